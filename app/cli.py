@@ -1,0 +1,108 @@
+"""The ``bearings`` command: serve, demo, experiments, bench.
+
+Each subcommand's flags default to the matching ``BEARINGS_*`` setting (see
+:mod:`app.config`), so a flag and its environment variable always agree.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+
+from app.config import Settings
+
+
+def _add_server_flags(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--host", help="address to listen on (BEARINGS_HOST, default 127.0.0.1)")
+    p.add_argument("--port", type=int, help="HTTP API port (BEARINGS_PORT, default 8000)")
+    p.add_argument(
+        "--maps",
+        type=Path,
+        action="append",
+        metavar="DIR",
+        help="extra directory of map files, besides the bundled maps/; repeatable "
+        "(BEARINGS_MAPS as a JSON list)",
+    )
+    p.add_argument(
+        "--viser-port", type=int, help="port of the viser view (BEARINGS_VISER_PORT, default 8080)"
+    )
+    p.add_argument(
+        "--no-viser",
+        dest="viser",
+        action="store_false",
+        default=None,
+        help="do not start the viser view (BEARINGS_VISER=false)",
+    )
+    p.add_argument("--log-level", help="debug, info, warning or error (BEARINGS_LOG_LEVEL)")
+    p.add_argument("--max-sessions", type=int, help="most live sessions (BEARINGS_MAX_SESSIONS)")
+    p.add_argument(
+        "--session-idle-timeout-s",
+        type=float,
+        help="seconds before an idle session is removed (BEARINGS_SESSION_IDLE_TIMEOUT_S)",
+    )
+    p.add_argument(
+        "--max-particles", type=int, help="most particles per session (BEARINGS_MAX_PARTICLES)"
+    )
+
+
+def settings_from_args(args: argparse.Namespace) -> Settings:
+    """Settings from the environment, overridden by every flag given on the command line."""
+    overrides = {
+        k: v
+        for k, v in vars(args).items()
+        if k in Settings.model_fields and v is not None
+    }
+    return Settings(**overrides)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="bearings",
+        description="Bearing-only semantic self-localization service for blind and "
+        "visually impaired people.",
+    )
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    serve = sub.add_parser("serve", help="run the HTTP/WebSocket service and the viser view")
+    _add_server_flags(serve)
+
+    demo = sub.add_parser(
+        "demo", help="run the service with a simulated walk in the bundled paper office"
+    )
+    _add_server_flags(demo)
+
+    exp = sub.add_parser("experiments", help="reproduce the paper's Tables I-III (and IV)")
+    from app.experiments.cli import add_arguments as add_experiment_arguments
+
+    add_experiment_arguments(exp)
+
+    bench = sub.add_parser("bench", help="time a full filter step on a generated map")
+    from app.bench import add_arguments as add_bench_arguments
+
+    add_bench_arguments(bench)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if args.command in ("serve", "demo"):
+        from app.server import run
+
+        return run(settings_from_args(args), demo=args.command == "demo")
+    if args.command == "experiments":
+        from app.experiments.cli import run as run_experiments
+
+        return run_experiments(args)
+    if args.command == "bench":
+        from app.bench import run as run_bench
+
+        return run_bench(args)
+    parser.error(f"unknown command {args.command!r}")
+    return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,67 @@
+"""Filter configuration: the paper's model plus each of Bearings' additions as a switch."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class FilterConfig:
+    """Every knob of the particle filter.
+
+    Angles given in degrees here (this is a user-facing configuration); the filter
+    converts them to radians once.
+    """
+
+    #: Number of particles (the maximum when ``adaptive`` is on).
+    particles: int = 10_000
+    #: Bearing standard deviation for every class without its own entry (degrees).
+    bearing_std_deg: float = 2.0
+    #: Per-class bearing standard deviations (degrees), e.g. {"table": 4.0}.
+    class_bearing_std_deg: dict[str, float] = field(default_factory=dict)
+    #: Camera field of view centred on the heading (degrees, 0 < fov <= 360).
+    fov_deg: float = 360.0
+    #: Maximum detection range in metres (None: unlimited).
+    max_range_m: float | None = None
+
+    # --- Bearings' additions; all off gives the paper's model ------------------------
+    #: Only objects in the field of view and in line of sight can explain a detection.
+    visibility: bool = True
+    #: A detection that nothing visible explains gets a floor instead of zero.
+    clutter: bool = True
+    #: Probability that a detection is clutter (false positive), used for the floor.
+    clutter_prob: float = 0.05
+    #: Augmented MCL with sensor resetting (w_slow / w_fast).
+    recovery: bool = True
+    alpha_slow: float = 0.02
+    alpha_fast: float = 0.3
+    #: Adaptive particle count (KLD-sampling) between min_particles and particles.
+    adaptive: bool = False
+    min_particles: int = 500
+
+    # --- Motion model (odometry, Probabilistic Robotics sample_motion_odometry) ---------
+    #: Translation noise as a fraction of the distance moved.
+    trans_noise_frac: float = 0.1
+    #: Rotation noise as a fraction of the turn.
+    rot_noise_frac: float = 0.1
+    #: Noise floors per frame, so a standing person still diffuses a little.
+    trans_noise_floor_m: float = 0.02
+    rot_noise_floor_deg: float = 1.0
+
+    #: Resample when the effective sample size falls below this fraction of N.
+    resample_threshold: float = 0.5
+
+    def bearing_std_rad(self, cls: str) -> float:
+        """The bearing standard deviation for one class, in radians."""
+        return float(np.radians(self.class_bearing_std_deg.get(cls, self.bearing_std_deg)))
+
+    @classmethod
+    def paper(cls, **overrides: object) -> FilterConfig:
+        """The paper's model only: no visibility, no clutter floor, no recovery."""
+        base = cls(visibility=False, clutter=False, recovery=False, adaptive=False)
+        return replace(base, **overrides)  # type: ignore[arg-type]
+
+    def replace(self, **overrides: object) -> FilterConfig:
+        return replace(self, **overrides)  # type: ignore[arg-type]

@@ -1,0 +1,130 @@
+"""Plane geometry on numpy arrays: angles, segment crossings, polygons.
+
+Everything here is vectorized and unit-agnostic except angles, which are radians.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+FloatArray = NDArray[np.float64]
+
+_EPS = 1e-9
+
+
+def wrap_angle(angle_rad: ArrayLike) -> FloatArray:
+    """Wrap angles to the half-open interval (-pi, pi].
+
+    Works element-wise on scalars and arrays of any shape.
+    """
+    a = np.asarray(angle_rad, dtype=np.float64)
+    wrapped = np.mod(a + np.pi, 2.0 * np.pi) - np.pi
+    # np.mod maps +pi to -pi; the contract's interval is closed at +pi.
+    return np.where(wrapped <= -np.pi, np.pi, wrapped)
+
+
+def wrap_deg(angle_deg: float) -> float:
+    """Wrap one angle in degrees to (-180, 180]."""
+    return float(np.degrees(wrap_angle(np.radians(angle_deg))))
+
+
+def circular_mean(angles_rad: ArrayLike, weights: ArrayLike | None = None) -> float:
+    """Weighted circular mean of angles (radians), in (-pi, pi]."""
+    a = np.asarray(angles_rad, dtype=np.float64)
+    w = np.ones_like(a) if weights is None else np.asarray(weights, dtype=np.float64)
+    return float(wrap_angle(np.arctan2(np.sum(w * np.sin(a)), np.sum(w * np.cos(a)))))
+
+
+def circular_std(angles_rad: ArrayLike, weights: ArrayLike | None = None) -> float:
+    """Weighted circular standard deviation, sqrt(-2 ln R), in radians."""
+    a = np.asarray(angles_rad, dtype=np.float64)
+    w = np.ones_like(a) if weights is None else np.asarray(weights, dtype=np.float64)
+    total = float(np.sum(w))
+    if total <= 0.0:
+        return float("inf")
+    r = np.hypot(np.sum(w * np.cos(a)), np.sum(w * np.sin(a))) / total
+    return float(np.sqrt(-2.0 * np.log(np.clip(r, 1e-300, 1.0))))
+
+
+def segments_cross_walls(
+    start: ArrayLike, end: ArrayLike, walls: ArrayLike, *, ignore: ArrayLike | None = None
+) -> NDArray[np.bool_]:
+    """Whether each segment start->end properly crosses at least one wall.
+
+    Args:
+        start: segment start points, shape (M, 2).
+        end: segment end points, shape (M, 2).
+        walls: wall segments as rows (x1, y1, x2, y2), shape (W, 4).
+        ignore: optional boolean mask, shape (M, W) or (W,): walls to skip per segment
+            (e.g. the wall a door is mounted in).
+
+    Returns:
+        Boolean array, shape (M,). Touching a wall exactly at a segment end point
+        counts as crossing only when the touch is strictly inside both segments.
+    """
+    p = np.atleast_2d(np.asarray(start, dtype=np.float64))
+    q = np.atleast_2d(np.asarray(end, dtype=np.float64))
+    w = np.asarray(walls, dtype=np.float64).reshape(-1, 4)
+    if w.shape[0] == 0:
+        return np.zeros(np.broadcast_shapes(p.shape, q.shape)[0], dtype=bool)
+    r = (q - p)[:, None, :]  # (M, 1, 2)
+    a = w[None, :, 0:2]  # (1, W, 2)
+    s = (w[:, 2:4] - w[:, 0:2])[None, :, :]
+    ap = a - p[:, None, :]
+    denom = r[..., 0] * s[..., 1] - r[..., 1] * s[..., 0]  # (M, W)
+    t_num = ap[..., 0] * s[..., 1] - ap[..., 1] * s[..., 0]
+    u_num = ap[..., 0] * r[..., 1] - ap[..., 1] * r[..., 0]
+    parallel = np.abs(denom) < _EPS
+    safe = np.where(parallel, 1.0, denom)
+    t = t_num / safe
+    u = u_num / safe
+    hit = (~parallel) & (t > _EPS) & (t < 1.0 - _EPS) & (u >= -_EPS) & (u <= 1.0 + _EPS)
+    if ignore is not None:
+        hit &= ~np.broadcast_to(np.asarray(ignore, dtype=bool), hit.shape)
+    return hit.any(axis=1)
+
+
+def point_segment_distance(points: ArrayLike, walls: ArrayLike) -> FloatArray:
+    """Distance from each point to each segment.
+
+    Args:
+        points: shape (M, 2).
+        walls: rows (x1, y1, x2, y2), shape (W, 4).
+
+    Returns:
+        Distances in map units, shape (M, W).
+    """
+    p = np.atleast_2d(np.asarray(points, dtype=np.float64))[:, None, :]
+    w = np.asarray(walls, dtype=np.float64).reshape(-1, 4)
+    a = w[None, :, 0:2]
+    d = (w[:, 2:4] - w[:, 0:2])[None, :, :]
+    length_sq = np.maximum(np.sum(d * d, axis=-1), _EPS)
+    t = np.clip(np.sum((p - a) * d, axis=-1) / length_sq, 0.0, 1.0)
+    closest = a + t[..., None] * d
+    return np.linalg.norm(p - closest, axis=-1)
+
+
+def points_in_polygon(points: ArrayLike, polygon: ArrayLike) -> NDArray[np.bool_]:
+    """Even-odd rule point-in-polygon test.
+
+    Args:
+        points: shape (M, 2).
+        polygon: vertices in order, shape (V, 2), not closed (first != last needed).
+
+    Returns:
+        Boolean array, shape (M,).
+    """
+    pts = np.atleast_2d(np.asarray(points, dtype=np.float64))
+    poly = np.asarray(polygon, dtype=np.float64)
+    x = pts[:, 0:1]
+    y = pts[:, 1:2]
+    x1 = poly[None, :, 0]
+    y1 = poly[None, :, 1]
+    x2 = np.roll(poly[:, 0], -1)[None, :]
+    y2 = np.roll(poly[:, 1], -1)[None, :]
+    straddles = (y1 > y) != (y2 > y)
+    dy = np.where(y2 == y1, 1.0, y2 - y1)
+    x_cross = x1 + (y - y1) * (x2 - x1) / dy
+    crossings = straddles & (x < x_cross)
+    return (np.count_nonzero(crossings, axis=1) % 2) == 1

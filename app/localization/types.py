@@ -1,0 +1,89 @@
+"""Plain value types shared by the filter and its callers.
+
+Internally every angle is in radians and every length in metres; the names say so.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+
+@dataclass(frozen=True, slots=True)
+class Odometry:
+    """Motion since the previous frame, expressed in the previous body frame.
+
+    Body frame: +x forward, +y left; ``turn_rad`` counter-clockwise positive.
+    """
+
+    forward_m: float = 0.0
+    left_m: float = 0.0
+    turn_rad: float = 0.0
+
+
+@dataclass(frozen=True, slots=True)
+class Detection:
+    """One object detection: what, in which direction, how sure.
+
+    ``bearing_rad`` is relative to the person's forward direction, counter-clockwise
+    positive (left is +pi/2). ``score`` is in [0, 1]; 0 carries no information.
+    """
+
+    cls: str
+    bearing_rad: float
+    score: float = 1.0
+
+
+@dataclass(frozen=True, slots=True)
+class Pose:
+    """A pose in the map frame: metres and radians (theta CCW from +x)."""
+
+    x: float
+    y: float
+    theta_rad: float
+
+
+@dataclass(frozen=True, slots=True)
+class InitialPose:
+    """A known start: mean pose and standard deviations."""
+
+    x: float
+    y: float
+    theta_rad: float
+    std_xy_m: float = 0.3
+    std_theta_rad: float = 0.2
+
+
+@dataclass(frozen=True, slots=True)
+class Hypothesis:
+    """One mode of the belief with the share of the weight it holds (0..1)."""
+
+    x: float
+    y: float
+    theta_rad: float
+    weight: float
+    std_xy_m: float = 0.0
+
+
+@dataclass(frozen=True, slots=True)
+class Estimate:
+    """What the filter believes after a step.
+
+    ``x, y, theta_rad`` and the standard deviations describe the heaviest cluster.
+    ``converged`` is true only when one tight cluster holds most of the weight.
+    ``hypotheses`` lists up to three clusters, heaviest first.
+    """
+
+    x: float
+    y: float
+    theta_rad: float
+    std_x_m: float
+    std_y_m: float
+    std_theta_rad: float
+    converged: bool
+    hypotheses: tuple[Hypothesis, ...] = field(default_factory=tuple)
+    n_particles: int = 0
+    ess: float = 0.0
+
+    @property
+    def pose(self) -> Pose:
+        return Pose(self.x, self.y, self.theta_rad)
