@@ -112,7 +112,9 @@ def _format_validation_error(source: str, error: ValidationError) -> str:
     return f"{source}: " + "; ".join(parts)
 
 
-def parse_map(data: object, *, source: str = "map", expected_name: str | None = None) -> SemanticMap:
+def parse_map(
+    data: object, *, source: str = "map", expected_name: str | None = None
+) -> SemanticMap:
     """Validate already-decoded JSON and build a :class:`SemanticMap`.
 
     Raises:
@@ -258,7 +260,9 @@ class SemanticMap:
         hi = allp.max(axis=0)
         return (float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1]))
 
-    def line_of_sight(self, points: ArrayLike, objects: ArrayLike | None = None) -> NDArray[np.bool_]:
+    def line_of_sight(
+        self, points: ArrayLike, objects: ArrayLike | None = None
+    ) -> NDArray[np.bool_]:
         """Whether each object is visible from each point (no wall in between).
 
         An object mounted in a wall is not hidden by that wall.

@@ -1,0 +1,32 @@
+# Bearings service image: HTTP/WebSocket API on 8000, viser view on 8080.
+FROM python:3.11-slim
+
+ENV PYTHONDONTWRITEBYTECODE=1 \
+    PYTHONUNBUFFERED=1 \
+    PIP_NO_CACHE_DIR=1 \
+    PIP_DISABLE_PIP_VERSION_CHECK=1 \
+    NUMBA_CACHE_DIR=/tmp/numba-cache
+
+# espeak-ng gives POST /speech an offline voice.
+RUN apt-get update \
+    && apt-get install -y --no-install-recommends espeak-ng \
+    && rm -rf /var/lib/apt/lists/*
+
+RUN useradd --create-home --uid 10001 bearings
+WORKDIR /srv/bearings
+
+# Dependencies first (better layer caching), then the code.
+COPY pyproject.toml README.md ./
+COPY app ./app
+COPY maps ./maps
+COPY static ./static
+# Editable install: the package finds maps/ and static/ next to app/ in this folder.
+RUN pip install -e . && chown -R bearings:bearings /srv/bearings
+
+USER bearings
+EXPOSE 8000 8080
+
+HEALTHCHECK --interval=30s --timeout=5s --start-period=20s --retries=3 \
+    CMD python -c "import urllib.request,sys; sys.exit(0 if urllib.request.urlopen('http://127.0.0.1:8000/healthz', timeout=4).status == 200 else 1)"
+
+CMD ["bearings", "serve", "--host", "0.0.0.0", "--port", "8000", "--viser-port", "8080"]

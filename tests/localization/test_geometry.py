@@ -1,0 +1,54 @@
+"""Angle wrapping, circular statistics and segment crossings."""
+
+from __future__ import annotations
+
+import numpy as np
+from hypothesis import given
+from hypothesis import strategies as st
+
+from app.localization.geometry import (
+    circular_mean,
+    circular_std,
+    points_in_polygon,
+    segments_cross_walls,
+    wrap_angle,
+    wrap_deg,
+)
+
+
+@given(st.floats(min_value=-1e4, max_value=1e4, allow_nan=False))
+def test_wrap_angle_lands_in_half_open_interval_and_keeps_direction(a: float) -> None:
+    w = float(wrap_angle(a))
+    assert -np.pi < w <= np.pi
+    assert np.isclose(np.cos(w), np.cos(a), atol=1e-6)
+    assert np.isclose(np.sin(w), np.sin(a), atol=1e-6)
+
+
+def test_wrap_deg_edges() -> None:
+    assert wrap_deg(180.0) == 180.0
+    assert wrap_deg(-180.0) == 180.0
+    assert np.isclose(wrap_deg(540.0), 180.0)
+    assert np.isclose(wrap_deg(-90.0), -90.0)
+    assert np.isclose(wrap_deg(370.0), 10.0)
+
+
+def test_circular_mean_across_the_seam() -> None:
+    a = np.radians([170.0, -170.0])
+    assert np.isclose(abs(circular_mean(a)), np.pi)
+    assert circular_std(np.zeros(5)) < 1e-6
+    assert circular_std(np.radians([0.0, 180.0])) > 3.0
+
+
+def test_segment_crossing_cases() -> None:
+    wall = np.array([[1.0, -1.0, 1.0, 1.0]])
+    start = np.array([[0.0, 0.0], [0.0, 0.0], [0.0, 2.0], [2.0, 0.0]])
+    end = np.array([[2.0, 0.0], [0.9, 0.0], [2.0, 2.0], [1.0, 0.0]])
+    assert segments_cross_walls(start, end, wall).tolist() == [True, False, False, False]
+    ignored = segments_cross_walls(start, end, wall, ignore=np.array([True]))
+    assert not ignored.any()
+
+
+def test_points_in_polygon_square() -> None:
+    square = [[0, 0], [2, 0], [2, 2], [0, 2]]
+    inside = points_in_polygon([[1, 1], [3, 1], [-0.1, 1], [1.9, 1.9]], square)
+    assert inside.tolist() == [True, False, False, True]
