@@ -1,0 +1,122 @@
+"""An honest summary of the particle cloud: clusters, the best pose, and ``converged``.
+
+A weighted mean of all particles is meaningless when the belief has several modes
+(a symmetric room gives mirror-image hypotheses; the mean between them is a place
+where nobody is). So the cloud is split into clusters by greedy mode seeking:
+
+1. histogram the remaining weight over coarse (x, y, heading) cells;
+2. start at the heaviest cell's weighted mean and re-centre a few times on the
+   particles within ``radius_m`` and ``heading_window_rad`` of the centre;
+3. those particles form a hypothesis; remove them and repeat (up to three).
+
+The pose reported is the heaviest cluster's weighted mean (circular mean for the
+heading). ``converged`` is true only when that cluster holds at least
+``min_mass`` of the weight and is tight in position and heading.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from app.localization.geometry import wrap_angle
+from app.localization.types import Estimate, Hypothesis
+
+
+@dataclass(frozen=True)
+class ClusterSettings:
+    """Thresholds of the clustering and of the ``converged`` test."""
+
+    cell_m: float = 0.5
+    heading_bins: int = 8
+    radius_m: float = 1.0
+    heading_window_rad: float = np.radians(45.0)
+    max_hypotheses: int = 3
+    min_mass: float = 0.9
+    max_std_xy_m: float = 0.35
+    max_std_theta_rad: float = np.radians(10.0)
+
+
+DEFAULT_CLUSTERING = ClusterSettings()
+
+
+def _weighted_pose(
+    x: NDArray[np.float64],
+    y: NDArray[np.float64],
+    theta: NDArray[np.float64],
+    w: NDArray[np.float64],
+) -> tuple[float, float, float, float, float, float, float]:
+    mass = float(w.sum())
+    wn = w / mass
+    mx = float(wn @ x)
+    my = float(wn @ y)
+    c = float(wn @ np.cos(theta))
+    s = float(wn @ np.sin(theta))
+    mt = float(np.arctan2(s, c))
+    sx = float(np.sqrt(max(wn @ (x - mx) ** 2, 0.0)))
+    sy = float(np.sqrt(max(wn @ (y - my) ** 2, 0.0)))
+    r = min(max(np.hypot(c, s), 1e-300), 1.0)
+    st = float(np.sqrt(-2.0 * np.log(r)))
+    return mass, mx, my, mt, sx, sy, st
+
+
+def estimate_pose(
+    x: NDArray[np.float64],
+    y: NDArray[np.float64],
+    theta: NDArray[np.float64],
+    weights: NDArray[np.float64],
+    settings: ClusterSettings = DEFAULT_CLUSTERING,
+    ess: float = 0.0,
+) -> Estimate:
+    """Cluster the weighted particles and summarize the belief.
+
+    Args:
+        x, y, theta: particle poses, shape (N,), metres and radians.
+        weights: normalized weights, shape (N,).
+
+    Returns:
+        The :class:`Estimate` (pose of the heaviest cluster, up to three hypotheses).
+    """
+    n = x.shape[0]
+    remaining = weights > 0.0
+    bin_width = 2.0 * np.pi / settings.heading_bins
+    cx = np.floor((x - x.min()) / settings.cell_m).astype(np.int64)
+    cy = np.floor((y - y.min()) / settings.cell_m).astype(np.int64)
+    ct = np.floor((theta + np.pi) / bin_width).astype(np.int64) % settings.heading_bins
+    flat = (cy * (cx.max() + 1) + cx) * settings.heading_bins + ct
+    hyps: list[tuple[float, float, float, float, float, float, float]] = []
+    for _ in range(settings.max_hypotheses):
+        w_left = np.where(remaining, weights, 0.0)
+        if w_left.sum() < 0.01:
+            break
+        hist = np.bincount(flat, weights=w_left)
+        seed = remaining & (flat == int(np.argmax(hist)))
+        _, mx, my, mt, *_ = _weighted_pose(x[seed], y[seed], theta[seed], weights[seed])
+        members = seed
+        for _ in range(3):
+            near = (
+                remaining
+                & ((x - mx) ** 2 + (y - my) ** 2 <= settings.radius_m**2)
+                & (np.abs(wrap_angle(theta - mt)) <= settings.heading_window_rad)
+            )
+            if not near.any():
+                break
+            members = near
+            _, mx, my, mt, *_ = _weighted_pose(x[near], y[near], theta[near], weights[near])
+        hyps.append(_weighted_pose(x[members], y[members], theta[members], weights[members]))
+        remaining &= ~members
+    if not hyps:  # no weight anywhere: say so honestly
+        return Estimate(0.0, 0.0, 0.0, np.inf, np.inf, np.pi, False, (), n, ess)
+    hyps.sort(key=lambda h: -h[0])
+    mass, mx, my, mt, sx, sy, st = hyps[0]
+    converged = (
+        mass >= settings.min_mass
+        and max(sx, sy) <= settings.max_std_xy_m
+        and st <= settings.max_std_theta_rad
+    )
+    hypotheses = tuple(
+        Hypothesis(h[1], h[2], h[3], h[0], float(np.hypot(h[4], h[5]))) for h in hyps
+    )
+    return Estimate(mx, my, mt, sx, sy, st, bool(converged), hypotheses, n, ess)

@@ -1,0 +1,187 @@
+"""The particle filter: Monte Carlo localization on a semantic map (paper, eq. 1).
+
+Each step predicts with odometry (:mod:`~app.localization.motion`), corrects with the
+bearing-only semantic sensor model (:mod:`~app.localization.sensor`), resamples when
+the effective sample size drops (:mod:`~app.localization.resampling`), optionally
+injects particles drawn from the observation (:mod:`~app.localization.recovery`), and
+summarizes the belief (:mod:`~app.localization.estimate`). Particles are a structure
+of arrays (x, y, theta, log-weight); nothing loops over particles in Python.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+from numpy.typing import NDArray
+
+from app.localization import sensor_kernel
+from app.localization.config import FilterConfig
+from app.localization.estimate import estimate_pose
+from app.localization.geometry import wrap_angle
+from app.localization.kld import kld_sample_size
+from app.localization.map import SemanticMap
+from app.localization.motion import motion_log_penalty, sample_motion
+from app.localization.recovery import AugmentedMCL, sample_from_observation
+from app.localization.resampling import (
+    effective_sample_size,
+    log_sum_exp,
+    normalized_weights,
+    systematic_resample,
+)
+from app.localization.sensor import Observation, prepare_observation
+from app.localization.types import Detection, Estimate, InitialPose, Odometry
+from app.localization.visibility import visibility_grid
+
+
+class ParticleFilter:
+    """Monte Carlo localization of one person on one map.
+
+    Args:
+        semantic_map: the annotated floor map.
+        config: model switches and noise; :meth:`FilterConfig.paper` for the paper's model.
+        rng: the filter's own random generator (same seed, same result).
+        initial_pose: a known start, or None for global localization (uniform over the
+            free space, any heading).
+    """
+
+    def __init__(
+        self,
+        semantic_map: SemanticMap,
+        config: FilterConfig | None = None,
+        *,
+        rng: np.random.Generator,
+        initial_pose: InitialPose | None = None,
+    ) -> None:
+        self.map = semantic_map
+        self.config = config or FilterConfig()
+        self.rng = rng
+        self._vis = visibility_grid(semantic_map) if self.config.visibility else None
+        self._recovery = AugmentedMCL(self.config.alpha_slow, self.config.alpha_fast)
+        self.last_observation: Observation | None = None
+        self.reset(initial_pose)
+
+    # ----------------------------------------------------------------- state
+    def reset(self, initial_pose: InitialPose | None = None) -> None:
+        """Start again: around ``initial_pose`` or, when None, anywhere."""
+        n = self.config.particles
+        if initial_pose is None:
+            pts = self.map.free_space.sample(n, self.rng)
+            self.x, self.y = pts[:, 0].copy(), pts[:, 1].copy()
+            self.theta = self.rng.uniform(-np.pi, np.pi, n)
+        else:
+            self.x = self.rng.normal(initial_pose.x, initial_pose.std_xy_m, n)
+            self.y = self.rng.normal(initial_pose.y, initial_pose.std_xy_m, n)
+            self.theta = wrap_angle(
+                self.rng.normal(initial_pose.theta_rad, initial_pose.std_theta_rad, n)
+            )
+        self.log_w = np.zeros(n, dtype=np.float64)
+        self._recovery.reset()
+        self.steps = 0
+        self.estimate: Estimate = estimate_pose(self.x, self.y, self.theta, self.weights)
+
+    @property
+    def n(self) -> int:
+        """Current number of particles."""
+        return int(self.x.shape[0])
+
+    @property
+    def weights(self) -> NDArray[np.float64]:
+        """Normalized particle weights, shape (N,)."""
+        return normalized_weights(self.log_w)
+
+    # ----------------------------------------------------------------- steps
+    def predict(self, odometry: Odometry | None) -> None:
+        """Move every particle by the noisy odometry; impossible moves lose their weight."""
+        x0, y0 = self.x, self.y
+        self.x, self.y, self.theta = sample_motion(
+            self.x, self.y, self.theta, odometry, self.config, self.rng
+        )
+        self.log_w = self.log_w + motion_log_penalty(x0, y0, self.x, self.y, self.map)
+
+    def observation_log_likelihood(self, obs: Observation) -> NDArray[np.float64]:
+        """log P(Z | s, M) for every particle, shape (N,)."""
+        if self._vis is not None:
+            cells = self._vis.cells(self.x, self.y)
+            table = self._vis.table
+        else:
+            cells = table = None
+        return sensor_kernel.log_likelihood(
+            self.x, self.y, self.theta, obs, self.map, self.config, cells, table
+        )
+
+    def correct(self, detections: Sequence[Detection]) -> float:
+        """Weight particles by the detections; return the injection share asked for.
+
+        A frame without usable detections changes nothing (no evidence).
+        """
+        obs = prepare_observation(detections, self.map, self.config)
+        self.last_observation = obs
+        if obs.empty:
+            return 0.0
+        log_lik = self.observation_log_likelihood(obs)
+        prior = self.log_w - log_sum_exp(self.log_w)
+        self.log_w = self.log_w + log_lik
+        if not self.config.recovery:
+            return 0.0
+        mean_ll = log_sum_exp(prior + log_lik)
+        per_class = mean_ll / max(obs.group_kappa.size, 1)
+        if not np.isfinite(per_class):
+            per_class = -1e3
+        return self._recovery.update(per_class)
+
+    def resample(self, inject_share: float = 0.0) -> bool:
+        """Resample when the ESS is low or particles are to be injected; True if done."""
+        w = self.weights
+        ess = effective_sample_size(w)
+        n_target = self.n
+        if self.config.adaptive:
+            n_target = kld_sample_size(
+                self.x, self.y, self.theta, w, self.config.min_particles, self.config.particles
+            )
+        due = ess < self.config.resample_threshold * self.n or not np.isfinite(self.log_w).any()
+        if not (due or inject_share > 0.0 or n_target != self.n):
+            return False
+        idx = systematic_resample(w, n_target, self.rng)
+        self.x, self.y, self.theta = self.x[idx], self.y[idx], self.theta[idx]
+        self.log_w = np.zeros(n_target, dtype=np.float64)
+        obs = self.last_observation
+        n_new = round(inject_share * n_target)
+        if n_new > 0 and obs is not None and not obs.empty:
+            nx, ny, nt = sample_from_observation(
+                n_new, obs, self.map, self.rng, self.config.bearing_std_rad("")
+            )
+            slots = self.rng.choice(n_target, size=n_new, replace=False)
+            self.x[slots], self.y[slots], self.theta[slots] = nx, ny, nt
+        return True
+
+    def step(self, odometry: Odometry | None, detections: Sequence[Detection]) -> Estimate:
+        """One full filter step: predict, correct, resample when due, estimate."""
+        self.predict(odometry)
+        inject = self.correct(detections)
+        self.resample(inject)
+        w = self.weights
+        self.estimate = estimate_pose(self.x, self.y, self.theta, w, ess=effective_sample_size(w))
+        self.steps += 1
+        return self.estimate
+
+
+def warm_up() -> None:
+    """Compile the numba kernels now (cached on disk), so no request waits for it."""
+    from app.localization.map import parse_map
+
+    tiny = parse_map(
+        {
+            "name": "warmup",
+            "walls": [
+                {"x1": 0, "y1": 0, "x2": 2, "y2": 0},
+                {"x1": 2, "y1": 0, "x2": 2, "y2": 2},
+                {"x1": 2, "y1": 2, "x2": 0, "y2": 2},
+                {"x1": 0, "y1": 2, "x2": 0, "y2": 0},
+            ],
+            "objects": [{"class": "door", "x": 2, "y": 1}],
+        }
+    )
+    for cfg in (FilterConfig(particles=50), FilterConfig.paper(particles=50)):
+        pf = ParticleFilter(tiny, cfg, rng=np.random.default_rng(0))
+        pf.step(Odometry(0.1, 0.0, 0.0), [Detection("door", 0.0, 1.0)])

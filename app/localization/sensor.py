@@ -1,0 +1,213 @@
+"""The sensor model: how well a set of bearing-only semantic detections fits a pose.
+
+This is the paper's model (Section III-B), written once here:
+
+* Eq. (2): detections are grouped by class, O_i = {z_k : c_k = c_i}, classes are
+  independent, and the likelihood is the product over classes. Each detection's
+  likelihood enters with the exponent 1/size(O_i), so a class seen many times (six
+  windows) does not drown a class seen once (the door).
+* Eq. (3): a detection's likelihood is the best over the map objects of its class,
+  max_n P(z_k | s, M^n) with c(M^n) = c_k: maximum-likelihood correspondence, no data
+  association and no object identities.
+* The bearing error follows a **von Mises** distribution with concentration
+  kappa = 1 / sigma_c^2 per class (sigma_c from :class:`FilterConfig`). Its density
+  depends on the error only through cos(error), so the model compares unit vectors
+  (a dot product) instead of calling atan2.
+* The detection score w in [0, 1] tempers the likelihood, P^w: w = 0 carries no
+  information, w = 1 the full likelihood.
+
+Bearings' additions, each switchable in :class:`FilterConfig`:
+
+* ``visibility``: only objects inside the field of view, within range and in line of
+  sight of the particle can explain a detection (line of sight from the per-map
+  :mod:`visibility grid <app.localization.visibility>`).
+* ``clutter``: each detection's likelihood is a mixture (1 - eps) vonMises + eps
+  uniform, eps = ``clutter_prob``; a detection that nothing explains (a false
+  positive) then costs a bounded amount instead of killing the right particle.
+
+All likelihoods are relative to the von Mises peak, so a perfect match scores 0 in
+log space; only differences between particles matter to the filter.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from app.localization.config import FilterConfig
+from app.localization.map import SemanticMap
+from app.localization.types import Detection
+
+
+def scaled_bessel_i0(kappa: float) -> float:
+    """I0(kappa) * exp(-kappa), stable for large kappa (asymptotic series above 30)."""
+    if kappa < 30.0:
+        return float(np.i0(kappa) * np.exp(-kappa))
+    return float(
+        (1.0 + 1.0 / (8.0 * kappa) + 9.0 / (128.0 * kappa**2)) / np.sqrt(2 * np.pi * kappa)
+    )
+
+
+@dataclass(frozen=True)
+class Observation:
+    """One frame's usable detections, grouped by class, as flat arrays.
+
+    Detections of classes the map lacks, and detections with score 0, are dropped
+    (they carry no information). Shapes: K detections, G classes, M member slots.
+
+    Attributes:
+        det_bearing: each detection's bearing, radians, shape (K,).
+        det_cos, det_sin: cos and sin of each bearing, shape (K,).
+        det_score: detection scores, shape (K,).
+        det_group: class group of each detection, shape (K,).
+        group_kappa: von Mises concentration per group, shape (G,).
+        group_weight: 1 / size(O_i) per group (eq. 2), shape (G,).
+        group_floor: relative clutter density eps * I0e(kappa) (0 when off), shape (G,).
+        group_keep: 1 - eps (1 when clutter is off), shape (G,).
+        member_start: group g's objects are members[member_start[g]:member_start[g+1]].
+        members: object indices, shape (M,).
+        classes: class word per group.
+        ignored: class words of dropped unknown-class detections.
+    """
+
+    det_bearing: NDArray[np.float64]
+    det_cos: NDArray[np.float64]
+    det_sin: NDArray[np.float64]
+    det_score: NDArray[np.float64]
+    det_group: NDArray[np.int64]
+    group_kappa: NDArray[np.float64]
+    group_weight: NDArray[np.float64]
+    group_floor: NDArray[np.float64]
+    group_keep: NDArray[np.float64]
+    member_start: NDArray[np.int64]
+    members: NDArray[np.int64]
+    classes: tuple[str, ...]
+    ignored: tuple[str, ...] = ()
+
+    @property
+    def empty(self) -> bool:
+        """True when the frame carries no evidence at all."""
+        return self.det_cos.size == 0
+
+
+def prepare_observation(
+    detections: Sequence[Detection], semantic_map: SemanticMap, config: FilterConfig
+) -> Observation:
+    """Group a frame's detections by class into an :class:`Observation`."""
+    by_class: dict[str, list[Detection]] = {}
+    ignored: list[str] = []
+    for d in detections:
+        if d.cls not in semantic_map.class_members:
+            ignored.append(d.cls)
+            continue
+        if d.score <= 0.0:
+            continue
+        by_class.setdefault(d.cls, []).append(d)
+    classes = tuple(sorted(by_class))
+    bearing_l, score_l, group_l = [], [], []
+    kappa, weight, floor, keep, starts, members = [], [], [], [], [0], []
+    eps = config.clutter_prob if config.clutter else 0.0
+    for g, cls in enumerate(classes):
+        dets = by_class[cls]
+        for d in dets:
+            bearing_l.append(float(d.bearing_rad))
+            score_l.append(min(float(d.score), 1.0))
+            group_l.append(g)
+        k = 1.0 / config.bearing_std_rad(cls) ** 2
+        kappa.append(k)
+        weight.append(1.0 / len(dets))
+        floor.append(eps * scaled_bessel_i0(k))
+        keep.append(1.0 - eps)
+        members.extend(semantic_map.class_members[cls].tolist())
+        starts.append(len(members))
+    bearing = np.array(bearing_l, dtype=np.float64)
+    return Observation(
+        det_bearing=bearing,
+        det_cos=np.cos(bearing),
+        det_sin=np.sin(bearing),
+        det_score=np.array(score_l, dtype=np.float64),
+        det_group=np.array(group_l, dtype=np.int64),
+        group_kappa=np.array(kappa, dtype=np.float64),
+        group_weight=np.array(weight, dtype=np.float64),
+        group_floor=np.array(floor, dtype=np.float64),
+        group_keep=np.array(keep, dtype=np.float64),
+        member_start=np.array(starts, dtype=np.int64),
+        members=np.array(members, dtype=np.int64),
+        classes=classes,
+        ignored=tuple(ignored),
+    )
+
+
+def candidate_mask(
+    x: NDArray[np.float64],
+    y: NDArray[np.float64],
+    theta: NDArray[np.float64],
+    objects: NDArray[np.int64],
+    semantic_map: SemanticMap,
+    config: FilterConfig,
+    visible_rows: NDArray[np.bool_] | None,
+) -> NDArray[np.bool_]:
+    """Which of ``objects`` each particle could see, shape (N, len(objects)).
+
+    With ``visibility`` off every object is a candidate (the paper's model).
+    ``visible_rows`` are the particles' rows of the visibility grid, shape (N, objects).
+    """
+    n = x.shape[0]
+    if not config.visibility:
+        return np.ones((n, objects.size), dtype=bool)
+    ok = (
+        np.ones((n, objects.size), dtype=bool) if visible_rows is None else visible_rows[:, objects]
+    )
+    dx = semantic_map.object_xy[objects, 0][None, :] - x[:, None]
+    dy = semantic_map.object_xy[objects, 1][None, :] - y[:, None]
+    if config.fov_deg < 360.0:
+        dist = np.hypot(dx, dy) + 1e-12
+        forward = (np.cos(theta)[:, None] * dx + np.sin(theta)[:, None] * dy) / dist
+        ok &= forward >= np.cos(np.radians(config.fov_deg) / 2.0)
+    if config.max_range_m is not None:
+        ok &= dx * dx + dy * dy <= config.max_range_m**2
+    return ok
+
+
+def log_likelihood_reference(
+    x: NDArray[np.float64],
+    y: NDArray[np.float64],
+    theta: NDArray[np.float64],
+    obs: Observation,
+    semantic_map: SemanticMap,
+    config: FilterConfig,
+    visible_rows: NDArray[np.bool_] | None = None,
+) -> NDArray[np.float64]:
+    """Per-particle log P(Z | s, M) of eqs. (2)-(3), plain numpy, shape (N,).
+
+    The readable reference; :mod:`app.localization.sensor_kernel` computes the same
+    numbers faster and the tests hold the two together.
+    """
+    n = x.shape[0]
+    total = np.zeros(n, dtype=np.float64)
+    cos_t = np.cos(theta)[:, None]
+    sin_t = np.sin(theta)[:, None]
+    for g in range(obs.group_kappa.size):
+        objs = obs.members[obs.member_start[g] : obs.member_start[g + 1]]
+        dx = semantic_map.object_xy[objs, 0][None, :] - x[:, None]
+        dy = semantic_map.object_xy[objs, 1][None, :] - y[:, None]
+        dist = np.hypot(dx, dy) + 1e-12
+        # Unit vector towards each object in the particle's body frame.
+        bx = (cos_t * dx + sin_t * dy) / dist
+        by = (-sin_t * dx + cos_t * dy) / dist
+        cand = candidate_mask(x, y, theta, objs, semantic_map, config, visible_rows)
+        kappa = obs.group_kappa[g]
+        with np.errstate(divide="ignore"):
+            log_keep = np.log(obs.group_keep[g])
+            log_floor = np.log(obs.group_floor[g])
+        for k in np.flatnonzero(obs.det_group == g):
+            cos_err = obs.det_cos[k] * bx + obs.det_sin[k] * by
+            best = np.max(np.where(cand, cos_err, -np.inf), axis=1)  # eq. (3)
+            # von Mises log-density relative to its peak, mixed with the clutter floor
+            log_p = np.logaddexp(kappa * (best - 1.0) + log_keep, log_floor)
+            # score tempering (P^w) and the class exponent 1/size(O_i), eq. (2)
+            total += obs.group_weight[g] * obs.det_score[k] * log_p
+    return total
