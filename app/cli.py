@@ -50,9 +50,7 @@ def _add_server_flags(p: argparse.ArgumentParser) -> None:
 def settings_from_args(args: argparse.Namespace) -> Settings:
     """Settings from the environment, overridden by every flag given on the command line."""
     overrides = {
-        k: v
-        for k, v in vars(args).items()
-        if k in Settings.model_fields and v is not None
+        k: v for k, v in vars(args).items() if k in Settings.model_fields and v is not None
     }
     return Settings(**overrides)
 

@@ -16,7 +16,7 @@ heading). ``converged`` is true only when that cluster holds at least
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -120,3 +120,43 @@ def estimate_pose(
         Hypothesis(h[1], h[2], h[3], h[0], float(np.hypot(h[4], h[5]))) for h in hyps
     )
     return Estimate(mx, my, mt, sx, sy, st, bool(converged), hypotheses, n, ess)
+
+
+class ConvergenceGate:
+    """Confirms ``converged`` only after the belief has held steady for a while.
+
+    Right after a global start a single update can collapse the cloud onto one wrong
+    spot that looks tight; telling a blind person that position with confidence is
+    the worst failure. So a tight, heavy cluster counts as converged only after it
+    has stayed put (moving no more than the odometry allows plus ``tolerance_m``, and
+    turning no more than ``tolerance_rad``) for ``frames`` consecutive frames.
+    """
+
+    def __init__(
+        self, frames: int = 5, tolerance_m: float = 0.3, tolerance_rad: float = np.radians(15.0)
+    ) -> None:
+        self.frames = frames
+        self.tolerance_m = tolerance_m
+        self.tolerance_rad = tolerance_rad
+        self._streak = 0
+        self._last: Estimate | None = None
+
+    def reset(self) -> None:
+        self._streak = 0
+        self._last = None
+
+    def confirm(self, raw: Estimate, moved_m: float = 0.0, turned_rad: float = 0.0) -> Estimate:
+        """``raw`` with ``converged`` true only if it held for ``frames`` frames."""
+        last = self._last
+        steady = (
+            raw.converged
+            and last is not None
+            and np.hypot(raw.x - last.x, raw.y - last.y) <= moved_m + self.tolerance_m
+            and abs(float(wrap_angle(raw.theta_rad - last.theta_rad)))
+            <= abs(turned_rad) + self.tolerance_rad
+        )
+        self._streak = self._streak + 1 if steady else (1 if raw.converged else 0)
+        self._last = raw
+        if raw.converged and self._streak < self.frames:
+            return replace(raw, converged=False)
+        return raw

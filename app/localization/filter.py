@@ -17,7 +17,7 @@ from numpy.typing import NDArray
 
 from app.localization import sensor_kernel
 from app.localization.config import FilterConfig
-from app.localization.estimate import estimate_pose
+from app.localization.estimate import ConvergenceGate, estimate_pose
 from app.localization.geometry import wrap_angle
 from app.localization.kld import kld_sample_size
 from app.localization.map import SemanticMap
@@ -58,6 +58,7 @@ class ParticleFilter:
         self.rng = rng
         self._vis = visibility_grid(semantic_map) if self.config.visibility else None
         self._recovery = AugmentedMCL(self.config.alpha_slow, self.config.alpha_fast)
+        self._gate = ConvergenceGate()
         self.last_observation: Observation | None = None
         self.reset(initial_pose)
 
@@ -77,6 +78,7 @@ class ParticleFilter:
             )
         self.log_w = np.zeros(n, dtype=np.float64)
         self._recovery.reset()
+        self._gate.reset()
         self.steps = 0
         self.estimate: Estimate = estimate_pose(self.x, self.y, self.theta, self.weights)
 
@@ -161,7 +163,10 @@ class ParticleFilter:
         inject = self.correct(detections)
         self.resample(inject)
         w = self.weights
-        self.estimate = estimate_pose(self.x, self.y, self.theta, w, ess=effective_sample_size(w))
+        raw = estimate_pose(self.x, self.y, self.theta, w, ess=effective_sample_size(w))
+        moved = 1.0 if odometry is None else float(np.hypot(odometry.forward_m, odometry.left_m))
+        turned = np.pi if odometry is None else odometry.turn_rad
+        self.estimate = self._gate.confirm(raw, moved, turned)
         self.steps += 1
         return self.estimate
 

@@ -1,0 +1,69 @@
+"""Error answers: always a status that fits and a body that says what was wrong."""
+
+from __future__ import annotations
+
+from fastapi import FastAPI, Request
+from fastapi.exceptions import RequestValidationError
+from fastapi.responses import JSONResponse
+from pydantic import ValidationError
+from starlette.exceptions import HTTPException as StarletteHTTPException
+
+from app.service.sessions import LimitReached, SessionNotFound, UnknownMap
+
+
+def describe_validation(errors: list[dict]) -> str:
+    """One readable sentence per problem: 'detections.0.score: must be <= 1'."""
+    parts = []
+    for e in errors:
+        loc = [str(p) for p in e.get("loc", ()) if p not in ("body",)]
+        where = ".".join(loc) or "body"
+        parts.append(f"{where}: {e.get('msg', 'invalid')}")
+    return "; ".join(parts)
+
+
+def _plain(errors: list[dict]) -> list[dict]:
+    # Drop the 'ctx'/'input' parts that may hold non-JSON values (e.g. NaN, exceptions).
+    return [{k: v for k, v in e.items() if k in ("type", "loc", "msg")} for e in errors]
+
+
+def install_error_handlers(app: FastAPI) -> None:
+    @app.exception_handler(RequestValidationError)
+    async def _validation(_: Request, exc: RequestValidationError) -> JSONResponse:
+        errors = list(exc.errors())
+        return JSONResponse(
+            status_code=422,
+            content={"detail": _plain(errors), "message": describe_validation(errors)},
+        )
+
+    @app.exception_handler(ValidationError)
+    async def _pydantic(_: Request, exc: ValidationError) -> JSONResponse:
+        errors = list(exc.errors())
+        return JSONResponse(
+            status_code=422,
+            content={"detail": _plain(errors), "message": describe_validation(errors)},
+        )
+
+    @app.exception_handler(StarletteHTTPException)
+    async def _http(_: Request, exc: StarletteHTTPException) -> JSONResponse:
+        return JSONResponse(
+            status_code=exc.status_code,
+            content={"detail": exc.detail, "message": str(exc.detail)},
+            headers=getattr(exc, "headers", None),
+        )
+
+    @app.exception_handler(SessionNotFound)
+    async def _missing(_: Request, exc: SessionNotFound) -> JSONResponse:
+        return JSONResponse(
+            status_code=404, content={"detail": exc.message, "message": exc.message}
+        )
+
+    @app.exception_handler(UnknownMap)
+    async def _unknown_map(_: Request, exc: UnknownMap) -> JSONResponse:
+        return JSONResponse(status_code=404, content={"detail": str(exc), "message": str(exc)})
+
+    @app.exception_handler(LimitReached)
+    async def _limit(_: Request, exc: LimitReached) -> JSONResponse:
+        return JSONResponse(
+            status_code=exc.status,
+            content={"detail": str(exc), "message": str(exc), "code": exc.code},
+        )

@@ -1,0 +1,91 @@
+"""Sessions over REST and WebSocket: one filter per session, frames in order."""
+
+from __future__ import annotations
+
+import json
+
+from fastapi import APIRouter, Response, WebSocket, WebSocketDisconnect, status
+from pydantic import ValidationError
+
+from app.api.deps import ManagerDep
+from app.api.errors import describe_validation
+from app.api.schemas import Frame, FrameResult, SessionCreate, SessionOut
+from app.service.sessions import LimitReached, SessionManager, SessionNotFound
+
+router = APIRouter(prefix="/sessions", tags=["sessions"])
+
+
+@router.post("", status_code=status.HTTP_201_CREATED, response_model=SessionOut)
+async def create_session(body: SessionCreate, manager: ManagerDep) -> SessionOut:
+    """Start localizing one person on a map."""
+    return (await manager.create(body)).public()
+
+
+@router.get("/{session_id}", response_model=SessionOut)
+async def get_session(session_id: str, manager: ManagerDep) -> SessionOut:
+    """The session with its latest result (or null)."""
+    return manager.get(session_id).public()
+
+
+@router.post("/{session_id}/frames", response_model=FrameResult)
+async def post_frame(session_id: str, frame: Frame, manager: ManagerDep) -> FrameResult:
+    """Process one frame; frames of a session are processed strictly in order."""
+    return await manager.process(session_id, frame)
+
+
+@router.delete("/{session_id}", status_code=status.HTTP_204_NO_CONTENT)
+async def delete_session(session_id: str, manager: ManagerDep) -> Response:
+    await manager.delete(session_id)
+    return Response(status_code=status.HTTP_204_NO_CONTENT)
+
+
+async def _send_error(ws: WebSocket, code: str, message: str) -> None:
+    await ws.send_text(json.dumps({"error": {"code": code, "message": message}}))
+
+
+@router.websocket("/{session_id}/stream")
+async def stream(ws: WebSocket, session_id: str) -> None:
+    """One ``FrameResult`` per ``Frame`` message, in order; bad messages get an error."""
+    manager: SessionManager = ws.app.state.manager
+    limit = ws.app.state.settings.max_message_bytes
+    await ws.accept()
+    try:
+        manager.get(session_id)
+    except SessionNotFound as exc:
+        await ws.close(code=status.WS_1008_POLICY_VIOLATION, reason=exc.message[:120])
+        return
+    try:
+        while True:
+            message = await ws.receive()
+            if message["type"] == "websocket.disconnect":
+                return
+            raw = message.get("text")
+            if raw is None and message.get("bytes") is not None:
+                raw = message["bytes"].decode("utf-8", errors="replace")
+            if raw is None:
+                continue
+            if len(raw.encode("utf-8")) > limit:
+                await _send_error(
+                    ws, "message_too_large", f"message is larger than the limit of {limit} bytes"
+                )
+                continue
+            try:
+                frame = Frame.model_validate_json(raw)
+            except ValidationError as exc:
+                code = (
+                    "invalid_json" if exc.errors()[0]["type"] == "json_invalid" else "invalid_frame"
+                )
+                await _send_error(ws, code, describe_validation(list(exc.errors())))
+                continue
+            try:
+                result = await manager.process(session_id, frame)
+            except SessionNotFound as exc:
+                await _send_error(ws, "session_not_found", exc.message)
+                await ws.close(code=status.WS_1008_POLICY_VIOLATION, reason="session ended")
+                return
+            except LimitReached as exc:
+                await _send_error(ws, exc.code, str(exc))
+                continue
+            await ws.send_text(result.model_dump_json(by_alias=True))
+    except WebSocketDisconnect:
+        return

@@ -1,0 +1,26 @@
+"""Offline speech synthesis of feedback text (espeak-ng)."""
+
+from __future__ import annotations
+
+import asyncio
+
+from fastapi import APIRouter, HTTPException, Response
+
+from app.api.schemas import SpeechRequest
+from app.feedback.speech import SpeechUnavailable, synthesize_wav
+
+router = APIRouter(tags=["speech"])
+
+
+@router.post(
+    "/speech",
+    response_class=Response,
+    responses={200: {"content": {"audio/wav": {}}}, 503: {"description": "no speech engine"}},
+    summary="Speak text as a WAV file",
+)
+async def speech(body: SpeechRequest) -> Response:
+    try:
+        wav = await asyncio.to_thread(synthesize_wav, body.text)
+    except SpeechUnavailable as exc:
+        raise HTTPException(status_code=503, detail=str(exc)) from None
+    return Response(wav, media_type="audio/wav")

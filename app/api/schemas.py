@@ -1,0 +1,189 @@
+"""Request and response bodies of the HTTP and WebSocket API, exactly as CONTRACT.md says.
+
+Units are in the names: ``*_deg`` degrees, ``*_m`` metres, map coordinates ``x, y``
+in metres. Every float must be finite; unknown fields are refused so typos surface.
+"""
+
+from __future__ import annotations
+
+from datetime import datetime
+from typing import Annotated, Literal
+
+from pydantic import BaseModel, ConfigDict, Field
+
+Finite = Annotated[float, Field(allow_inf_nan=False)]
+
+
+class _In(BaseModel):
+    model_config = ConfigDict(extra="forbid", populate_by_name=True)
+
+
+class _Out(BaseModel):
+    model_config = ConfigDict(populate_by_name=True)
+
+
+# ----------------------------------------------------------------------------- input
+class OdometryIn(_In):
+    """Motion since the previous frame, in the previous body frame (+x forward, +y left)."""
+
+    forward_m: Finite = Field(0.0, ge=-10, le=10, description="forward motion, metres")
+    left_m: Finite = Field(0.0, ge=-10, le=10, description="leftward motion, metres")
+    turn_deg: Finite = Field(
+        0.0, ge=-360, le=360, description="turn, degrees, counter-clockwise positive"
+    )
+
+
+class DetectionIn(_In):
+    """One detection from the 360-degree camera's object detector."""
+
+    cls: str = Field(
+        alias="class",
+        min_length=1,
+        max_length=64,
+        description="object class, a lower-case word such as door; classes the map "
+        "lacks are ignored and reported in warnings",
+    )
+    bearing_deg: Finite = Field(
+        description="direction of the object's centre relative to straight ahead, degrees, "
+        "counter-clockwise positive (left +90, right -90); any real value, wrapped to "
+        "(-180, 180]"
+    )
+    score: Finite = Field(1.0, ge=0.0, le=1.0, description="detection confidence in [0, 1]")
+
+
+class TruthIn(_In):
+    """Ground truth sent by simulations (an addition to the contract; never used by the filter)."""
+
+    x: Finite = Field(description="metres")
+    y: Finite = Field(description="metres")
+    theta_deg: Finite = Field(description="heading, degrees CCW from +x")
+
+
+class Frame(_In):
+    """One camera frame with the motion since the previous one."""
+
+    timestamp: Finite | None = Field(None, description="client time of the frame, seconds")
+    odometry: OdometryIn | None = Field(
+        None, description="motion since the previous frame; null means unknown motion"
+    )
+    detections: list[DetectionIn] = Field(default_factory=list, description="what the camera sees")
+    describe: bool = Field(False, description="ask for a full description now ('Where am I?')")
+    truth: TruthIn | None = Field(
+        None, description="addition: a simulation's ground truth, shown in the view only"
+    )
+
+
+class SensorSettings(_In):
+    bearing_std_deg: Finite = Field(
+        2.0, gt=0.0, le=90.0, description="bearing noise standard deviation, degrees"
+    )
+    fov_deg: Finite = Field(360.0, gt=0.0, le=360.0, description="camera field of view, degrees")
+    class_bearing_std_deg: dict[str, Annotated[float, Field(gt=0, le=90, allow_inf_nan=False)]] = (
+        Field(default_factory=dict, description="addition: per-class bearing std, degrees")
+    )
+
+
+class FeedbackSettings(_In):
+    style: Literal["clock", "left_right", "degrees"] = Field(
+        "clock", description="how directions are spoken"
+    )
+    units: Literal["metric", "imperial"] = Field("metric", description="metres or feet")
+    max_items: int = Field(3, ge=1, le=10, description="most objects per feedback")
+
+
+class InitialPoseIn(_In):
+    x: Finite = Field(description="metres")
+    y: Finite = Field(description="metres")
+    theta_deg: Finite = Field(description="heading, degrees CCW from +x")
+    std_xy_m: Finite = Field(0.3, gt=0.0, le=100.0, description="position std, metres")
+    std_theta_deg: Finite = Field(10.0, gt=0.0, le=360.0, description="heading std, degrees")
+
+
+class SessionCreate(_In):
+    map: str = Field(min_length=1, max_length=200, description="name of a map from GET /maps")
+    particles: int | None = Field(
+        None, ge=100, description="particle count (default and maximum: service settings)"
+    )
+    seed: int | None = Field(None, ge=0, le=2**63 - 1, description="random seed, for replays")
+    initial_pose: InitialPoseIn | None = Field(
+        None, description="known start; null starts with no knowledge (global localization)"
+    )
+    sensor: SensorSettings = Field(default_factory=SensorSettings)
+    feedback: FeedbackSettings = Field(default_factory=FeedbackSettings)
+
+
+# ----------------------------------------------------------------------------- output
+class PoseOut(_Out):
+    x: float = Field(description="metres")
+    y: float = Field(description="metres")
+    theta_deg: float = Field(description="heading, degrees CCW from +x, (-180, 180]")
+
+
+class Uncertainty(_Out):
+    std_x_m: float
+    std_y_m: float
+    std_theta_deg: float
+
+
+class HypothesisOut(_Out):
+    x: float
+    y: float
+    theta_deg: float
+    weight: float = Field(description="share of the belief's weight, 0..1")
+    region: str | None = Field(description="named region containing it, or null")
+
+
+class FeedbackItemOut(_Out):
+    cls: str = Field(alias="class", serialization_alias="class")
+    label: str | None
+    clock: int | None = Field(description="clock direction 1..12 (12 ahead), null if unknown")
+    bearing_deg: float | None = Field(description="degrees, CCW positive, null if unknown")
+    distance_m: float | None = Field(description="metres, null if unknown")
+
+
+class FeedbackOut(_Out):
+    text: str = Field(description="what to speak now (may be empty)")
+    items: list[FeedbackItemOut]
+
+
+class FrameResult(_Out):
+    seq: int = Field(description="1-based number of this frame in the session")
+    pose: PoseOut
+    uncertainty: Uncertainty
+    converged: bool = Field(description="true only when the belief is a single tight mode")
+    hypotheses: list[HypothesisOut]
+    feedback: FeedbackOut
+    warnings: list[str]
+
+
+class SessionOut(_Out):
+    id: str
+    map: str
+    particles: int
+    created_at: datetime
+    frames: int
+    last_result: FrameResult | None
+
+
+class Bounds(_Out):
+    min_x: float
+    min_y: float
+    max_x: float
+    max_y: float
+
+
+class MapSummary(_Out):
+    name: str
+    description: str
+    classes: list[str]
+    object_count: int
+    bounds: Bounds
+
+
+class ErrorBody(_Out):
+    detail: object
+    message: str
+
+
+class SpeechRequest(_In):
+    text: str = Field(min_length=1, max_length=2000, description="text to speak")

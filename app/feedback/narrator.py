@@ -1,0 +1,251 @@
+"""What to say after each frame: the items, and the text for speech.
+
+Honesty first: while the filter has not converged, no position, region or
+map-derived direction is stated as fact. The narrator then says the location is not
+yet certain, reports what the camera sees right now in relative terms, and names
+competing regions when the hypotheses disagree.
+
+Once converged, ``items`` lists the map objects matched to this frame's detections,
+then the nearest other visible objects. ``text`` holds only what is new: an object
+already announced at the same clock position is not repeated until it moves by an
+hour on the clock, its distance changes notably, or a minute has passed. Entering a
+region is announced. ``describe=True`` ("Where am I?") gives a full description now.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from app.feedback.phrasing import (
+    Style,
+    Units,
+    article,
+    capitalize,
+    clock_distance_hours,
+    clock_from_bearing_deg,
+    direction_phrase,
+    distance_phrase,
+)
+from app.localization.geometry import wrap_angle
+from app.localization.map import SemanticMap
+from app.localization.types import Detection, Estimate
+
+#: Repeat an unchanged announcement after this long (seconds).
+REPEAT_AFTER_S = 60.0
+#: Hypotheses lighter than this are not named as alternatives.
+MIN_ALTERNATIVE_WEIGHT = 0.1
+#: Above this position std (m) distances are hedged with "roughly".
+CERTAIN_STD_M = 0.25
+
+
+@dataclass(frozen=True)
+class FeedbackOptions:
+    style: Style = "clock"
+    units: Units = "metric"
+    max_items: int = 3
+
+
+@dataclass(frozen=True)
+class FeedbackItem:
+    """One object in the feedback; direction and distance are None when not known."""
+
+    cls: str
+    label: str | None
+    clock: int | None
+    bearing_deg: float | None
+    distance_m: float | None
+
+
+@dataclass(frozen=True)
+class Feedback:
+    text: str
+    items: list[FeedbackItem] = field(default_factory=list)
+
+
+@dataclass
+class _Said:
+    clock: int
+    distance_m: float | None
+    at_s: float
+
+
+class Narrator:
+    """Per-session narrator; remembers what was said to avoid repeating it."""
+
+    def __init__(self, semantic_map: SemanticMap, options: FeedbackOptions | None = None) -> None:
+        self.map = semantic_map
+        self.options = options or FeedbackOptions()
+        self._said: dict[object, _Said] = {}
+        self._region: str | None = None
+        self._was_converged = False
+        self._status_at: float | None = None
+        self._ambiguity: tuple[str, ...] = ()
+
+    # ------------------------------------------------------------------ public
+    def update(
+        self,
+        estimate: Estimate,
+        detections: Sequence[Detection],
+        *,
+        timestamp_s: float | None,
+        describe: bool = False,
+        fov_deg: float = 360.0,
+    ) -> Feedback:
+        """Feedback for one frame (see the module docstring for the rules)."""
+        now = time.monotonic() if timestamp_s is None else float(timestamp_s)
+        dets = [d for d in detections if d.score > 0 and d.cls in self.map.class_members]
+        if estimate.converged:
+            return self._located(estimate, dets, now, describe, fov_deg)
+        return self._uncertain(estimate, dets, now, describe)
+
+    # ------------------------------------------------------------- not located
+    def _uncertain(
+        self, estimate: Estimate, dets: list[Detection], now: float, describe: bool
+    ) -> Feedback:
+        opts = self.options
+        seen = sorted(dets, key=lambda d: -d.score)[: opts.max_items]
+        items = [
+            FeedbackItem(
+                d.cls,
+                None,
+                clock_from_bearing_deg(math.degrees(d.bearing_rad)),
+                round(math.degrees(d.bearing_rad), 1),
+                None,
+            )
+            for d in seen
+        ]
+        parts: list[str] = []
+        regions = self._candidate_regions(estimate)
+        first = self._was_converged or self._status_at is None
+        stale = self._status_at is not None and now - self._status_at >= REPEAT_AFTER_S
+        if describe or first or stale or regions != self._ambiguity:
+            if self._was_converged:
+                parts.append("I am no longer sure where you are.")
+            if len(regions) >= 2:
+                parts.append(f"You may be in {' or '.join(regions)}; not certain yet.")
+            else:
+                parts.append("Your location is not certain yet.")
+            self._status_at = now
+            self._ambiguity = regions
+        self._was_converged = False
+        self._region = None
+        fresh = []
+        for d in seen:
+            clock = clock_from_bearing_deg(math.degrees(d.bearing_rad))
+            if describe or self._is_new(("seen", d.cls, clock), clock, None, now):
+                fresh.append(
+                    f"{article(d.cls)} {direction_phrase(math.degrees(d.bearing_rad), opts.style)}"
+                )
+        if fresh:
+            parts.append(f"I see {_join(fresh)}; still working out where you are.")
+        return Feedback(" ".join(parts), items)
+
+    def _candidate_regions(self, estimate: Estimate) -> tuple[str, ...]:
+        names: list[str] = []
+        for h in estimate.hypotheses:
+            if h.weight < MIN_ALTERNATIVE_WEIGHT:
+                continue
+            r = self.map.region_at(h.x, h.y)
+            if r is not None and r not in names:
+                names.append(r)
+        return tuple(names)
+
+    # ----------------------------------------------------------------- located
+    def _located(
+        self,
+        estimate: Estimate,
+        dets: list[Detection],
+        now: float,
+        describe: bool,
+        fov_deg: float,
+    ) -> Feedback:
+        opts = self.options
+        certain = max(estimate.std_x_m, estimate.std_y_m) <= CERTAIN_STD_M
+        ordered = self._ordered_objects(estimate, dets, fov_deg)
+        pose_xy = np.array([estimate.x, estimate.y])
+        items: list[FeedbackItem] = []
+        for n in ordered[: opts.max_items]:
+            d = self.map.object_xy[n] - pose_xy
+            bearing = math.degrees(float(wrap_angle(math.atan2(d[1], d[0]) - estimate.theta_rad)))
+            items.append(
+                FeedbackItem(
+                    self.map.class_of(n),
+                    self.map.object_labels[n],
+                    clock_from_bearing_deg(bearing),
+                    round(bearing, 1),
+                    round(float(np.hypot(*d)), 2),
+                )
+            )
+        parts: list[str] = []
+        if not self._was_converged:
+            parts.append("Location found.")
+        region = self.map.region_at(estimate.x, estimate.y)
+        if describe or region != self._region:
+            if region is not None:
+                parts.append(f"You are in {region}.")
+            elif describe:
+                parts.append("You are outside the named areas of this map.")
+        self._region = region
+        self._was_converged = True
+        self._status_at = None
+        for n, item in zip(ordered, items, strict=False):
+            if describe or self._is_new(("obj", int(n)), item.clock, item.distance_m, now):
+                name = item.label or item.cls
+                where = direction_phrase(item.bearing_deg or 0.0, opts.style)
+                far = distance_phrase(item.distance_m or 0.0, opts.units, certain=certain)
+                parts.append(f"{capitalize(name)} {where}, {far}.")
+        return Feedback(" ".join(parts), items)
+
+    def _ordered_objects(
+        self, estimate: Estimate, dets: list[Detection], fov_deg: float
+    ) -> list[int]:
+        """Objects matched to this frame's detections first, then the nearest visible others."""
+        pose_xy = np.array([[estimate.x, estimate.y]])
+        visible = self.map.line_of_sight(pose_xy)[0]
+        rel = self.map.object_xy - pose_xy
+        dist = np.hypot(rel[:, 0], rel[:, 1])
+        bearing = wrap_angle(np.arctan2(rel[:, 1], rel[:, 0]) - estimate.theta_rad)
+        in_view = visible & (np.abs(bearing) <= math.radians(fov_deg) / 2 + 1e-9)
+        matched: list[int] = []
+        for d in sorted(dets, key=lambda d: -d.score):
+            members = self.map.class_members[d.cls]
+            cand = members[in_view[members]]
+            if cand.size == 0:
+                continue
+            err = np.abs(wrap_angle(bearing[cand] - d.bearing_rad))
+            best = int(cand[np.argmin(err)])
+            if best not in matched:
+                matched.append(best)
+        others = [int(i) for i in np.argsort(dist) if visible[i] and int(i) not in matched]
+        return matched + others
+
+    # ------------------------------------------------------------ repetition
+    def _is_new(self, key: object, clock: int | None, distance_m: float | None, now: float) -> bool:
+        """True when this announcement adds something; remembers it if so."""
+        said = self._said.get(key)
+        changed = (
+            said is None
+            or clock is None
+            or clock_distance_hours(said.clock, clock) >= 1
+            or now - said.at_s >= REPEAT_AFTER_S
+            or now < said.at_s
+            or (
+                distance_m is not None
+                and said.distance_m is not None
+                and abs(distance_m - said.distance_m) >= max(1.0, 0.3 * said.distance_m)
+            )
+        )
+        if changed:
+            self._said[key] = _Said(clock or 0, distance_m, now)
+        return changed
+
+
+def _join(words: list[str]) -> str:
+    if len(words) <= 1:
+        return "".join(words)
+    return ", ".join(words[:-1]) + " and " + words[-1]

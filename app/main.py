@@ -1,0 +1,90 @@
+"""Build the FastAPI application (thin: wiring only)."""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import importlib.util
+import logging
+from collections.abc import AsyncIterator
+from pathlib import Path
+
+from fastapi import FastAPI
+from fastapi.staticfiles import StaticFiles
+
+from app.api.errors import install_error_handlers
+from app.api.limits import BodySizeLimit
+from app.api.routes import health, maps, metrics, sessions, speech
+from app.config import Settings, get_settings
+from app.localization.map import SemanticMap, bundled_maps_dir, load_map_dir
+from app.service.metrics import Metrics
+from app.service.sessions import SessionManager
+
+log = logging.getLogger("bearings")
+
+STATIC_DIR = Path(__file__).resolve().parents[1] / "static"
+
+
+def load_maps(settings: Settings) -> dict[str, SemanticMap]:
+    """Bundled maps plus every ``--maps`` directory (later directories win on a name clash)."""
+    maps = load_map_dir(bundled_maps_dir())
+    for directory in settings.maps:
+        maps.update(load_map_dir(directory))
+    return maps
+
+
+def create_app(settings: Settings | None = None, *, demo: bool = False) -> FastAPI:
+    """The service: REST + WebSocket API, metrics, the demo page and (optionally) the view."""
+    settings = settings or get_settings()
+    metrics_ = Metrics()
+
+    @contextlib.asynccontextmanager
+    async def lifespan(app: FastAPI) -> AsyncIterator[None]:
+        from app.localization.filter import warm_up
+
+        await asyncio.to_thread(warm_up)
+        manager = SessionManager(load_maps(settings), settings, metrics_)
+        app.state.manager = manager
+        tasks = [asyncio.create_task(manager.run_sweeper())]
+        view = None
+        if settings.viser:
+            from app.viz import LiveView
+
+            view = LiveView(manager, port=settings.viser_port)
+            view.start()
+            app.state.view = view
+        if demo:
+            from app.demo import run_demo_walk
+
+            tasks.append(asyncio.create_task(run_demo_walk(manager)))
+        try:
+            yield
+        finally:
+            for task in tasks:
+                task.cancel()
+            for task in tasks:
+                with contextlib.suppress(asyncio.CancelledError, Exception):
+                    await task
+            if view is not None:
+                view.stop()
+
+    app = FastAPI(
+        title="Bearings",
+        version="0.1.0",
+        summary="Bearing-only semantic self-localization for blind and visually impaired people.",
+        lifespan=lifespan,
+    )
+    app.state.settings = settings
+    app.state.metrics = metrics_
+    app.state.view = None
+    app.add_middleware(BodySizeLimit, max_bytes=settings.max_message_bytes)
+    install_error_handlers(app)
+    for module in (health, metrics, maps, sessions, speech):
+        app.include_router(module.router)
+    if importlib.util.find_spec("app.api.routes.demo") is not None:
+        from app.api.routes import demo as demo_routes
+
+        app.include_router(demo_routes.router)
+    if STATIC_DIR.is_dir():
+        app.mount("/", StaticFiles(directory=STATIC_DIR, html=True), name="static")
+    return app

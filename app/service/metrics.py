@@ -1,0 +1,27 @@
+"""Prometheus metrics of one app, in its own registry (tests build many apps)."""
+
+from __future__ import annotations
+
+from prometheus_client import CollectorRegistry, Counter, Gauge, Histogram, disable_created_metrics
+
+disable_created_metrics()
+
+
+class Metrics:
+    """Frames, step latency, sessions."""
+
+    def __init__(self) -> None:
+        self.registry = CollectorRegistry()
+        self.frames = Counter("bearings_frames", "Frames processed", registry=self.registry)
+        self.step_seconds = Histogram(
+            "bearings_step_seconds",
+            "Time to process one frame (filter step and feedback), seconds",
+            buckets=(0.001, 0.0025, 0.005, 0.01, 0.025, 0.05, 0.1, 0.25, 0.5, 1.0),
+            registry=self.registry,
+        )
+        self.active_sessions = Gauge(
+            "bearings_active_sessions", "Live sessions", registry=self.registry
+        )
+        self.sessions_created = Counter(
+            "bearings_sessions_created", "Sessions created", registry=self.registry
+        )

@@ -1,0 +1,298 @@
+"""Live sessions: each owns one particle filter and one narrator.
+
+Frames of one session run strictly in order, one at a time (an asyncio lock per
+session), and the filter work runs in a worker thread so the event loop, other
+sessions and ``/healthz`` stay responsive. A WebSocket disconnect does not end a
+session; ``DELETE`` or the idle timeout does.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import logging
+import secrets
+import threading
+import time
+from dataclasses import dataclass, field
+from datetime import UTC, datetime
+
+import numpy as np
+
+from app.api.schemas import Frame, FrameResult, SessionCreate, SessionOut
+from app.config import Settings
+from app.feedback import FeedbackOptions, Narrator
+from app.localization.config import FilterConfig
+from app.localization.filter import ParticleFilter
+from app.localization.map import SemanticMap
+from app.localization.types import Detection, Estimate, InitialPose, Pose
+from app.service.convert import detections_of, frame_result, odometry_of, truth_of
+from app.service.metrics import Metrics
+
+log = logging.getLogger("bearings.sessions")
+
+
+class SessionNotFound(KeyError):
+    """No live session has that id."""
+
+    def __init__(self, session_id: str) -> None:
+        super().__init__(session_id)
+        self.message = f"no session {session_id!r}: it never existed, was deleted or expired"
+
+    def __str__(self) -> str:
+        return self.message
+
+
+class LimitReached(RuntimeError):
+    """A service limit was hit; ``status`` is the HTTP status to answer with."""
+
+    def __init__(self, message: str, status: int = 429, code: str = "limit") -> None:
+        super().__init__(message)
+        self.status = status
+        self.code = code
+
+
+class UnknownMap(LookupError):
+    def __init__(self, name: str, known: list[str]) -> None:
+        super().__init__(f"no map {name!r}; known maps: {', '.join(known) or 'none'}")
+
+
+def log_event(event: str, **fields: object) -> None:
+    """One structured (JSON) log line per session event."""
+    log.info(json.dumps({"event": event, **fields}, default=str))
+
+
+@dataclass(frozen=True)
+class SessionSnapshot:
+    """A consistent copy of a session's state for readers on other threads (the view)."""
+
+    id: str
+    map_name: str
+    version: int
+    frames: int
+    x: np.ndarray
+    y: np.ndarray
+    theta: np.ndarray
+    weights: np.ndarray
+    estimate: Estimate | None
+    detections: list[Detection]
+    truth: Pose | None
+
+
+@dataclass
+class Session:
+    """One person's localization: filter, narrator and the latest result."""
+
+    id: str
+    map: SemanticMap
+    filter: ParticleFilter
+    narrator: Narrator
+    particles: int
+    created_at: datetime
+    last_active: float = field(default_factory=time.monotonic)
+    frames: int = 0
+    last_result: FrameResult | None = None
+    last_detections: list[Detection] = field(default_factory=list)
+    truth: Pose | None = None
+    version: int = 0
+    last_timestamp: float | None = None
+    order: asyncio.Lock = field(default_factory=asyncio.Lock)
+    state_lock: threading.Lock = field(default_factory=threading.Lock)
+
+    def public(self) -> SessionOut:
+        return SessionOut(
+            id=self.id,
+            map=self.map.name,
+            particles=self.particles,
+            created_at=self.created_at,
+            frames=self.frames,
+            last_result=self.last_result,
+        )
+
+    def process_sync(self, frame: Frame) -> FrameResult:
+        """Run one frame through the filter and the narrator (worker thread)."""
+        detections, warnings = detections_of(frame, self.map)
+        if (
+            frame.timestamp is not None
+            and self.last_timestamp is not None
+            and frame.timestamp < self.last_timestamp
+        ):
+            warnings.append(
+                f"timestamp {frame.timestamp} is earlier than the previous frame's "
+                f"{self.last_timestamp}; frames are processed in the order received"
+            )
+        with self.state_lock:
+            estimate = self.filter.step(odometry_of(frame), detections)
+            feedback = self.narrator.update(
+                estimate,
+                detections,
+                timestamp_s=frame.timestamp,
+                describe=frame.describe,
+                fov_deg=self.filter.config.fov_deg,
+            )
+            self.frames += 1
+            result = frame_result(self.frames, estimate, feedback, self.map, warnings)
+            self.last_result = result
+            self.last_detections = detections
+            self.truth = truth_of(frame)
+            if frame.timestamp is not None:
+                self.last_timestamp = frame.timestamp
+            self.version += 1
+        return result
+
+    def snapshot(self) -> SessionSnapshot:
+        """Copies of the particles and latest state, safe to call from any thread."""
+        with self.state_lock:
+            pf = self.filter
+            return SessionSnapshot(
+                id=self.id,
+                map_name=self.map.name,
+                version=self.version,
+                frames=self.frames,
+                x=pf.x.copy(),
+                y=pf.y.copy(),
+                theta=pf.theta.copy(),
+                weights=pf.weights,
+                estimate=pf.estimate if self.frames else None,
+                detections=list(self.last_detections),
+                truth=self.truth,
+            )
+
+
+class SessionManager:
+    """Creates, finds, feeds and expires sessions, within the service's limits."""
+
+    def __init__(self, maps: dict[str, SemanticMap], settings: Settings, metrics: Metrics) -> None:
+        self.maps = maps
+        self.settings = settings
+        self.metrics = metrics
+        self._sessions: dict[str, Session] = {}
+
+    def sessions(self) -> list[Session]:
+        """Live sessions, oldest first."""
+        return list(self._sessions.values())
+
+    def get(self, session_id: str) -> Session:
+        try:
+            return self._sessions[session_id]
+        except KeyError:
+            raise SessionNotFound(session_id) from None
+
+    def _build(self, request: SessionCreate) -> Session:
+        if request.map not in self.maps:
+            raise UnknownMap(request.map, sorted(self.maps))
+        semantic_map = self.maps[request.map]
+        particles = request.particles or self.settings.default_particles
+        if particles > self.settings.max_particles:
+            raise LimitReached(
+                f"particles: {particles} is more than this service allows "
+                f"({self.settings.max_particles})",
+                status=422,
+                code="too_many_particles",
+            )
+        sensor = request.sensor
+        config = FilterConfig(
+            particles=particles,
+            bearing_std_deg=sensor.bearing_std_deg,
+            class_bearing_std_deg=dict(sensor.class_bearing_std_deg),
+            fov_deg=sensor.fov_deg,
+        )
+        seed = request.seed if request.seed is not None else secrets.randbits(63)
+        initial = None
+        if request.initial_pose is not None:
+            p = request.initial_pose
+            initial = InitialPose(
+                p.x,
+                p.y,
+                float(np.radians(p.theta_deg)),
+                p.std_xy_m,
+                float(np.radians(p.std_theta_deg)),
+            )
+        pf = ParticleFilter(
+            semantic_map, config, rng=np.random.default_rng(seed), initial_pose=initial
+        )
+        fb = request.feedback
+        narrator = Narrator(semantic_map, FeedbackOptions(fb.style, fb.units, fb.max_items))
+        return Session(
+            id=secrets.token_urlsafe(24),  # 192 random bits
+            map=semantic_map,
+            filter=pf,
+            narrator=narrator,
+            particles=particles,
+            created_at=datetime.now(UTC),
+        )
+
+    async def create(self, request: SessionCreate) -> Session:
+        """A new session; the filter is built off the event loop."""
+        if len(self._sessions) >= self.settings.max_sessions:
+            raise LimitReached(
+                f"the service already runs its maximum of {self.settings.max_sessions} sessions; "
+                "delete one or try again later",
+                status=429,
+                code="too_many_sessions",
+            )
+        session = await asyncio.to_thread(self._build, request)
+        if len(self._sessions) >= self.settings.max_sessions:  # raced with another create
+            raise LimitReached(
+                f"the service already runs its maximum of {self.settings.max_sessions} sessions",
+                status=429,
+                code="too_many_sessions",
+            )
+        self._sessions[session.id] = session
+        self.metrics.active_sessions.set(len(self._sessions))
+        self.metrics.sessions_created.inc()
+        log_event(
+            "session_created",
+            session=session.id[:8],
+            map=session.map.name,
+            particles=session.particles,
+            global_start=request.initial_pose is None,
+        )
+        return session
+
+    async def process(self, session_id: str, frame: Frame) -> FrameResult:
+        """Run one frame, strictly after the session's previous ones."""
+        session = self.get(session_id)
+        if len(frame.detections) > self.settings.max_detections:
+            raise LimitReached(
+                f"detections: {len(frame.detections)} detections in one frame; the limit is "
+                f"{self.settings.max_detections}",
+                status=422,
+                code="too_many_detections",
+            )
+        async with session.order:
+            if session_id not in self._sessions:
+                raise SessionNotFound(session_id)
+            started = time.perf_counter()
+            result = await asyncio.to_thread(session.process_sync, frame)
+            self.metrics.step_seconds.observe(time.perf_counter() - started)
+            self.metrics.frames.inc()
+            session.last_active = time.monotonic()
+            return result
+
+    async def delete(self, session_id: str, *, reason: str = "deleted") -> None:
+        session = self._sessions.pop(session_id, None)
+        if session is None:
+            raise SessionNotFound(session_id)
+        self.metrics.active_sessions.set(len(self._sessions))
+        log_event(f"session_{reason}", session=session_id[:8], frames=session.frames)
+
+    async def expire_idle(self) -> int:
+        """Remove sessions idle longer than the timeout; return how many."""
+        limit = self.settings.session_idle_timeout_s
+        now = time.monotonic()
+        stale = [
+            s.id
+            for s in self._sessions.values()
+            if now - s.last_active > limit and not s.order.locked()
+        ]
+        for sid in stale:
+            await self.delete(sid, reason="expired")
+        return len(stale)
+
+    async def run_sweeper(self) -> None:
+        """Forever: expire idle sessions every few seconds (cancel to stop)."""
+        period = max(0.5, min(30.0, self.settings.session_idle_timeout_s / 4))
+        while True:
+            await asyncio.sleep(period)
+            await self.expire_idle()
