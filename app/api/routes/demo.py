@@ -1,0 +1,59 @@
+"""Additions for the demo page: simulated frames to stream, and where the view lives."""
+
+from __future__ import annotations
+
+import asyncio
+
+import numpy as np
+from fastapi import APIRouter, Request
+from pydantic import Field
+
+from app.api.deps import ManagerDep
+from app.api.schemas import _In
+from app.service.sessions import UnknownMap
+from app.simulation.simulator import simulate
+from app.simulation.walks import demo_config
+
+router = APIRouter(tags=["demo"])
+
+
+class SimulationRequest(_In):
+    map: str = Field("paper_office", description="map to walk on")
+    fov_deg: float = Field(360.0, gt=0, le=360, description="camera field of view, degrees")
+    occlusion: bool = Field(False, description="face a corner with the front 180 deg blocked")
+    missing: bool = Field(False, description="each frame loses a random share of detections")
+    false_rate: float = Field(0.0, ge=0, le=5, description="false detections per frame (mean)")
+    bearing_noise_deg: float = Field(2.0, ge=0, le=45, description="bearing noise std, degrees")
+    seed: int = Field(0, ge=0, le=2**32 - 1, description="random seed")
+
+
+@router.post("/simulations", summary="Simulated frames of a looping walk (with ground truth)")
+async def simulations(body: SimulationRequest, manager: ManagerDep) -> dict[str, object]:
+    """Frames in the ``Frame`` format (plus ``truth``) for a client to stream to a session."""
+    if body.map not in manager.maps:
+        raise UnknownMap(body.map, sorted(manager.maps))
+    semantic_map = manager.maps[body.map]
+
+    def make() -> list[dict[str, object]]:
+        rng = np.random.default_rng(body.seed)
+        cfg = demo_config(
+            semantic_map,
+            rng,
+            fov_deg=body.fov_deg,
+            occlusion=body.occlusion,
+            missing=body.missing,
+            false_rate=body.false_rate,
+            bearing_noise_deg=body.bearing_noise_deg,
+        )
+        return [f.to_contract() for f in simulate(semantic_map, cfg, rng)]
+
+    frames = await asyncio.to_thread(make)
+    return {"map": body.map, "rate_hz": 5.0, "frames": frames}
+
+
+@router.get("/view", summary="Where the live viser view is served")
+async def view(request: Request) -> dict[str, object]:
+    settings = request.app.state.settings
+    live = request.app.state.view
+    port = live.port if live is not None else settings.viser_port
+    return {"enabled": live is not None, "port": port}

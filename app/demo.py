@@ -1,0 +1,117 @@
+"""Simulated walks streamed into live sessions, for `bearings demo` and the view's controls.
+
+A :class:`DemoWalk` creates a session and feeds it frames from the simulator in real
+time (5 frames/s), looping its path for ever, exactly as a phone app would through
+the public API. "Kidnap" carries the simulated person to a random place without
+telling the filter.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from app.api.schemas import Frame, SessionCreate
+from app.localization.geometry import wrap_angle
+from app.localization.types import Odometry
+from app.service.sessions import SessionManager, SessionNotFound
+from app.simulation.simulator import SimFrame, simulate
+from app.simulation.walks import demo_config
+
+log = logging.getLogger("bearings.demo")
+
+
+@dataclass(frozen=True)
+class DemoSettings:
+    map_name: str = "paper_office"
+    fov_deg: float = 360.0
+    occlusion: bool = False
+    missing: bool = False
+    particles: int = 10_000
+    seed: int = 0
+    speed: float = 1.0  # playback speed; 1.0 is real time
+
+
+class DemoWalk:
+    """One simulated person walking in a loop, streaming into one session."""
+
+    def __init__(self, manager: SessionManager, settings: DemoSettings) -> None:
+        self.manager = manager
+        self.settings = settings
+        self.session_id: str | None = None
+        self._kidnap = False
+        self._rng = np.random.default_rng(settings.seed)
+        self._task: asyncio.Task[None] | None = None
+
+    def kidnap(self) -> None:
+        """Carry the person elsewhere at the next frame (no odometry for that frame)."""
+        self._kidnap = True
+
+    def start(self) -> asyncio.Task[None]:
+        self._task = asyncio.get_running_loop().create_task(self.run())
+        return self._task
+
+    async def stop(self) -> None:
+        if self._task is not None:
+            self._task.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await self._task
+        if self.session_id is not None:
+            with contextlib.suppress(SessionNotFound):
+                await self.manager.delete(self.session_id)
+
+    def _frames(self) -> list[SimFrame]:
+        s = self.settings
+        semantic_map = self.manager.maps[s.map_name]
+        cfg = demo_config(
+            semantic_map, self._rng, fov_deg=s.fov_deg, occlusion=s.occlusion, missing=s.missing
+        )
+        return simulate(semantic_map, cfg, self._rng)
+
+    def _kidnapped_frames(self) -> list[SimFrame]:
+        frames = self._frames()
+        start = int(self._rng.integers(len(frames) // 3, len(frames)))
+        rest = frames[start:]
+        return [replace(rest[0], odometry=None), *rest[1:]]
+
+    async def run(self) -> None:
+        s = self.settings
+        session = await self.manager.create(
+            SessionCreate(
+                map=s.map_name, particles=s.particles, seed=s.seed, sensor={"fov_deg": s.fov_deg}
+            )
+        )
+        self.session_id = session.id
+        period = 1.0 / 5.0 / max(s.speed, 1e-3)
+        frames = self._frames()
+        i = 0
+        loop = asyncio.get_running_loop()
+        next_at = loop.time()
+        while True:
+            if self._kidnap:
+                self._kidnap = False
+                frames, i = self._kidnapped_frames(), 0
+            if i >= len(frames):  # the loop closes where it began: carry on from there
+                last = frames[-1].truth
+                frames, i = self._frames(), 0
+                turn = float(wrap_angle(frames[0].truth.theta_rad - last.theta_rad))
+                frames[0] = replace(frames[0], odometry=Odometry(0.0, 0.0, turn))
+            frame = Frame.model_validate(frames[i].to_contract())
+            try:
+                await self.manager.process(session.id, frame)
+            except SessionNotFound:
+                log.info("demo session ended; demo walk stops")
+                return
+            i += 1
+            next_at += period
+            await asyncio.sleep(max(0.0, next_at - loop.time()))
+
+
+async def run_demo_walk(manager: SessionManager, **settings: object) -> None:
+    """The walk `bearings demo` starts: the paper office, 360 degree camera, real time."""
+    walk = DemoWalk(manager, DemoSettings(**settings))  # type: ignore[arg-type]
+    await walk.run()
