@@ -129,8 +129,14 @@ class ConvergenceGate:
     spot that looks tight; telling a blind person that position with confidence is
     the worst failure. So a tight, heavy cluster counts as converged only after it
     has stayed put (moving no more than the odometry allows plus ``tolerance_m``, and
-    turning no more than ``tolerance_rad``) for ``frames`` consecutive frames.
+    turning no more than ``tolerance_rad``) for ``frames`` consecutive frames, and
+    while the estimate explains what the camera sees: the smoothed median of the
+    squared bearing residuals (in standard deviations) must stay below ``max_fit``
+    (below 1 when the pose is right and the noise is as configured; residuals are
+    clipped at 3 standard deviations so a false detection costs at most 9).
     """
+
+    max_fit: float = 1.0
 
     def __init__(
         self, frames: int = 5, tolerance_m: float = 0.3, tolerance_rad: float = np.radians(15.0)
@@ -145,8 +151,14 @@ class ConvergenceGate:
         self._streak = 0
         self._last = None
 
-    def confirm(self, raw: Estimate, moved_m: float = 0.0, turned_rad: float = 0.0) -> Estimate:
-        """``raw`` with ``converged`` true only if it held for ``frames`` frames."""
+    def confirm(
+        self,
+        raw: Estimate,
+        moved_m: float = 0.0,
+        turned_rad: float = 0.0,
+        fit: float | None = None,
+    ) -> Estimate:
+        """``raw`` with ``converged`` true only if it held for ``frames`` frames and fits."""
         last = self._last
         steady = (
             raw.converged
@@ -157,6 +169,6 @@ class ConvergenceGate:
         )
         self._streak = self._streak + 1 if steady else (1 if raw.converged else 0)
         self._last = raw
-        if raw.converged and self._streak < self.frames:
+        if raw.converged and (self._streak < self.frames or fit is None or fit > self.max_fit):
             return replace(raw, converged=False)
         return raw

@@ -29,9 +29,12 @@ from app.localization.resampling import (
     normalized_weights,
     systematic_resample,
 )
-from app.localization.sensor import Observation, prepare_observation
+from app.localization.sensor import Observation, normalized_residuals, prepare_observation
 from app.localization.types import Detection, Estimate, InitialPose, Odometry
 from app.localization.visibility import visibility_grid
+
+#: Weight of the newest frame in the smoothed fit that gates ``converged``.
+FIT_SMOOTHING = 0.3
 
 
 class ParticleFilter:
@@ -79,6 +82,8 @@ class ParticleFilter:
         self.log_w = np.zeros(n, dtype=np.float64)
         self._recovery.reset()
         self._gate.reset()
+        #: Smoothed mean squared bearing residual (in stds) at the estimate; None before any.
+        self.fit: float | None = None
         self.steps = 0
         self.estimate: Estimate = estimate_pose(self.x, self.y, self.theta, self.weights)
 
@@ -124,12 +129,15 @@ class ParticleFilter:
         log_lik = self.observation_log_likelihood(obs)
         prior = self.log_w - log_sum_exp(self.log_w)
         self.log_w = self.log_w + log_lik
-        if not self.config.recovery:
-            return 0.0
         mean_ll = log_sum_exp(prior + log_lik)
         per_class = mean_ll / max(obs.group_kappa.size, 1)
         if not np.isfinite(per_class):
             per_class = -1e3
+        self.fit = (
+            per_class if self.fit is None else self.fit + FIT_SMOOTHING * (per_class - self.fit)
+        )
+        if not self.config.recovery:
+            return 0.0
         return self._recovery.update(per_class)
 
     def resample(self, inject_share: float = 0.0) -> bool:
@@ -164,11 +172,26 @@ class ParticleFilter:
         self.resample(inject)
         w = self.weights
         raw = estimate_pose(self.x, self.y, self.theta, w, ess=effective_sample_size(w))
+        self._update_fit(raw)
         moved = 1.0 if odometry is None else float(np.hypot(odometry.forward_m, odometry.left_m))
         turned = np.pi if odometry is None else odometry.turn_rad
-        self.estimate = self._gate.confirm(raw, moved, turned)
+        self.estimate = self._gate.confirm(raw, moved, turned, self.fit)
         self.steps += 1
         return self.estimate
+
+    def _update_fit(self, raw: Estimate) -> None:
+        """Smooth how well the estimated pose explains this frame's detections.
+
+        The mean of the squared normalized residuals, each clipped at 3 standard
+        deviations so that one false detection cannot dominate; a cloud collapsed onto
+        a wrong spot leaves many residuals large.
+        """
+        obs = self.last_observation
+        if not raw.converged or obs is None or obs.empty:
+            return
+        r = normalized_residuals(raw.x, raw.y, raw.theta_rad, obs, self.map, self.config)
+        value = float(np.mean(np.minimum(r, 3.0) ** 2))
+        self.fit = value if self.fit is None else self.fit + FIT_SMOOTHING * (value - self.fit)
 
 
 def warm_up() -> None:

@@ -211,3 +211,35 @@ def log_likelihood_reference(
             # score tempering (P^w) and the class exponent 1/size(O_i), eq. (2)
             total += obs.group_weight[g] * obs.det_score[k] * log_p
     return total
+
+
+def normalized_residuals(
+    x: float,
+    y: float,
+    theta: float,
+    obs: Observation,
+    semantic_map: SemanticMap,
+    config: FilterConfig,
+) -> NDArray[np.float64]:
+    """Each detection's bearing error at one pose, in units of its class's std, shape (K,).
+
+    The error is to the best-matching visible object of the detection's class (eq. 3);
+    a detection nothing visible explains gets +inf. Used to check that a converged
+    estimate actually explains what the camera sees.
+    """
+    out = np.full(obs.det_cos.size, np.inf)
+    if obs.empty:
+        return out
+    px, py, pt = np.array([x]), np.array([y]), np.array([theta])
+    rows = semantic_map.line_of_sight(np.array([[x, y]])) if config.visibility else None
+    for g in range(obs.group_kappa.size):
+        objs = obs.members[obs.member_start[g] : obs.member_start[g + 1]]
+        ok = candidate_mask(px, py, pt, objs, semantic_map, config, rows)[0]
+        if not ok.any():
+            continue
+        d = semantic_map.object_xy[objs[ok]] - np.array([x, y])
+        predicted = np.arctan2(d[:, 1], d[:, 0]) - theta
+        for k in np.flatnonzero(obs.det_group == g):
+            err = np.abs(np.angle(np.exp(1j * (obs.det_bearing[k] - predicted))))
+            out[k] = float(err.min() * np.sqrt(obs.group_kappa[g]))
+    return out

@@ -1,0 +1,223 @@
+"""Sessions over REST: the contract field by field, and every refusal."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from fastapi.testclient import TestClient
+
+from app.localization.map import bundled_maps_dir, load_map
+from app.simulation.scenarios import paper_config
+from app.simulation.simulator import simulate
+
+
+def test_create_and_get_session(client: TestClient) -> None:
+    r = client.post("/sessions", json={"map": "paper_office"})
+    assert r.status_code == 201
+    s = r.json()
+    assert set(s) == {"id", "map", "particles", "created_at", "frames", "last_result"}
+    assert s["particles"] == 1000 and s["frames"] == 0 and s["last_result"] is None
+    assert len(s["id"]) >= 22  # >= 128 bits in URL-safe base64
+    assert client.get(f"/sessions/{s['id']}").json()["id"] == s["id"]
+
+
+def test_ids_are_unique_and_random(client: TestClient) -> None:
+    ids = {
+        client.post("/sessions", json={"map": "paper_office", "particles": 100}).json()["id"]
+        for _ in range(5)
+    }
+    assert len(ids) == 5
+
+
+def test_frame_result_matches_the_contract(client: TestClient, session_id: str) -> None:
+    frame = {
+        "timestamp": 1.0,
+        "odometry": {"forward_m": 0.1, "left_m": 0.0, "turn_deg": -2.0},
+        "detections": [{"class": "door", "bearing_deg": 35.0, "score": 0.9}],
+    }
+    r = client.post(f"/sessions/{session_id}/frames", json=frame)
+    assert r.status_code == 200, r.text
+    res = r.json()
+    assert set(res) == {
+        "seq",
+        "pose",
+        "uncertainty",
+        "converged",
+        "hypotheses",
+        "feedback",
+        "warnings",
+    }
+    assert res["seq"] == 1
+    assert set(res["pose"]) == {"x", "y", "theta_deg"}
+    assert set(res["uncertainty"]) == {"std_x_m", "std_y_m", "std_theta_deg"}
+    assert res["converged"] is False  # one detection cannot localize anyone
+    assert 1 <= len(res["hypotheses"]) <= 3
+    assert set(res["hypotheses"][0]) == {"x", "y", "theta_deg", "weight", "region"}
+    assert set(res["feedback"]) == {"text", "items"}
+    assert "not certain" in res["feedback"]["text"]
+    got = client.get(f"/sessions/{session_id}").json()
+    assert got["frames"] == 1 and got["last_result"]["seq"] == 1
+
+
+def test_a_walk_converges_and_says_where(client: TestClient) -> None:
+    sid = client.post(
+        "/sessions", json={"map": "paper_office", "particles": 3000, "seed": 2}
+    ).json()["id"]
+    office = load_map(bundled_maps_dir() / "paper_office.json")
+    frames = simulate(office, paper_config("nominal", 360), np.random.default_rng(5))[:40]
+    for f in frames:
+        res = client.post(f"/sessions/{sid}/frames", json=f.to_contract()).json()
+    truth = frames[-1].truth
+    assert res["converged"]
+    assert math.hypot(res["pose"]["x"] - truth.x, res["pose"]["y"] - truth.y) < 0.2
+    assert res["hypotheses"][0]["region"] == "Office"
+    items = res["feedback"]["items"]
+    assert items and {"class", "label", "clock", "bearing_deg", "distance_m"} <= set(items[0])
+    described = client.post(
+        f"/sessions/{sid}/frames", json={**frames[-1].to_contract(), "describe": True}
+    )
+    assert "You are in Office" in described.json()["feedback"]["text"]
+
+
+def test_unknown_class_is_ignored_and_warned(client: TestClient, session_id: str) -> None:
+    r = client.post(
+        f"/sessions/{session_id}/frames",
+        json={
+            "detections": [
+                {"class": "sofa", "bearing_deg": 10},
+                {"class": "door", "bearing_deg": 0},
+            ]
+        },
+    )
+    assert r.status_code == 200
+    assert any("sofa" in w for w in r.json()["warnings"])
+
+
+def test_bearings_are_wrapped(client: TestClient, session_id: str) -> None:
+    r = client.post(
+        f"/sessions/{session_id}/frames",
+        json={"detections": [{"class": "door", "bearing_deg": 725}]},
+    )
+    assert r.status_code == 200
+    assert r.json()["feedback"]["items"][0]["bearing_deg"] == pytest.approx(5.0)
+
+
+@pytest.mark.parametrize(
+    ("body", "field"),
+    [
+        ({"detections": [{"class": "door", "bearing_deg": "NaN"}]}, "bearing_deg"),
+        ({"detections": [{"class": "door", "bearing_deg": "Infinity"}]}, "bearing_deg"),
+        ({"detections": [{"class": "door", "bearing_deg": 1, "score": 1.5}]}, "score"),
+        ({"detections": [{"class": "door", "bearing_deg": 1, "score": -0.1}]}, "score"),
+        ({"detections": [{"class": "door"}]}, "bearing_deg"),
+        ({"detections": [{"bearing_deg": 3}]}, "class"),
+        ({"detections": "door"}, "detections"),
+        ({"odometry": {"forward_m": "far"}}, "forward_m"),
+        ({"timestamp": "yesterday"}, "timestamp"),
+        ({"describe": "please"}, "describe"),
+        ({"detection": []}, "detection"),
+    ],
+)
+def test_bad_frames_are_422_with_a_message(
+    client: TestClient, session_id: str, body, field
+) -> None:
+    r = client.post(f"/sessions/{session_id}/frames", json=body)
+    assert r.status_code == 422
+    assert field in r.json()["message"]
+    # Nothing was accepted: the session is untouched and still works.
+    assert client.get(f"/sessions/{session_id}").json()["frames"] == 0
+    assert client.post(f"/sessions/{session_id}/frames", json={}).status_code == 200
+
+
+def test_raw_nan_in_json_is_refused(client: TestClient, session_id: str) -> None:
+    r = client.post(
+        f"/sessions/{session_id}/frames",
+        content=b'{"detections": [{"class": "door", "bearing_deg": NaN}]}',
+        headers={"content-type": "application/json"},
+    )
+    assert r.status_code == 422
+
+
+@pytest.mark.parametrize(
+    ("body", "status", "words"),
+    [
+        ({"map": "atlantis"}, 404, "atlantis"),
+        ({}, 422, "map"),
+        ({"map": "paper_office", "particles": 10}, 422, "particles"),
+        ({"map": "paper_office", "particles": 10**6}, 422, "particles"),
+        ({"map": "paper_office", "sensor": {"fov_deg": 400}}, 422, "fov_deg"),
+        ({"map": "paper_office", "sensor": {"bearing_std_deg": 0}}, 422, "bearing_std_deg"),
+        ({"map": "paper_office", "feedback": {"style": "poetry"}}, 422, "style"),
+        ({"map": "paper_office", "feedback": {"units": "cubits"}}, 422, "units"),
+        ({"map": "paper_office", "initial_pose": {"x": 1}}, 422, "initial_pose"),
+    ],
+)
+def test_bad_session_requests(client: TestClient, body, status, words) -> None:
+    r = client.post("/sessions", json=body)
+    assert r.status_code == status
+    assert words in r.json()["message"]
+
+
+def test_initial_pose_is_used(client: TestClient) -> None:
+    sid = client.post(
+        "/sessions",
+        json={
+            "map": "paper_office",
+            "particles": 500,
+            "initial_pose": {
+                "x": 2.0,
+                "y": 3.0,
+                "theta_deg": 90,
+                "std_xy_m": 0.1,
+                "std_theta_deg": 5,
+            },
+        },
+    ).json()["id"]
+    res = client.post(f"/sessions/{sid}/frames", json={}).json()
+    assert abs(res["pose"]["x"] - 2.0) < 0.3 and abs(res["pose"]["theta_deg"] - 90) < 15
+
+
+def test_session_limit_is_429(client: TestClient) -> None:
+    for _ in range(5):
+        assert (
+            client.post("/sessions", json={"map": "paper_office", "particles": 100}).status_code
+            == 201
+        )
+    r = client.post("/sessions", json={"map": "paper_office", "particles": 100})
+    assert r.status_code == 429 and "maximum" in r.json()["message"]
+
+
+def test_detection_limit(client: TestClient, session_id: str) -> None:
+    dets = [{"class": "door", "bearing_deg": i} for i in range(21)]
+    r = client.post(f"/sessions/{session_id}/frames", json={"detections": dets})
+    assert r.status_code == 422 and "limit" in r.json()["message"]
+
+
+def test_body_size_limit_is_413(client: TestClient, session_id: str) -> None:
+    big = {"detections": [], "pad": "x" * 10_000}
+    r = client.post(f"/sessions/{session_id}/frames", json=big)
+    assert r.status_code == 413 and "8192" in r.json()["message"]
+
+
+def test_delete_then_404(client: TestClient, session_id: str) -> None:
+    assert client.delete(f"/sessions/{session_id}").status_code == 204
+    for r in (
+        client.get(f"/sessions/{session_id}"),
+        client.post(f"/sessions/{session_id}/frames", json={}),
+        client.delete(f"/sessions/{session_id}"),
+    ):
+        assert r.status_code == 404 and "no session" in r.json()["message"]
+
+
+def test_speech_returns_wav_or_clear_503(client: TestClient) -> None:
+    import shutil
+
+    r = client.post("/speech", json={"text": "Door at 2 o'clock, about 3 metres."})
+    if shutil.which("espeak-ng"):
+        assert r.status_code == 200 and r.headers["content-type"] == "audio/wav"
+        assert r.content[:4] == b"RIFF" and len(r.content) > 2000
+    else:
+        assert r.status_code == 503 and "espeak-ng" in r.json()["message"]
+    assert client.post("/speech", json={"text": ""}).status_code == 422

@@ -1,0 +1,126 @@
+"""A real uvicorn server on a free port, real WebSocket clients, many sessions at once."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import socket
+import threading
+import time
+from collections.abc import Iterator
+
+import httpx
+import numpy as np
+import pytest
+import uvicorn
+import websockets
+
+from app.localization.map import bundled_maps_dir, load_map
+from app.main import create_app
+from app.simulation.scenarios import paper_config
+from app.simulation.simulator import simulate
+from tests.api.conftest import make_settings
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@pytest.fixture(scope="module")
+def server_url() -> Iterator[str]:
+    port = free_port()
+    settings = make_settings(max_sessions=50, port=port)
+    config = uvicorn.Config(create_app(settings), host="127.0.0.1", port=port, log_level="warning")
+    server = uvicorn.Server(config)
+    thread = threading.Thread(target=server.run, daemon=True)
+    thread.start()
+    deadline = time.time() + 30
+    while not server.started:
+        assert time.time() < deadline, "server did not start"
+        time.sleep(0.05)
+    yield f"127.0.0.1:{port}"
+    server.should_exit = True
+    thread.join(timeout=10)
+
+
+FRAMES = [
+    f.to_contract()
+    for f in simulate(
+        load_map(bundled_maps_dir() / "paper_office.json"),
+        paper_config("nominal", 360),
+        np.random.default_rng(11),
+    )[:30]
+]
+
+
+async def stream_session(
+    url: str, n_frames: int, seed: int, particles: int = 500
+) -> tuple[str, list[int], dict]:
+    async with httpx.AsyncClient(base_url=f"http://{url}") as http:
+        r = await http.post(
+            "/sessions", json={"map": "paper_office", "particles": particles, "seed": seed}
+        )
+        assert r.status_code == 201, r.text
+        sid = r.json()["id"]
+    seqs = []
+    last: dict = {}
+    async with websockets.connect(f"ws://{url}/sessions/{sid}/stream") as ws:
+        for frame in FRAMES[:n_frames]:
+            await ws.send(json.dumps(frame))
+        for _ in range(n_frames):
+            last = json.loads(await ws.recv())
+            seqs.append(last["seq"])
+    return sid, seqs, last
+
+
+def test_stream_over_a_real_server(server_url: str) -> None:
+    sid, seqs, last = asyncio.run(stream_session(server_url, 30, 1, particles=4000))
+    assert seqs == list(range(1, 31))
+    assert last["converged"]
+    truth = FRAMES[29]["truth"]
+    assert np.hypot(last["pose"]["x"] - truth["x"], last["pose"]["y"] - truth["y"]) < 0.25
+    got = httpx.get(f"http://{server_url}/sessions/{sid}").json()
+    assert got["frames"] == 30
+
+
+def test_twenty_sessions_at_once_each_in_order(server_url: str) -> None:
+    async def main() -> list[tuple[str, list[int], dict]]:
+        return await asyncio.gather(*(stream_session(server_url, 15, s) for s in range(20)))
+
+    results = asyncio.run(main())
+    assert len({sid for sid, _, _ in results}) == 20
+    for _, seqs, _ in results:
+        assert seqs == list(range(1, 16))
+
+
+def test_health_stays_responsive_while_streaming(server_url: str) -> None:
+    async def main() -> float:
+        task = asyncio.gather(*(stream_session(server_url, 30, s) for s in range(6)))
+        worst = 0.0
+        async with httpx.AsyncClient(base_url=f"http://{server_url}") as http:
+            for _ in range(10):
+                t0 = time.perf_counter()
+                assert (await http.get("/healthz")).status_code == 200
+                worst = max(worst, time.perf_counter() - t0)
+                await asyncio.sleep(0.05)
+        await task
+        return worst
+
+    # Generous bound: the event loop is never blocked by filter work.
+    assert asyncio.run(main()) < 1.0
+
+
+def test_unknown_session_close_reason_over_the_wire(server_url: str) -> None:
+    async def main() -> websockets.exceptions.ConnectionClosed:
+        async with websockets.connect(f"ws://{server_url}/sessions/missing/stream") as ws:
+            try:
+                await ws.recv()
+            except websockets.exceptions.ConnectionClosed as exc:
+                return exc
+        raise AssertionError("the server did not close the connection")
+
+    exc = asyncio.run(main())
+    assert exc.rcvd is not None and exc.rcvd.code == 1008
+    assert "no session" in exc.rcvd.reason

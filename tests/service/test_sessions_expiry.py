@@ -1,0 +1,50 @@
+"""Idle sessions expire; busy ones do not."""
+
+from __future__ import annotations
+
+import asyncio
+
+from app.api.schemas import Frame, SessionCreate
+from app.localization.map import bundled_maps_dir, load_map_dir
+from app.service.metrics import Metrics
+from app.service.sessions import SessionManager, SessionNotFound
+from tests.api.conftest import make_settings
+
+
+def test_idle_sessions_expire() -> None:
+    async def main() -> None:
+        manager = SessionManager(
+            load_map_dir(bundled_maps_dir()), make_settings(session_idle_timeout_s=0.2), Metrics()
+        )
+        idle = await manager.create(SessionCreate(map="paper_office", particles=200))
+        busy = await manager.create(SessionCreate(map="paper_office", particles=200))
+        for _ in range(4):
+            await asyncio.sleep(0.1)
+            await manager.process(busy.id, Frame())
+        assert await manager.expire_idle() == 1
+        try:
+            manager.get(idle.id)
+        except SessionNotFound:
+            pass
+        else:
+            raise AssertionError("idle session survived")
+        assert manager.get(busy.id).frames == 4
+
+    asyncio.run(main())
+
+
+def test_snapshot_is_a_copy() -> None:
+    async def main() -> None:
+        manager = SessionManager(load_map_dir(bundled_maps_dir()), make_settings(), Metrics())
+        s = await manager.create(SessionCreate(map="paper_office", particles=300))
+        snap = s.snapshot()
+        assert snap.estimate is None and snap.frames == 0
+        await manager.process(s.id, Frame(detections=[{"class": "door", "bearing_deg": 3}]))
+        later = s.snapshot()
+        assert later.version == snap.version + 1 and later.frames == 1
+        assert not np.shares_memory(later.x, s.filter.x)
+        assert np.isclose(later.weights.sum(), 1.0)
+
+    import numpy as np
+
+    asyncio.run(main())
