@@ -136,7 +136,7 @@ class ConvergenceGate:
     clipped at 3 standard deviations so a false detection costs at most 9).
     """
 
-    max_fit: float = 1.0
+    max_fit: float = 2.0
 
     def __init__(
         self, frames: int = 5, tolerance_m: float = 0.3, tolerance_rad: float = np.radians(15.0)
@@ -160,15 +160,17 @@ class ConvergenceGate:
     ) -> Estimate:
         """``raw`` with ``converged`` true only if it held for ``frames`` frames and fits."""
         last = self._last
+        fits = fit is not None and fit <= self.max_fit
         steady = (
             raw.converged
+            and fits
             and last is not None
             and np.hypot(raw.x - last.x, raw.y - last.y) <= moved_m + self.tolerance_m
             and abs(float(wrap_angle(raw.theta_rad - last.theta_rad)))
             <= abs(turned_rad) + self.tolerance_rad
         )
-        self._streak = self._streak + 1 if steady else (1 if raw.converged else 0)
+        self._streak = self._streak + 1 if steady else (1 if raw.converged and fits else 0)
         self._last = raw
-        if raw.converged and (self._streak < self.frames or fit is None or fit > self.max_fit):
+        if raw.converged and (self._streak < self.frames or not fits):
             return replace(raw, converged=False)
         return raw

@@ -110,7 +110,7 @@ class ParticleFilter:
         """log P(Z | s, M) for every particle, shape (N,)."""
         if self._vis is not None:
             cells = self._vis.cells(self.x, self.y)
-            table = self._vis.table
+            table = self._vis.by_object
         else:
             cells = table = None
         return sensor_kernel.log_likelihood(
@@ -133,9 +133,6 @@ class ParticleFilter:
         per_class = mean_ll / max(obs.group_kappa.size, 1)
         if not np.isfinite(per_class):
             per_class = -1e3
-        self.fit = (
-            per_class if self.fit is None else self.fit + FIT_SMOOTHING * (per_class - self.fit)
-        )
         if not self.config.recovery:
             return 0.0
         return self._recovery.update(per_class)
@@ -191,7 +188,9 @@ class ParticleFilter:
             return
         r = normalized_residuals(raw.x, raw.y, raw.theta_rad, obs, self.map, self.config)
         value = float(np.mean(np.minimum(r, 3.0) ** 2))
-        self.fit = value if self.fit is None else self.fit + FIT_SMOOTHING * (value - self.fit)
+        smoothed = value if self.fit is None else self.fit + FIT_SMOOTHING * (value - self.fit)
+        # One frame that fits very badly vetoes at once; the average remembers it.
+        self.fit = max(smoothed, value / 2.0)
 
 
 def warm_up() -> None:

@@ -8,8 +8,6 @@ code is cached on disk; :func:`warm_up` compiles it at start-up so no request wa
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 from numba import njit
 from numpy.typing import NDArray
@@ -18,63 +16,100 @@ from app.localization.config import FilterConfig
 from app.localization.map import SemanticMap
 from app.localization.sensor import Observation
 
+#: softplus(z) = log(1 + e^z) tabulated on [SOFTPLUS_LO, SOFTPLUS_HI]; outside it
+#: softplus is z (above, error < 2e-9) or 0 (below, error < 2e-9).
+SOFTPLUS_LO = -20.0
+SOFTPLUS_HI = 20.0
+SOFTPLUS_STEPS = 8192
+SOFTPLUS_INV_STEP = SOFTPLUS_STEPS / (SOFTPLUS_HI - SOFTPLUS_LO)
+SOFTPLUS_TABLE = np.logaddexp(0.0, SOFTPLUS_LO + np.arange(SOFTPLUS_STEPS + 2) / SOFTPLUS_INV_STEP)
 
-@njit(cache=True, fastmath=False, nogil=True)
+
+@njit(cache=True, fastmath={"nsz", "arcp", "contract", "afn", "reassoc"}, nogil=True)
 def _kernel(
     x, y, theta, cells, vis_table, use_vis, cos_half_fov, check_fov, max_range_sq,
     obj_x, obj_y, det_cos, det_sin, det_score, det_group,
     group_kappa, group_weight, group_log_floor, group_log_keep, member_start, members, out,
+    softplus_table,
 ):  # fmt: skip
+    # Loops run over particles innermost so the compiler can vectorize them.
     n = x.shape[0]
-    m_total = members.shape[0]
     k_total = det_cos.shape[0]
-    bx = np.empty(m_total)
-    by = np.empty(m_total)
-    ok = np.empty(m_total, dtype=np.bool_)
-    for i in range(n):
-        ct = math.cos(theta[i])
-        st = math.sin(theta[i])
-        cell = cells[i]
-        for j in range(m_total):
+    ct = np.cos(theta)
+    st = np.sin(theta)
+    best = np.full((k_total, n), -2.0)
+    fx = np.empty(n)
+    fy = np.empty(n)
+    ok = np.empty(n, dtype=np.bool_)
+    for g in range(group_kappa.shape[0]):
+        for j in range(member_start[g], member_start[g + 1]):
             o = members[j]
-            dx = obj_x[o] - x[i]
-            dy = obj_y[o] - y[i]
-            d2 = dx * dx + dy * dy
-            inv = 1.0 / math.sqrt(d2 + 1e-24)
-            fx = (ct * dx + st * dy) * inv
-            bx[j] = fx
-            by[j] = (ct * dy - st * dx) * inv
-            good = True
+            ox = obj_x[o]
+            oy = obj_y[o]
+            for i in range(n):
+                dx = ox - x[i]
+                dy = oy - y[i]
+                d2 = dx * dx + dy * dy
+                inv = 1.0 / np.sqrt(d2 + 1e-24)
+                fx[i] = (ct[i] * dx + st[i] * dy) * inv
+                fy[i] = (ct[i] * dy - st[i] * dx) * inv
             if use_vis:
-                good = vis_table[cell, o]
-                if good and check_fov and fx < cos_half_fov:
-                    good = False
-                if good and d2 > max_range_sq:
-                    good = False
-            ok[j] = good
-        total = 0.0
-        for k in range(k_total):
-            g = det_group[k]
-            best = -2.0
-            found = False
-            for j in range(member_start[g], member_start[g + 1]):
-                if ok[j]:
-                    c = det_cos[k] * bx[j] + det_sin[k] * by[j]
-                    if c > best:
-                        best = c
-                    found = True
-            log_floor = group_log_floor[g]
-            if found:
-                a = group_kappa[g] * (best - 1.0) + group_log_keep[g]
-                if log_floor > -math.inf:
-                    hi = max(a, log_floor)
-                    lp = hi + math.log(math.exp(a - hi) + math.exp(log_floor - hi))
+                for i in range(n):
+                    ok[i] = vis_table[o, cells[i]]
+                if check_fov:
+                    for i in range(n):
+                        ok[i] = ok[i] and fx[i] >= cos_half_fov
+                if max_range_sq < np.inf:
+                    for i in range(n):
+                        dx = ox - x[i]
+                        dy = oy - y[i]
+                        ok[i] = ok[i] and dx * dx + dy * dy <= max_range_sq
+            for k in range(k_total):
+                if det_group[k] != g:
+                    continue
+                ca = det_cos[k]
+                sa = det_sin[k]
+                row = best[k]
+                if use_vis:
+                    for i in range(n):
+                        c = ca * fx[i] + sa * fy[i]
+                        if ok[i] and c > row[i]:
+                            row[i] = c
                 else:
-                    lp = a
-            else:
-                lp = log_floor
-            total += group_weight[g] * det_score[k] * lp
-        out[i] = total
+                    for i in range(n):
+                        c = ca * fx[i] + sa * fy[i]
+                        if c > row[i]:
+                            row[i] = c
+    for i in range(n):
+        out[i] = 0.0
+    for k in range(k_total):
+        g = det_group[k]
+        kappa = group_kappa[g]
+        log_keep = group_log_keep[g]
+        log_floor = group_log_floor[g]
+        scale = group_weight[g] * det_score[k]
+        row = best[k]
+        if log_floor == -np.inf:
+            for i in range(n):
+                # best < -1.5 marks "no visible candidate": the likelihood is 0.
+                lp = kappa * (row[i] - 1.0) + log_keep if row[i] > -1.5 else -np.inf
+                out[i] += scale * lp
+        else:
+            # log(floor + keep e^a) = log_floor + softplus(a + log_keep - log_floor),
+            # softplus read from a table with linear interpolation (error < 1e-5).
+            shift = log_keep - log_floor
+            for i in range(n):
+                sp = 0.0
+                if row[i] > -1.5:
+                    z = kappa * (row[i] - 1.0) + shift
+                    if z >= SOFTPLUS_HI:
+                        sp = z
+                    elif z > SOFTPLUS_LO:
+                        t = (z - SOFTPLUS_LO) * SOFTPLUS_INV_STEP
+                        j = int(t)
+                        f = t - j
+                        sp = softplus_table[j] + f * (softplus_table[j + 1] - softplus_table[j])
+                out[i] += scale * (log_floor + sp)
 
 
 def log_likelihood(
@@ -91,7 +126,7 @@ def log_likelihood(
 
     Args:
         cells: each particle's visibility-grid cell, shape (N,) (with ``visibility``).
-        vis_table: the grid's table, shape (cells, objects) (with ``visibility``).
+        vis_table: the grid's table by object, shape (objects, cells) (with ``visibility``).
     """
     n = x.shape[0]
     out = np.zeros(n, dtype=np.float64)
@@ -100,7 +135,7 @@ def log_likelihood(
     use_vis = bool(config.visibility and vis_table is not None and cells is not None)
     if not use_vis:
         cells = np.zeros(n, dtype=np.int64)
-        vis_table = np.ones((1, max(semantic_map.object_count, 1)), dtype=np.bool_)
+        vis_table = np.ones((max(semantic_map.object_count, 1), 1), dtype=np.bool_)
     check_fov = config.fov_deg < 360.0
     max_range_sq = np.inf if config.max_range_m is None else config.max_range_m**2
     with np.errstate(divide="ignore"):
@@ -129,5 +164,6 @@ def log_likelihood(
         obs.member_start,
         obs.members,
         out,
+        SOFTPLUS_TABLE,
     )
     return out

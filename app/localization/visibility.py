@@ -41,6 +41,8 @@ class VisibilityGrid:
     resolution_m: float
     shape: tuple[int, int]
     table: NDArray[np.bool_]
+    #: The same table transposed, shape (N, rows * cols): fast per-object lookups.
+    by_object: NDArray[np.bool_]
 
     def cells(self, x: ArrayLike, y: ArrayLike) -> NDArray[np.int64]:
         """Flat cell index per point, clipped onto the grid, shape like ``x``."""
@@ -83,7 +85,9 @@ def build_visibility_grid(semantic_map: SemanticMap) -> VisibilityGrid:
     for start in range(0, idx.size, step):
         part = idx[start : start + step]
         table[part] = semantic_map.line_of_sight(centres[part])
-    return VisibilityGrid(fs.origin_x, fs.origin_y, res, (rows, cols), table)
+    return VisibilityGrid(
+        fs.origin_x, fs.origin_y, res, (rows, cols), table, np.ascontiguousarray(table.T)
+    )
 
 
 def visibility_grid(semantic_map: SemanticMap) -> VisibilityGrid:

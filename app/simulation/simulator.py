@@ -107,8 +107,9 @@ def _corners(semantic_map: SemanticMap) -> np.ndarray:
     return shared if shared.size else keys
 
 
-def _truth_poses(cfg: SimulationConfig, semantic_map: SemanticMap) -> list[tuple[Pose, bool]]:
-    """Ground-truth pose per frame and whether the view is blocked then."""
+def _truth_poses(cfg: SimulationConfig, semantic_map: SemanticMap) -> list[tuple[Pose, bool, bool]]:
+    """Ground-truth pose per frame, whether the view is blocked then, and whether the
+    person was just carried there (kidnapped)."""
     dt = 1.0 / cfg.rate_hz
     step_turn = np.radians(cfg.turn_rate_deg_s) * dt
     pts = [np.array(p, dtype=np.float64) for p in cfg.path]
@@ -119,8 +120,9 @@ def _truth_poses(cfg: SimulationConfig, semantic_map: SemanticMap) -> list[tuple
     visits = sorted(cfg.corner_visits, key=lambda v: v.start_s)
     phase, phase_end, target = "walk", 0.0, 0.0
     t = 0.0
-    out: list[tuple[Pose, bool]] = []
+    out: list[tuple[Pose, bool, bool]] = []
     kidnapped = False
+    just_carried = False
 
     def turn_towards(goal: float) -> bool:
         nonlocal heading
@@ -133,7 +135,8 @@ def _truth_poses(cfg: SimulationConfig, semantic_map: SemanticMap) -> list[tuple
 
     while True:
         blocked = phase == "hold" or any(a <= t < b for a, b in cfg.blocked_intervals)
-        out.append((Pose(float(pos[0]), float(pos[1]), heading), blocked))
+        out.append((Pose(float(pos[0]), float(pos[1]), heading), blocked, just_carried))
+        just_carried = False
         if cfg.duration_s is not None and t + dt > cfg.duration_s + 1e-9:
             break
         if phase == "walk" and seg >= len(pts):
@@ -144,6 +147,7 @@ def _truth_poses(cfg: SimulationConfig, semantic_map: SemanticMap) -> list[tuple
             kx, ky, kt = cfg.kidnap_pose or (pts[0][0], pts[0][1], 0.0)
             pos = np.array([kx, ky], dtype=np.float64)
             heading = float(np.radians(kt))
+            just_carried = True
             continue
         if phase == "walk" and visits and t >= visits[0].start_s and corners.size:
             visit = visits.pop(0)
@@ -228,13 +232,8 @@ def simulate(
     truth = _truth_poses(config, semantic_map)
     frames: list[SimFrame] = []
     dt = 1.0 / config.rate_hz
-    for i, (pose, blocked) in enumerate(truth):
+    for i, (pose, blocked, jumped) in enumerate(truth):
         t = i * dt
-        jumped = (
-            config.kidnap_at_s is not None
-            and i > 0
-            and (i - 1) * dt < config.kidnap_at_s <= t + 1e-9
-        )
         odo = None if i == 0 or jumped else _odometry(truth[i - 1][0], pose, config, rng)
         dets = _detections(semantic_map, pose, blocked, config, camera, rng)
         frames.append(SimFrame(round(t, 6), pose, odo, dets, blocked))
