@@ -22,6 +22,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from app.localization.geometry import wrap_angle
+from app.localization.resampling import systematic_resample
 from app.localization.types import Estimate, Hypothesis
 
 
@@ -69,8 +70,15 @@ def estimate_pose(
     weights: NDArray[np.float64],
     settings: ClusterSettings = DEFAULT_CLUSTERING,
     ess: float = 0.0,
+    rng: np.random.Generator | None = None,
+    max_points: int = 2_000,
 ) -> Estimate:
     """Cluster the weighted particles and summarize the belief.
+
+    With more than ``max_points`` particles and an ``rng``, the clustering runs on a
+    systematic resample of ``max_points`` of them (equal weights): the summary of a
+    posterior from 2,000 draws is as good as from 10,000 (the standard error of a
+    mean is std / sqrt(2000)) and costs a fifth.
 
     Args:
         x, y, theta: particle poses, shape (N,), metres and radians.
@@ -80,6 +88,10 @@ def estimate_pose(
         The :class:`Estimate` (pose of the heaviest cluster, up to three hypotheses).
     """
     n = x.shape[0]
+    if rng is not None and n > max_points:
+        idx = systematic_resample(weights, max_points, rng)
+        x, y, theta = x[idx], y[idx], theta[idx]
+        weights = np.full(max_points, 1.0 / max_points)
     remaining = weights > 0.0
     bin_width = 2.0 * np.pi / settings.heading_bins
     cx = np.floor((x - x.min()) / settings.cell_m).astype(np.int64)

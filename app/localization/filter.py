@@ -168,7 +168,9 @@ class ParticleFilter:
         inject = self.correct(detections)
         self.resample(inject)
         w = self.weights
-        raw = estimate_pose(self.x, self.y, self.theta, w, ess=effective_sample_size(w))
+        raw = estimate_pose(
+            self.x, self.y, self.theta, w, ess=effective_sample_size(w), rng=self.rng
+        )
         self._update_fit(raw)
         moved = 1.0 if odometry is None else float(np.hypot(odometry.forward_m, odometry.left_m))
         turned = np.pi if odometry is None else odometry.turn_rad
@@ -186,7 +188,8 @@ class ParticleFilter:
         obs = self.last_observation
         if not raw.converged or obs is None or obs.empty:
             return
-        r = normalized_residuals(raw.x, raw.y, raw.theta_rad, obs, self.map, self.config)
+        row = self._vis.visible(raw.x, raw.y)[0] if self._vis is not None else None
+        r = normalized_residuals(raw.x, raw.y, raw.theta_rad, obs, self.map, self.config, row)
         value = float(np.mean(np.minimum(r, 3.0) ** 2))
         smoothed = value if self.fit is None else self.fit + FIT_SMOOTHING * (value - self.fit)
         # One frame that fits very badly vetoes at once; the average remembers it.

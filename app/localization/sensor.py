@@ -220,18 +220,26 @@ def normalized_residuals(
     obs: Observation,
     semantic_map: SemanticMap,
     config: FilterConfig,
+    visible_row: NDArray[np.bool_] | None = None,
 ) -> NDArray[np.float64]:
     """Each detection's bearing error at one pose, in units of its class's std, shape (K,).
 
     The error is to the best-matching visible object of the detection's class (eq. 3);
     a detection nothing visible explains gets +inf. Used to check that a converged
-    estimate actually explains what the camera sees.
+    estimate actually explains what the camera sees. ``visible_row`` (shape (N,)) is
+    the pose's row of the visibility grid; computed exactly when not given.
     """
     out = np.full(obs.det_cos.size, np.inf)
     if obs.empty:
         return out
     px, py, pt = np.array([x]), np.array([y]), np.array([theta])
-    rows = semantic_map.line_of_sight(np.array([[x, y]])) if config.visibility else None
+    rows = None
+    if config.visibility:
+        rows = (
+            semantic_map.line_of_sight(np.array([[x, y]]))
+            if visible_row is None
+            else visible_row[None, :]
+        )
     for g in range(obs.group_kappa.size):
         objs = obs.members[obs.member_start[g] : obs.member_start[g + 1]]
         ok = candidate_mask(px, py, pt, objs, semantic_map, config, rows)[0]

@@ -45,10 +45,10 @@ class VisibilityGrid:
     by_object: NDArray[np.bool_]
 
     def cells(self, x: ArrayLike, y: ArrayLike) -> NDArray[np.int64]:
-        """Flat cell index per point, clipped onto the grid, shape like ``x``."""
+        """Flat cell index per point, clipped onto the grid, shape (M,)."""
         rows, cols = self.shape
-        c = np.floor((np.asarray(x) - self.origin_x) / self.resolution_m).astype(np.int64)
-        r = np.floor((np.asarray(y) - self.origin_y) / self.resolution_m).astype(np.int64)
+        c = np.floor((np.atleast_1d(x) - self.origin_x) / self.resolution_m).astype(np.int64)
+        r = np.floor((np.atleast_1d(y) - self.origin_y) / self.resolution_m).astype(np.int64)
         np.clip(c, 0, cols - 1, out=c)
         np.clip(r, 0, rows - 1, out=r)
         return r * cols + c
