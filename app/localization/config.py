@@ -37,8 +37,9 @@ class FilterConfig:
     recovery: bool = True
     alpha_slow: float = 0.02
     alpha_fast: float = 0.3
-    #: Adaptive particle count (KLD-sampling) between min_particles and particles.
-    adaptive: bool = False
+    #: Adaptive particle count: all ``particles`` while lost, KLD-sampling (at least
+    #: ``min_particles``) once converged.
+    adaptive: bool = True
     min_particles: int = 500
 
     # --- Motion model (odometry, Probabilistic Robotics sample_motion_odometry) ---------

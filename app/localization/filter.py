@@ -143,9 +143,12 @@ class ParticleFilter:
         ess = effective_sample_size(w)
         n_target = self.n
         if self.config.adaptive:
-            n_target = kld_sample_size(
-                self.x, self.y, self.theta, w, self.config.min_particles, self.config.particles
-            )
+            # Lost: keep every particle. Localized: as few as KLD-sampling allows.
+            n_target = self.config.particles
+            if self.estimate.converged:
+                n_target = kld_sample_size(
+                    self.x, self.y, self.theta, w, self.config.min_particles, self.config.particles
+                )
         due = ess < self.config.resample_threshold * self.n or not np.isfinite(self.log_w).any()
         if not (due or inject_share > 0.0 or n_target != self.n):
             return False
