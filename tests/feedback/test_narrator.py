@@ -1,0 +1,181 @@
+"""What the narrator says, and when: labels, order, repetition, regions, honesty."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from app.feedback import FeedbackOptions, Narrator
+from app.localization.map import SemanticMap, parse_map
+from app.localization.types import Detection, Estimate, Hypothesis
+
+TWO_OFFICES = parse_map(
+    {
+        "name": "two_offices",
+        "walls": [
+            {"x1": 0, "y1": 0, "x2": 10, "y2": 0},
+            {"x1": 10, "y1": 0, "x2": 10, "y2": 5},
+            {"x1": 10, "y1": 5, "x2": 0, "y2": 5},
+            {"x1": 0, "y1": 5, "x2": 0, "y2": 0},
+            {"x1": 5, "y1": 0, "x2": 5, "y2": 2},
+            {"x1": 5, "y1": 3, "x2": 5, "y2": 5},
+        ],
+        "objects": [
+            {"class": "door", "x": 10, "y": 2.5, "label": "main entrance"},
+            {"class": "table", "x": 2, "y": 2.5},
+            {"class": "window", "x": 2.5, "y": 5},
+            {"class": "table", "x": 8, "y": 1},
+            {"class": "window", "x": 7.5, "y": 5},
+        ],
+        "regions": [
+            {"name": "Office 1", "polygon": [[0, 0], [5, 0], [5, 5], [0, 5]]},
+            {"name": "Office 2", "polygon": [[5, 0], [10, 0], [10, 5], [5, 5]]},
+        ],
+    }
+)
+
+
+def located(x: float, y: float, theta_deg: float = 0.0, std: float = 0.05) -> Estimate:
+    th = math.radians(theta_deg)
+    return Estimate(x, y, th, std, std, math.radians(2), True, (Hypothesis(x, y, th, 1.0),), 1000)
+
+
+def lost(*modes: tuple[float, float, float]) -> Estimate:
+    hyps = tuple(Hypothesis(x, y, 0.0, w) for x, y, w in modes)
+    x, y, _ = modes[0]
+    return Estimate(x, y, 0.0, 1.5, 1.5, 1.0, False, hyps, 1000)
+
+
+def test_label_and_phrase_order() -> None:
+    n = Narrator(TWO_OFFICES)
+    # At (7, 2.5) facing east: the door (labelled) is straight ahead, 3 m away.
+    fb = n.update(located(7, 2.5), [Detection("door", 0.0)], timestamp_s=0.0)
+    assert "You are in Office 2." in fb.text
+    assert "Main entrance at 12 o'clock, about 3 metres." in fb.text
+    first = fb.items[0]
+    assert (first.cls, first.label, first.clock) == ("door", "main entrance", 12)
+    assert first.distance_m == pytest.approx(3.0)
+
+
+def test_matched_objects_come_first_then_nearest_visible() -> None:
+    n = Narrator(TWO_OFFICES, FeedbackOptions(max_items=3))
+    # At (7, 2) facing north; the camera sees the window at (7.5, 5) (bearing about -9 deg).
+    fb = n.update(located(7, 2, 90), [Detection("window", math.radians(-9.5))], timestamp_s=0.0)
+    assert next(i.cls for i in fb.items) == "window"
+    assert fb.items[0].clock == 12
+    assert len(fb.items) == 3
+    rest = fb.items[1:]
+    assert rest[0].distance_m <= rest[1].distance_m
+    # Objects behind the inner wall are not offered: the west table is hidden.
+    assert all(not (i.cls == "table" and i.distance_m and i.distance_m > 4.9) for i in fb.items)
+
+
+def test_max_items_is_respected() -> None:
+    fb = Narrator(TWO_OFFICES, FeedbackOptions(max_items=1)).update(
+        located(7, 2.5), [Detection("door", 0.0), Detection("table", -1.0)], timestamp_s=0.0
+    )
+    assert len(fb.items) == 1
+
+
+def test_no_repetition_until_something_changes() -> None:
+    n = Narrator(TWO_OFFICES)
+    dets = [Detection("door", 0.0)]
+    first = n.update(located(7, 2.5), dets, timestamp_s=0.0).text
+    again = n.update(located(7, 2.5), dets, timestamp_s=0.2).text
+    assert first and again != first
+    assert "Main entrance" not in again
+    # Turning by two hours: the door is announced again at its new clock position.
+    turned = n.update(
+        located(7, 2.5, 60), [Detection("door", math.radians(-60))], timestamp_s=0.4
+    ).text
+    assert "Main entrance at 2 o'clock" in turned
+    # A minute later the unchanged door is repeated.
+    later = n.update(
+        located(7, 2.5, 60), [Detection("door", math.radians(-60))], timestamp_s=61.0
+    ).text
+    assert "Main entrance at 2 o'clock" in later
+
+
+def test_distance_change_is_announced() -> None:
+    n = Narrator(TWO_OFFICES)
+    n.update(located(6.0, 2.5), [Detection("door", 0.0)], timestamp_s=0.0)
+    closer = n.update(located(8.8, 2.5), [Detection("door", 0.0)], timestamp_s=5.0).text
+    assert "Main entrance at 12 o'clock, 1 metre." in closer
+
+
+def test_entering_a_region_is_announced_once() -> None:
+    n = Narrator(TWO_OFFICES)
+    assert "You are in Office 1." in n.update(located(2, 1), [], timestamp_s=0).text
+    assert "You are in" not in n.update(located(2.1, 1), [], timestamp_s=0.2).text
+    assert "You are in Office 2." in n.update(located(6, 2.5), [], timestamp_s=5).text
+
+
+def test_describe_gives_everything_now() -> None:
+    n = Narrator(TWO_OFFICES)
+    n.update(located(7, 2.5), [Detection("door", 0.0)], timestamp_s=0.0)
+    fb = n.update(located(7, 2.5), [Detection("door", 0.0)], timestamp_s=0.2, describe=True)
+    assert fb.text.startswith("You are in Office 2.")
+    assert "Main entrance at 12 o'clock" in fb.text
+
+
+def test_uncertain_location_is_never_stated_as_fact() -> None:
+    n = Narrator(TWO_OFFICES)
+    fb = n.update(
+        lost((7, 2.5, 0.6), (7.2, 2.4, 0.2)), [Detection("table", math.radians(-30))], timestamp_s=0
+    )
+    assert "not certain" in fb.text
+    assert "You are in" not in fb.text
+    assert "metre" not in fb.text
+    assert "I see a table at 1 o'clock; still working out where you are." in fb.text
+    assert fb.items[0].distance_m is None and fb.items[0].label is None
+    assert fb.items[0].clock == 1
+
+
+def test_competing_regions_are_named() -> None:
+    n = Narrator(TWO_OFFICES)
+    fb = n.update(lost((7, 2.5, 0.5), (2, 2.5, 0.45)), [], timestamp_s=0)
+    assert "You may be in Office 2 or Office 1" in fb.text
+    # Nothing new next frame: no repetition of the status.
+    assert n.update(lost((7, 2.5, 0.5), (2, 2.5, 0.45)), [], timestamp_s=0.2).text == ""
+
+
+def test_losing_the_position_is_said() -> None:
+    n = Narrator(TWO_OFFICES)
+    n.update(located(7, 2.5), [], timestamp_s=0)
+    fb = n.update(lost((7, 2.5, 0.5), (2, 2.5, 0.45)), [], timestamp_s=1)
+    assert "no longer sure" in fb.text
+
+
+def test_imperial_and_left_right_styles() -> None:
+    n = Narrator(TWO_OFFICES, FeedbackOptions(style="left_right", units="imperial"))
+    fb = n.update(located(7, 2.5), [Detection("door", 0.0)], timestamp_s=0.0)
+    assert "Main entrance straight ahead, about 10 feet." in fb.text
+
+
+def test_unknown_classes_and_zero_scores_are_not_spoken() -> None:
+    n = Narrator(TWO_OFFICES)
+    fb = n.update(
+        lost((7, 2.5, 1.0)), [Detection("sofa", 0.0), Detection("door", 0.0, 0.0)], timestamp_s=0
+    )
+    assert "sofa" not in fb.text and "door" not in fb.text
+    assert fb.items == []
+
+
+def test_hedging_when_less_certain() -> None:
+    n = Narrator(TWO_OFFICES)
+    fb = n.update(located(7, 2.5, std=0.3), [Detection("door", 0.0)], timestamp_s=0.0)
+    assert "roughly 3 metres" in fb.text
+
+
+def paper_map() -> SemanticMap:
+    from app.localization.map import bundled_maps_dir, load_map
+
+    return load_map(bundled_maps_dir() / "paper_office.json")
+
+
+def test_paper_office_walk_sentence() -> None:
+    n = Narrator(paper_map())
+    # Near the south-west table, facing east: the door is far ahead-left.
+    fb = n.update(located(2.0, 1.2), [Detection("door", math.radians(28))], timestamp_s=0)
+    assert "Main entrance at 11 o'clock, about 9 metres." in fb.text
