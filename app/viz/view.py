@@ -47,6 +47,7 @@ class LiveView:
         self.frames_drawn = 0
         self._last_version = -1
         self._stop = threading.Event()
+        self._draw_lock = threading.Lock()
         self._thread: threading.Thread | None = None
         self._rng = np.random.default_rng(0)
         self.loop: asyncio.AbstractEventLoop | None = None
@@ -103,6 +104,10 @@ class LiveView:
 
     def refresh(self) -> bool:
         """Redraw from the latest snapshot if it changed; True when something was drawn."""
+        with self._draw_lock:
+            return self._refresh()
+
+    def _refresh(self) -> bool:
         if self.controls is not None:
             self.controls.sync_sessions()
         sid = self.watched

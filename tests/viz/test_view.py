@@ -1,0 +1,115 @@
+"""The viser scene and the live view, with viser's own server and no browser."""
+
+from __future__ import annotations
+
+import asyncio
+import socket
+import time
+
+import numpy as np
+import pytest
+import viser
+
+from app.api.schemas import Frame, SessionCreate
+from app.localization.map import bundled_maps_dir, load_map, load_map_dir
+from app.service.metrics import Metrics
+from app.service.sessions import SessionManager
+from app.simulation.scenarios import paper_config
+from app.simulation.simulator import simulate
+from app.viz.particles import MAX_DRAWN, detection_rays, sample_particles
+from app.viz.scene import build_map_scene, top_down_camera
+from app.viz.view import LiveView
+from tests.api.conftest import make_settings
+
+OFFICE = load_map(bundled_maps_dir() / "paper_office.json")
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@pytest.fixture
+def server():
+    srv = viser.ViserServer(host="127.0.0.1", port=free_port(), verbose=False)
+    yield srv
+    srv.stop()
+
+
+def test_scene_has_the_map(server: viser.ViserServer) -> None:
+    scene = build_map_scene(server, OFFICE)
+    assert scene.walls is not None
+    assert scene.walls.points.shape == (4, 2, 3)
+    assert sorted(h.points.shape[0] for h in scene.objects) == [1, 4, 6]
+    assert all(h.points.dtype == np.float32 for h in scene.objects)  # float32, not float16
+    assert len(scene.labels) == 11 + 1  # every object, and the one region
+    assert any(label.text == "main entrance" for label in scene.labels)
+
+
+def test_camera_frames_the_whole_map(server: viser.ViserServer) -> None:
+    build_map_scene(server, OFFICE)
+    pos = np.asarray(server.initial_camera.position)
+    look = np.asarray(server.initial_camera.look_at)
+    assert look[:2] == pytest.approx((5.0, 3.5))
+    # Looking (almost) straight down from high enough that a 75 deg view spans the map.
+    assert pos[2] > 0 and np.hypot(*(pos[:2] - look[:2])) < 0.1 * pos[2]
+    half_width = pos[2] * np.tan(np.radians(75 / 2))
+    assert half_width >= 5.0
+    assert top_down_camera(OFFICE)[0][2] == pytest.approx(pos[2])
+
+
+def make_manager() -> SessionManager:
+    return SessionManager(load_map_dir(bundled_maps_dir()), make_settings(), Metrics())
+
+
+def test_particles_are_sampled_by_weight_and_capped() -> None:
+    async def main():
+        manager = make_manager()
+        s = await manager.create(SessionCreate(map="paper_office", particles=8000, seed=1))
+        frames = simulate(OFFICE, paper_config("nominal", 360), np.random.default_rng(1))[:3]
+        for f in frames:
+            await manager.process(s.id, Frame.model_validate(f.to_contract()))
+        return s.snapshot()
+
+    snap = asyncio.run(main())
+    pts, colours, ticks = sample_particles(snap, np.random.default_rng(0))
+    assert pts.shape == (MAX_DRAWN, 3) and colours.shape == (MAX_DRAWN, 3)
+    assert ticks.shape == (MAX_DRAWN, 2, 3)
+    assert detection_rays(snap).shape == (11, 2, 3)
+    # Drawn particles concentrate where the weight is: near the estimate.
+    est = snap.estimate
+    assert np.median(np.hypot(pts[:, 0] - est.x, pts[:, 1] - est.y)) < 1.0
+
+
+def test_live_view_draws_the_watched_session() -> None:
+    async def main() -> LiveView:
+        manager = make_manager()
+        view = LiveView(manager, port=free_port(), host="127.0.0.1")
+        view.start()
+        try:
+            s = await manager.create(SessionCreate(map="paper_office", particles=2000, seed=2))
+            frames = simulate(OFFICE, paper_config("nominal", 360), np.random.default_rng(2))[:5]
+            for f in frames:
+                await manager.process(s.id, Frame.model_validate(f.to_contract()))
+            deadline = time.time() + 10
+            while view._last_version != s.version and time.time() < deadline:
+                await asyncio.sleep(0.05)
+            assert view.watched == s.id  # the newest session is watched by default
+            assert view.controls is not None
+            assert s.id in view.controls.session.options
+            assert view.refresh() is False  # nothing new: nothing redrawn
+            await manager.process(s.id, Frame())
+            assert view.refresh() is True
+            # The GUI's demo button starts a simulated walk and watches it.
+            sid = await view.controls.start_walk()
+            assert view.watched == sid
+            await asyncio.sleep(0.6)
+            assert manager.get(sid).frames >= 2
+            await view.controls.reset_walk()
+            return view
+        finally:
+            view.stop()
+
+    view = asyncio.run(main())
+    assert view.frames_drawn >= 1
