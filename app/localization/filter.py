@@ -33,6 +33,8 @@ from app.localization.sensor import Observation, normalized_residuals, prepare_o
 from app.localization.types import Detection, Estimate, InitialPose, Odometry
 from app.localization.visibility import visibility_grid
 
+#: Share of a global start's particles drawn from the first observation.
+SEED_SHARE = 0.9
 #: Weight of the newest frame in the smoothed fit that gates ``converged``.
 FIT_SMOOTHING = 0.3
 
@@ -80,6 +82,8 @@ class ParticleFilter:
                 self.rng.normal(initial_pose.theta_rad, initial_pose.std_theta_rad, n)
             )
         self.log_w = np.zeros(n, dtype=np.float64)
+        # A global start with recovery on seeds its cloud from the first evidence.
+        self._seed_from_observation = initial_pose is None and self.config.recovery
         self._recovery.reset()
         self._gate.reset()
         #: Smoothed mean squared bearing residual (in stds) at the estimate; None before any.
@@ -126,6 +130,8 @@ class ParticleFilter:
         self.last_observation = obs
         if obs.empty:
             return 0.0
+        if self._seed_from_observation:
+            self._seed_cloud(obs)
         log_lik = self.observation_log_likelihood(obs)
         prior = self.log_w - log_sum_exp(self.log_w)
         self.log_w = self.log_w + log_lik
@@ -136,6 +142,22 @@ class ParticleFilter:
         if not self.config.recovery:
             return 0.0
         return self._recovery.update(per_class)
+
+    def _seed_cloud(self, obs: Observation) -> None:
+        """Global start, first evidence: draw most particles from the observation.
+
+        Anywhere in the free space, but with the heading that points one detection at
+        an object of its class (sensor resetting); the rest stay uniform, so a false
+        first detection cannot trap the filter. Many more particles then start near
+        the true heading than a uniform draw would put there.
+        """
+        self._seed_from_observation = False
+        n_obs = int(SEED_SHARE * self.n)
+        x, y, th = sample_from_observation(
+            n_obs, obs, self.map, self.rng, self.config.bearing_std_rad("")
+        )
+        self.x[:n_obs], self.y[:n_obs], self.theta[:n_obs] = x, y, th
+        self.log_w[:] = 0.0
 
     def resample(self, inject_share: float = 0.0) -> bool:
         """Resample when the ESS is low or particles are to be injected; True if done."""
