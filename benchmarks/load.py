@@ -1,0 +1,148 @@
+"""Load test: N WebSocket sessions streaming frames at R Hz for T seconds.
+
+Starts a real server on a free loopback port (or uses ``--url``), creates N
+sessions, streams simulated paper-office frames at the given rate from each, and
+reports p50/p95/max latency (send to result), frames/s and errors.
+
+    python benchmarks/load.py --sessions 20 --rate 10 --seconds 60 --particles 10000
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import json
+import socket
+import statistics
+import threading
+import time
+
+import httpx
+import numpy as np
+import uvicorn
+import websockets
+
+from app.config import Settings
+from app.localization.map import bundled_maps_dir, load_map
+from app.main import create_app
+from app.simulation.scenarios import paper_config
+from app.simulation.simulator import simulate
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def start_server(max_particles: int) -> tuple[str, uvicorn.Server, threading.Thread]:
+    port = free_port()
+    settings = Settings(viser=False, port=port, max_particles=max(max_particles, 100_000))
+    server = uvicorn.Server(
+        uvicorn.Config(create_app(settings), host="127.0.0.1", port=port, log_level="warning")
+    )
+    thread = threading.Thread(target=server.run, daemon=True)
+    thread.start()
+    while not server.started:
+        time.sleep(0.05)
+    return f"127.0.0.1:{port}", server, thread
+
+
+async def one_session(
+    url: str, frames: list[dict], rate: float, seconds: float, particles: int, seed: int
+) -> tuple[list[float], int]:
+    async with httpx.AsyncClient(base_url=f"http://{url}", timeout=30) as http:
+        r = await http.post(
+            "/sessions", json={"map": "paper_office", "particles": particles, "seed": seed}
+        )
+        r.raise_for_status()
+        sid = r.json()["id"]
+    latencies: list[float] = []
+    errors = 0
+    period = 1.0 / rate
+    async with websockets.connect(f"ws://{url}/sessions/{sid}/stream", max_size=2**22) as ws:
+        start = time.perf_counter()
+        i = 0
+        while time.perf_counter() - start < seconds:
+            frame = frames[(i + seed * 7) % len(frames)]
+            t0 = time.perf_counter()
+            await ws.send(json.dumps(frame))
+            reply = json.loads(await ws.recv())
+            latencies.append(time.perf_counter() - t0)
+            if "error" in reply:
+                errors += 1
+            i += 1
+            await asyncio.sleep(max(0.0, start + i * period - time.perf_counter()))
+    async with httpx.AsyncClient(base_url=f"http://{url}") as http:
+        await http.delete(f"/sessions/{sid}")
+    return latencies, errors
+
+
+async def run(args: argparse.Namespace, url: str) -> dict[str, object]:
+    office = load_map(bundled_maps_dir() / "paper_office.json")
+    frames = [
+        f.to_contract()
+        for f in simulate(office, paper_config("nominal", 360), np.random.default_rng(0))
+    ]
+    t0 = time.perf_counter()
+    results = await asyncio.gather(
+        *(
+            one_session(url, frames, args.rate, args.seconds, args.particles, s)
+            for s in range(args.sessions)
+        ),
+        return_exceptions=True,
+    )
+    wall = time.perf_counter() - t0
+    lat = [x for r in results if not isinstance(r, BaseException) for x in r[0]]
+    errors = sum(r[1] for r in results if not isinstance(r, BaseException))
+    failed = sum(1 for r in results if isinstance(r, BaseException))
+    lat_ms = sorted(1e3 * x for x in lat)
+    q = statistics.quantiles(lat_ms, n=100) if len(lat_ms) >= 2 else [float("nan")] * 99
+    return {
+        "sessions": args.sessions,
+        "rate_hz": args.rate,
+        "seconds": args.seconds,
+        "particles": args.particles,
+        "frames": len(lat_ms),
+        "frames_per_s": round(len(lat_ms) / wall, 1),
+        "target_frames_per_s": args.sessions * args.rate,
+        "p50_ms": round(q[49], 1),
+        "p95_ms": round(q[94], 1),
+        "max_ms": round(lat_ms[-1], 1) if lat_ms else None,
+        "errors": errors,
+        "failed_sessions": failed,
+    }
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument("--sessions", type=int, default=20)
+    parser.add_argument("--rate", type=float, default=10.0, help="frames per second per session")
+    parser.add_argument("--seconds", type=float, default=60.0)
+    parser.add_argument("--particles", type=int, default=10_000)
+    parser.add_argument("--url", help="host:port of a running server (default: start one)")
+    args = parser.parse_args()
+    server = None
+    url = args.url
+    if url is None:
+        url, server, thread = start_server(args.particles)
+    try:
+        report = asyncio.run(run(args, url))
+    finally:
+        if server is not None:
+            server.should_exit = True
+            thread.join(timeout=10)
+    print(json.dumps(report))
+    r = report
+    print(
+        f"{r['sessions']} sessions x {r['rate_hz']} Hz x {r['particles']} particles, "
+        f"{r['seconds']} s: {r['frames_per_s']} frames/s (target {r['target_frames_per_s']}), "
+        f"p50 {r['p50_ms']} ms, p95 {r['p95_ms']} ms, errors {r['errors']}, "
+        f"failed sessions {r['failed_sessions']}"
+    )
+
+
+if __name__ == "__main__":
+    main()
