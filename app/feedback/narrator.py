@@ -37,6 +37,8 @@ from app.localization.types import Detection, Estimate
 
 #: Repeat an unchanged announcement after this long (seconds).
 REPEAT_AFTER_S = 60.0
+#: Routine object updates are spoken at most this often (seconds), so speech keeps up.
+MIN_GAP_S = 2.0
 #: Hypotheses lighter than this are not named as alternatives.
 MIN_ALTERNATIVE_WEIGHT = 0.1
 #: Above this position std (m) distances are hedged with "roughly".
@@ -85,6 +87,7 @@ class Narrator:
         self._was_converged = False
         self._status_at: float | None = None
         self._ambiguity: tuple[str, ...] = ()
+        self._objects_at: float | None = None
 
     # ------------------------------------------------------------------ public
     def update(
@@ -108,7 +111,8 @@ class Narrator:
         self, estimate: Estimate, dets: list[Detection], now: float, describe: bool
     ) -> Feedback:
         opts = self.options
-        seen = sorted(dets, key=lambda d: -d.score)[: opts.max_items]
+        # Most confident first, then what is most nearly ahead.
+        seen = sorted(dets, key=lambda d: (-d.score, abs(d.bearing_rad)))[: opts.max_items]
         items = [
             FeedbackItem(
                 d.cls,
@@ -135,13 +139,14 @@ class Narrator:
         self._was_converged = False
         self._region = None
         fresh = []
-        for d in seen:
+        for d in seen if describe or self._gap_passed(now) else []:
             clock = clock_from_bearing_deg(math.degrees(d.bearing_rad))
             if describe or self._is_new(("seen", d.cls, clock), clock, None, now):
                 fresh.append(
                     f"{article(d.cls)} {direction_phrase(math.degrees(d.bearing_rad), opts.style)}"
                 )
         if fresh:
+            self._objects_at = now
             parts.append(f"I see {_join(fresh)}; still working out where you are.")
         return Feedback(" ".join(parts), items)
 
@@ -193,12 +198,18 @@ class Narrator:
         self._region = region
         self._was_converged = True
         self._status_at = None
-        for n, item in zip(ordered, items, strict=False):
+        spoken = False
+        for n, item in zip(
+            ordered, items if describe or self._gap_passed(now) else [], strict=False
+        ):
             if describe or self._is_new(("obj", int(n)), item.clock, item.distance_m, now):
+                spoken = True
                 name = item.label or item.cls
                 where = direction_phrase(item.bearing_deg or 0.0, opts.style)
                 far = distance_phrase(item.distance_m or 0.0, opts.units, certain=certain)
                 parts.append(f"{capitalize(name)} {where}, {far}.")
+        if spoken:
+            self._objects_at = now
         return Feedback(" ".join(parts), items)
 
     def _ordered_objects(
@@ -212,7 +223,7 @@ class Narrator:
         bearing = wrap_angle(np.arctan2(rel[:, 1], rel[:, 0]) - estimate.theta_rad)
         in_view = visible & (np.abs(bearing) <= math.radians(fov_deg) / 2 + 1e-9)
         matched: list[int] = []
-        for d in sorted(dets, key=lambda d: -d.score):
+        for d in dets:
             members = self.map.class_members[d.cls]
             cand = members[in_view[members]]
             if cand.size == 0:
@@ -221,10 +232,14 @@ class Narrator:
             best = int(cand[np.argmin(err)])
             if best not in matched:
                 matched.append(best)
+        matched.sort(key=lambda i: dist[i])  # nearest first: a stable, useful order
         others = [int(i) for i in np.argsort(dist) if visible[i] and int(i) not in matched]
         return matched + others
 
     # ------------------------------------------------------------ repetition
+    def _gap_passed(self, now: float) -> bool:
+        return self._objects_at is None or not 0 <= now - self._objects_at < MIN_GAP_S
+
     def _is_new(self, key: object, clock: int | None, distance_m: float | None, now: float) -> bool:
         """True when this announcement adds something; remembers it if so."""
         said = self._said.get(key)
