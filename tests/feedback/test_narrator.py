@@ -93,7 +93,7 @@ def test_no_repetition_until_something_changes() -> None:
     assert "Main entrance at 2 o'clock" in turned
     # A minute later the unchanged door is repeated.
     later = n.update(
-        located(7, 2.5, 60), [Detection("door", math.radians(-60))], timestamp_s=61.0
+        located(7, 2.5, 60), [Detection("door", math.radians(-60))], timestamp_s=63.0
     ).text
     assert "Main entrance at 2 o'clock" in later
 
