@@ -3,10 +3,11 @@
 Augmented MCL (Probabilistic Robotics, Table 8.3) keeps two running averages of the
 measurement likelihood, a slow one ``w_slow`` and a fast one ``w_fast``. When the
 fast one falls below the slow one, the observations stopped fitting the particles,
-and a share ``max(0, 1 - w_fast / w_slow)`` of the particles is replaced with fresh
-ones. The fresh particles are drawn from the current observation (sensor resetting,
-Lenser & Veloso 2000): a position uniform over the free space, and the heading that
-makes one detection point at a randomly chosen map object of its class.
+and a share ``max(0, 1 - w_fast / (threshold * w_slow))`` of the particles is replaced
+with fresh ones (Thrun's rule with a dead band, ``threshold`` = 0.5, against the jitter
+of noisy detections). The fresh particles are drawn from the current observation
+(sensor resetting, Lenser & Veloso 2000): a position uniform over the free space, and
+the heading that makes one detection point at a randomly chosen map object of its class.
 
 The likelihood fed to the averages is the mean per observed class, exponentiated,
 so that frames with many or few classes are comparable. A frame with no usable
@@ -34,6 +35,9 @@ class AugmentedMCL:
 
     alpha_slow: float
     alpha_fast: float
+    #: Dead band: inject only once w_fast falls below this share of w_slow, so the
+    #: frame-to-frame jitter of noisy or cluttered detections never injects.
+    threshold: float = 0.5
     w_slow: float = 0.0
     w_fast: float = 0.0
 
@@ -47,7 +51,8 @@ class AugmentedMCL:
         self.w_fast += self.alpha_fast * (w_avg - self.w_fast)
         if self.w_slow <= 0.0:
             return 0.0
-        return float(np.clip(1.0 - self.w_fast / self.w_slow, 0.0, MAX_INJECTION))
+        ratio = self.w_fast / (self.threshold * self.w_slow)
+        return float(np.clip(1.0 - ratio, 0.0, MAX_INJECTION))
 
     def reset(self) -> None:
         self.w_slow = self.w_fast = 0.0
