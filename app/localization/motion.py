@@ -9,16 +9,33 @@ parameterized directly in the body frame that CONTRACT.md's odometry uses.
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 from numpy.typing import NDArray
 
 from app.localization.config import FilterConfig
-from app.localization.geometry import segments_cross_walls, wrap_angle
+from app.localization.geometry import segments_cross_walls
 from app.localization.map import SemanticMap
 from app.localization.types import Odometry
 
 #: When a frame carries no odometry the person may still have moved: diffuse this much.
 NO_ODOMETRY_STD_M = 0.15
 NO_ODOMETRY_STD_RAD = np.radians(10.0)
+
+
+@njit(cache=True, nogil=True, fastmath={"nsz", "arcp", "contract", "afn", "reassoc"})
+def _move(x, y, theta, fwd, left, turn, std_t, std_r, noise):  # fmt: skip
+    """In place: apply the body-frame motion plus scaled standard-normal noise (3, N)."""
+    two_pi = 2.0 * np.pi
+    for i in range(x.shape[0]):
+        f = fwd + std_t * noise[0, i]
+        lft = left + std_t * noise[1, i]
+        c = np.cos(theta[i])
+        s = np.sin(theta[i])
+        x[i] += c * f - s * lft
+        y[i] += s * f + c * lft
+        t = theta[i] + turn + std_r * noise[2, i]
+        t = (t + np.pi) % two_pi - np.pi
+        theta[i] = np.pi if t <= -np.pi else t
 
 
 def sample_motion(
@@ -29,7 +46,7 @@ def sample_motion(
     config: FilterConfig,
     rng: np.random.Generator,
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
-    """New particle poses after one noisy odometry step.
+    """New particle poses after one noisy odometry step (the inputs are not modified).
 
     Args:
         x, y, theta: particle poses, shape (N,), metres and radians.
@@ -38,25 +55,19 @@ def sample_motion(
     Returns:
         New (x, y, theta), each shape (N,); theta wrapped to (-pi, pi].
     """
-    n = x.shape[0]
     if odometry is None:
-        fwd = rng.normal(0.0, NO_ODOMETRY_STD_M, n)
-        left = rng.normal(0.0, NO_ODOMETRY_STD_M, n)
-        turn = rng.normal(0.0, NO_ODOMETRY_STD_RAD, n)
+        fwd = left = turn = 0.0
+        std_t, std_r = NO_ODOMETRY_STD_M, float(NO_ODOMETRY_STD_RAD)
     else:
         dist = float(np.hypot(odometry.forward_m, odometry.left_m))
         std_t = config.trans_noise_frac * dist + config.trans_noise_floor_m
-        std_r = config.rot_noise_frac * abs(odometry.turn_rad) + np.radians(
-            config.rot_noise_floor_deg
+        std_r = config.rot_noise_frac * abs(odometry.turn_rad) + float(
+            np.radians(config.rot_noise_floor_deg)
         )
-        fwd = odometry.forward_m + rng.normal(0.0, std_t, n)
-        left = odometry.left_m + rng.normal(0.0, std_t, n)
-        turn = odometry.turn_rad + rng.normal(0.0, std_r, n)
-    c = np.cos(theta)
-    s = np.sin(theta)
-    new_x = x + c * fwd - s * left
-    new_y = y + s * fwd + c * left
-    new_theta = wrap_angle(theta + turn)
+        fwd, left, turn = odometry.forward_m, odometry.left_m, odometry.turn_rad
+    noise = rng.standard_normal((3, x.shape[0]))
+    new_x, new_y, new_theta = x.copy(), y.copy(), theta.copy()
+    _move(new_x, new_y, new_theta, float(fwd), float(left), float(turn), std_t, std_r, noise)
     return new_x, new_y, new_theta
 
 

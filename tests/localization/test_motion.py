@@ -1,0 +1,65 @@
+"""The odometry motion model and the wall / free-space penalty."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from app.localization.config import FilterConfig
+from app.localization.motion import NO_ODOMETRY_STD_M, motion_log_penalty, sample_motion
+from app.localization.types import Odometry
+from tests.localization.conftest import room
+
+EXACT = FilterConfig(
+    trans_noise_frac=0, rot_noise_frac=0, trans_noise_floor_m=0, rot_noise_floor_deg=0
+)
+
+
+def test_noise_free_motion_is_exact_in_the_body_frame() -> None:
+    x, y, th = np.array([1.0, 2.0]), np.array([1.0, 1.0]), np.array([0.0, np.pi / 2])
+    nx, ny, nth = sample_motion(
+        x, y, th, Odometry(0.5, 0.2, np.pi / 2), EXACT, np.random.default_rng(0)
+    )
+    # Facing east: forward is +x, left is +y. Facing north: forward is +y, left is -x.
+    assert np.allclose(nx, [1.5, 1.8]) and np.allclose(ny, [1.2, 1.5])
+    assert np.allclose(nth, [np.pi / 2, np.pi])
+    assert np.allclose(x, [1.0, 2.0])  # inputs untouched
+
+
+def test_noise_grows_with_motion_and_has_a_floor() -> None:
+    n = 20_000
+    zeros = np.zeros(n)
+    cfg = FilterConfig()
+    rng = np.random.default_rng(1)
+    still_x, _, still_t = sample_motion(zeros, zeros, zeros, Odometry(0, 0, 0), cfg, rng)
+    assert still_x.std() == pytest.approx(cfg.trans_noise_floor_m, rel=0.05)
+    assert still_t.std() == pytest.approx(np.radians(cfg.rot_noise_floor_deg), rel=0.05)
+    walk_x, _, _ = sample_motion(zeros, zeros, zeros, Odometry(1.0, 0, 0), cfg, rng)
+    assert walk_x.mean() == pytest.approx(1.0, abs=0.01)
+    expected = cfg.trans_noise_frac * 1.0 + cfg.trans_noise_floor_m
+    assert walk_x.std() == pytest.approx(expected, rel=0.05)
+    lost_x, _, _ = sample_motion(zeros, zeros, zeros, None, cfg, rng)
+    assert lost_x.std() == pytest.approx(NO_ODOMETRY_STD_M, rel=0.05)
+
+
+def test_heading_stays_wrapped() -> None:
+    th = np.full(1000, 3.1)
+    _, _, nth = sample_motion(
+        np.zeros(1000),
+        np.zeros(1000),
+        th,
+        Odometry(0, 0, 0.5),
+        FilterConfig(),
+        np.random.default_rng(2),
+    )
+    assert (nth > -np.pi).all() and (nth <= np.pi).all()
+
+
+def test_moves_through_walls_or_off_the_map_are_impossible() -> None:
+    m = room([{"class": "door", "x": 6, "y": 2}], walls=[{"x1": 3, "y1": 0, "x2": 3, "y2": 4}])
+    x0 = np.array([2.5, 2.5, 1.0, 2.0])
+    y0 = np.array([2.0, 2.0, 1.0, 2.0])
+    x1 = np.array([3.5, 2.8, 1.2, 7.0])  # through the wall, short step, step, off the map
+    y1 = np.array([2.0, 2.0, 1.0, 2.0])
+    penalty = motion_log_penalty(x0, y0, x1, y1, m)
+    assert penalty.tolist() == [-np.inf, 0.0, 0.0, -np.inf]
