@@ -1,8 +1,10 @@
 """Compiled (numba) form of :func:`app.localization.sensor.log_likelihood_reference`.
 
-One pass per particle: the unit vectors towards the frame's candidate objects are
-computed once, then every detection takes its best match among its class (eq. 3),
-and the class-weighted, score-tempered log-likelihoods are summed (eq. 2). Compiled
+For each candidate object the unit vectors from every particle towards it are
+computed once (float32: the bearing geometry needs no more), every detection of the
+object's class keeps its best match (eq. 3), and the class-weighted, score-tempered
+log-likelihoods are summed (eq. 2). Loops run over particles innermost so that they
+vectorize. The result matches the float64 reference within 1e-3 in log-likelihood. Compiled
 code is cached on disk; :func:`warm_up` compiles it at start-up so no request waits.
 """
 
@@ -35,22 +37,25 @@ def _kernel(
     # Loops run over particles innermost so the compiler can vectorize them.
     n = x.shape[0]
     k_total = det_cos.shape[0]
-    ct = np.cos(theta)
-    st = np.sin(theta)
-    best = np.full((k_total, n), -2.0)
-    fx = np.empty(n)
-    fy = np.empty(n)
+    f32 = np.float32
+    ct = np.cos(theta).astype(f32)
+    st = np.sin(theta).astype(f32)
+    xs = x.astype(f32)
+    ys = y.astype(f32)
+    best = np.full((k_total, n), f32(-2.0))
+    fx = np.empty(n, dtype=f32)
+    fy = np.empty(n, dtype=f32)
     ok = np.empty(n, dtype=np.bool_)
     for g in range(group_kappa.shape[0]):
         for j in range(member_start[g], member_start[g + 1]):
             o = members[j]
-            ox = obj_x[o]
-            oy = obj_y[o]
+            ox = f32(obj_x[o])
+            oy = f32(obj_y[o])
             for i in range(n):
-                dx = ox - x[i]
-                dy = oy - y[i]
+                dx = ox - xs[i]
+                dy = oy - ys[i]
                 d2 = dx * dx + dy * dy
-                inv = 1.0 / np.sqrt(d2 + 1e-24)
+                inv = f32(1.0) / np.sqrt(d2 + f32(1e-20))
                 fx[i] = (ct[i] * dx + st[i] * dy) * inv
                 fy[i] = (ct[i] * dy - st[i] * dx) * inv
             if use_vis:
@@ -67,8 +72,8 @@ def _kernel(
             for k in range(k_total):
                 if det_group[k] != g:
                     continue
-                ca = det_cos[k]
-                sa = det_sin[k]
+                ca = f32(det_cos[k])
+                sa = f32(det_sin[k])
                 row = best[k]
                 if use_vis:
                     for i in range(n):

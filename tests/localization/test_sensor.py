@@ -184,5 +184,6 @@ def test_compiled_kernel_matches_the_numpy_reference(paper_office: SemanticMap, 
     ref = loglik(paper_office, cfg, pts[:, 0], pts[:, 1], th, dets, kernel=False)
     finite = np.isfinite(ref)
     assert np.array_equal(finite, np.isfinite(fast))
-    # The kernel reads softplus from a table: equal to the reference within 1e-5.
-    assert np.abs(fast[finite] - ref[finite]).max() < 1e-5
+    # The kernel works in float32 and reads softplus from a table: its log-likelihoods
+    # match the float64 reference within 1e-3 (weights within 0.1 %).
+    assert np.abs(fast[finite] - ref[finite]).max() < 1e-3
