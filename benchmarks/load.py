@@ -12,19 +12,18 @@ from __future__ import annotations
 import argparse
 import asyncio
 import json
+import os
 import socket
 import statistics
-import threading
+import subprocess
+import sys
 import time
 
 import httpx
 import numpy as np
-import uvicorn
 import websockets
 
-from app.config import Settings
 from app.localization.map import bundled_maps_dir, load_map
-from app.main import create_app
 from app.simulation.scenarios import paper_config
 from app.simulation.simulator import simulate
 
@@ -35,29 +34,36 @@ def free_port() -> int:
         return s.getsockname()[1]
 
 
-def start_server(max_particles: int) -> tuple[str, uvicorn.Server, threading.Thread]:
+def start_server(max_particles: int) -> tuple[str, subprocess.Popen[bytes]]:
+    """`bearings serve` in its own process, as in production (the client gets its own GIL)."""
     port = free_port()
-    settings = Settings(viser=False, port=port, max_particles=max(max_particles, 100_000))
-    server = uvicorn.Server(
-        uvicorn.Config(create_app(settings), host="127.0.0.1", port=port, log_level="warning")
-    )
-    thread = threading.Thread(target=server.run, daemon=True)
-    thread.start()
-    while not server.started:
-        time.sleep(0.05)
-    return f"127.0.0.1:{port}", server, thread
+    env = {**os.environ, "BEARINGS_MAX_PARTICLES": str(max(max_particles, 100_000))}
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "app.cli", "serve", "--port", str(port), "--no-viser",
+         "--log-level", "warning", "--max-sessions", "1000"],
+        env=env,
+    )  # fmt: skip
+    deadline = time.time() + 120
+    while time.time() < deadline:
+        try:
+            if httpx.get(f"http://127.0.0.1:{port}/healthz", timeout=1).status_code == 200:
+                return f"127.0.0.1:{port}", proc
+        except httpx.HTTPError:
+            time.sleep(0.2)
+    proc.kill()
+    raise RuntimeError("the server did not start")
 
 
 async def one_session(
     url: str, frames: list[dict], rate: float, seconds: float, particles: int, seed: int
-) -> tuple[list[float], int]:
+) -> tuple[list[tuple[float, float]], int]:
     async with httpx.AsyncClient(base_url=f"http://{url}", timeout=30) as http:
         r = await http.post(
             "/sessions", json={"map": "paper_office", "particles": particles, "seed": seed}
         )
         r.raise_for_status()
         sid = r.json()["id"]
-    latencies: list[float] = []
+    latencies: list[tuple[float, float]] = []  # (seconds since start, latency)
     errors = 0
     period = 1.0 / rate
     async with websockets.connect(f"ws://{url}/sessions/{sid}/stream", max_size=2**22) as ws:
@@ -68,7 +74,7 @@ async def one_session(
             t0 = time.perf_counter()
             await ws.send(json.dumps(frame))
             reply = json.loads(await ws.recv())
-            latencies.append(time.perf_counter() - t0)
+            latencies.append((t0 - start, time.perf_counter() - t0))
             if "error" in reply:
                 errors += 1
             i += 1
@@ -93,7 +99,9 @@ async def run(args: argparse.Namespace, url: str) -> dict[str, object]:
         return_exceptions=True,
     )
     wall = time.perf_counter() - t0
-    lat = [x for r in results if not isinstance(r, BaseException) for x in r[0]]
+    pairs = [x for r in results if not isinstance(r, BaseException) for x in r[0]]
+    lat = [latency for _, latency in pairs]
+    steady = sorted(1e3 * latency for t, latency in pairs if t >= args.warmup)
     errors = sum(r[1] for r in results if not isinstance(r, BaseException))
     failed = sum(1 for r in results if isinstance(r, BaseException))
     lat_ms = sorted(1e3 * x for x in lat)
@@ -109,6 +117,11 @@ async def run(args: argparse.Namespace, url: str) -> dict[str, object]:
         "p50_ms": round(q[49], 1),
         "p95_ms": round(q[94], 1),
         "max_ms": round(lat_ms[-1], 1) if lat_ms else None,
+        "steady_after_s": args.warmup,
+        "steady_p50_ms": round(statistics.median(steady), 1) if steady else None,
+        "steady_p95_ms": round(statistics.quantiles(steady, n=100)[94], 1)
+        if len(steady) > 1
+        else None,
         "errors": errors,
         "failed_sessions": failed,
     }
@@ -123,23 +136,28 @@ def main() -> None:
     parser.add_argument("--seconds", type=float, default=60.0)
     parser.add_argument("--particles", type=int, default=10_000)
     parser.add_argument("--url", help="host:port of a running server (default: start one)")
+    parser.add_argument(
+        "--warmup", type=float, default=10.0,
+        help="seconds after which latencies also count as steady state (all sessions start lost)",
+    )  # fmt: skip
     args = parser.parse_args()
-    server = None
+    proc = None
     url = args.url
     if url is None:
-        url, server, thread = start_server(args.particles)
+        url, proc = start_server(args.particles)
     try:
         report = asyncio.run(run(args, url))
     finally:
-        if server is not None:
-            server.should_exit = True
-            thread.join(timeout=10)
+        if proc is not None:
+            proc.terminate()
+            proc.wait(timeout=30)
     print(json.dumps(report))
     r = report
     print(
         f"{r['sessions']} sessions x {r['rate_hz']} Hz x {r['particles']} particles, "
         f"{r['seconds']} s: {r['frames_per_s']} frames/s (target {r['target_frames_per_s']}), "
-        f"p50 {r['p50_ms']} ms, p95 {r['p95_ms']} ms, errors {r['errors']}, "
+        f"p50 {r['p50_ms']} ms, p95 {r['p95_ms']} ms (after {r['steady_after_s']} s: "
+        f"p50 {r['steady_p50_ms']} ms, p95 {r['steady_p95_ms']} ms), errors {r['errors']}, "
         f"failed sessions {r['failed_sessions']}"
     )
 

@@ -34,6 +34,7 @@ from app.feedback.phrasing import (
 from app.localization.geometry import wrap_angle
 from app.localization.map import SemanticMap
 from app.localization.types import Detection, Estimate
+from app.localization.visibility import visibility_grid
 
 #: Repeat an unchanged announcement after this long (seconds).
 REPEAT_AFTER_S = 60.0
@@ -217,7 +218,8 @@ class Narrator:
     ) -> list[int]:
         """Objects matched to this frame's detections first, then the nearest visible others."""
         pose_xy = np.array([[estimate.x, estimate.y]])
-        visible = self.map.line_of_sight(pose_xy)[0]
+        # Line of sight from the map's precomputed grid (the cell around the pose).
+        visible = visibility_grid(self.map).visible(estimate.x, estimate.y)[0]
         rel = self.map.object_xy - pose_xy
         dist = np.hypot(rel[:, 0], rel[:, 1])
         bearing = wrap_angle(np.arctan2(rel[:, 1], rel[:, 0]) - estimate.theta_rad)
