@@ -43,24 +43,38 @@ class ClusterSettings:
 DEFAULT_CLUSTERING = ClusterSettings()
 
 
-def _weighted_pose(
+def _summary(
+    w: NDArray[np.float64],
     x: NDArray[np.float64],
     y: NDArray[np.float64],
-    theta: NDArray[np.float64],
-    w: NDArray[np.float64],
+    cos_t: NDArray[np.float64],
+    sin_t: NDArray[np.float64],
 ) -> tuple[float, float, float, float, float, float, float]:
+    """(mass, mean x, mean y, circular mean heading, std x, std y, circular std)."""
     mass = float(w.sum())
     wn = w / mass
     mx = float(wn @ x)
     my = float(wn @ y)
-    c = float(wn @ np.cos(theta))
-    s = float(wn @ np.sin(theta))
-    mt = float(np.arctan2(s, c))
-    sx = float(np.sqrt(max(wn @ (x - mx) ** 2, 0.0)))
-    sy = float(np.sqrt(max(wn @ (y - my) ** 2, 0.0)))
-    r = min(max(np.hypot(c, s), 1e-300), 1.0)
-    st = float(np.sqrt(-2.0 * np.log(r)))
-    return mass, mx, my, mt, sx, sy, st
+    c = float(wn @ cos_t)
+    s = float(wn @ sin_t)
+    sx = float(np.sqrt(max(float(wn @ (x - mx) ** 2), 0.0)))
+    sy = float(np.sqrt(max(float(wn @ (y - my) ** 2), 0.0)))
+    r = min(max(float(np.hypot(c, s)), 1e-300), 1.0)
+    return mass, mx, my, float(np.arctan2(s, c)), sx, sy, float(np.sqrt(-2.0 * np.log(r)))
+
+
+def _centre(
+    w: NDArray[np.float64],
+    x: NDArray[np.float64],
+    y: NDArray[np.float64],
+    cos_t: NDArray[np.float64],
+    sin_t: NDArray[np.float64],
+) -> tuple[float, float, float, float]:
+    """Weighted mean position and mean heading direction (cos, sin) of weights ``w``."""
+    mass = float(w.sum())
+    c, s = float(w @ cos_t), float(w @ sin_t)
+    norm = max(float(np.hypot(c, s)), 1e-300)
+    return float(w @ x) / mass, float(w @ y) / mass, c / norm, s / norm
 
 
 def estimate_pose(
@@ -94,31 +108,35 @@ def estimate_pose(
         x, y, theta = x[idx], y[idx], theta[idx]
         weights = np.full(max_points, 1.0 / max_points)
     remaining = weights > 0.0
+    cos_t, sin_t = np.cos(theta), np.sin(theta)
     bin_width = 2.0 * np.pi / settings.heading_bins
     cx = np.floor((x - x.min()) / settings.cell_m).astype(np.int64)
     cy = np.floor((y - y.min()) / settings.cell_m).astype(np.int64)
     ct = np.floor((theta + np.pi) / bin_width).astype(np.int64) % settings.heading_bins
     flat = (cy * (cx.max() + 1) + cx) * settings.heading_bins + ct
+    cos_window = np.cos(settings.heading_window_rad)
     hyps: list[tuple[float, float, float, float, float, float, float]] = []
     for _ in range(settings.max_hypotheses):
         w_left = np.where(remaining, weights, 0.0)
         if w_left.sum() < 0.01:
             break
         hist = np.bincount(flat, weights=w_left)
-        seed = remaining & (flat == int(np.argmax(hist)))
-        _, mx, my, mt, *_ = _weighted_pose(x[seed], y[seed], theta[seed], weights[seed])
-        members = seed
-        for _ in range(3):
+        members = remaining & (flat == int(np.argmax(hist)))
+        mx, my, mc, ms = _centre(np.where(members, weights, 0.0), x, y, cos_t, sin_t)
+        for _ in range(3):  # re-centre on the particles near the centre
             near = (
                 remaining
                 & ((x - mx) ** 2 + (y - my) ** 2 <= settings.radius_m**2)
-                & (np.abs(wrap_angle(theta - mt)) <= settings.heading_window_rad)
+                & (cos_t * mc + sin_t * ms >= cos_window)
             )
-            if not near.any():
+            if not near.any() or np.array_equal(near, members):
+                members = near if near.any() else members
                 break
             members = near
-            _, mx, my, mt, *_ = _weighted_pose(x[near], y[near], theta[near], weights[near])
-        hyps.append(_weighted_pose(x[members], y[members], theta[members], weights[members]))
+            mx, my, mc, ms = _centre(np.where(near, weights, 0.0), x, y, cos_t, sin_t)
+        hyps.append(
+            _summary(weights[members], x[members], y[members], cos_t[members], sin_t[members])
+        )
         remaining &= ~members
     if not hyps:  # no weight anywhere: say so honestly
         return Estimate(0.0, 0.0, 0.0, np.inf, np.inf, np.pi, False, (), n, ess)
