@@ -36,7 +36,7 @@ class ClusterSettings:
     heading_window_rad: float = np.radians(45.0)
     max_hypotheses: int = 3
     min_mass: float = 0.9
-    max_std_xy_m: float = 0.35
+    max_std_xy_m: float = 0.25
     max_std_theta_rad: float = np.radians(10.0)
 
 
@@ -161,13 +161,17 @@ class ConvergenceGate:
     the worst failure. So a tight, heavy cluster counts as converged only after it
     has stayed put (moving no more than the odometry allows plus ``tolerance_m``, and
     turning no more than ``tolerance_rad``) for ``frames`` consecutive frames, and
-    while the estimate explains what the camera sees: the smoothed median of the
+    while the estimate explains what the camera sees: the smoothed mean of the
     squared bearing residuals (in standard deviations) must stay below ``max_fit``
     (below 1 when the pose is right and the noise is as configured; residuals are
-    clipped at 3 standard deviations so a false detection costs at most 9).
+    clipped at 3 standard deviations so a false detection costs at most 9), and only
+    while detections keep coming: dead reckoning alone is not a confirmed position.
     """
 
     max_fit: float = 2.0
+    #: Dead reckoning alone (frames without usable detections) for longer than this
+    #: is not a confirmed position: 10 frames is 2 s at 5 frames/s.
+    max_frames_without_evidence: int = 10
 
     def __init__(
         self, frames: int = 5, tolerance_m: float = 0.3, tolerance_rad: float = np.radians(15.0)
@@ -188,10 +192,15 @@ class ConvergenceGate:
         moved_m: float = 0.0,
         turned_rad: float = 0.0,
         fit: float | None = None,
+        frames_without_evidence: int = 0,
     ) -> Estimate:
         """``raw`` with ``converged`` true only if it held for ``frames`` frames and fits."""
         last = self._last
-        fits = fit is not None and fit <= self.max_fit
+        fits = (
+            fit is not None
+            and fit <= self.max_fit
+            and frames_without_evidence <= self.max_frames_without_evidence
+        )
         steady = (
             raw.converged
             and fits

@@ -88,6 +88,7 @@ class ParticleFilter:
         self._gate.reset()
         #: Smoothed mean squared bearing residual (in stds) at the estimate; None before any.
         self.fit: float | None = None
+        self.frames_without_evidence = 0
         self.steps = 0
         self.estimate: Estimate = estimate_pose(self.x, self.y, self.theta, self.weights)
 
@@ -129,7 +130,9 @@ class ParticleFilter:
         obs = prepare_observation(detections, self.map, self.config)
         self.last_observation = obs
         if obs.empty:
+            self.frames_without_evidence += 1
             return 0.0
+        self.frames_without_evidence = 0
         if self._seed_from_observation:
             self._seed_cloud(obs)
         log_lik = self.observation_log_likelihood(obs)
@@ -199,7 +202,9 @@ class ParticleFilter:
         self._update_fit(raw)
         moved = 1.0 if odometry is None else float(np.hypot(odometry.forward_m, odometry.left_m))
         turned = np.pi if odometry is None else odometry.turn_rad
-        self.estimate = self._gate.confirm(raw, moved, turned, self.fit)
+        self.estimate = self._gate.confirm(
+            raw, moved, turned, self.fit, self.frames_without_evidence
+        )
         self.steps += 1
         return self.estimate
 
