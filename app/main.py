@@ -50,7 +50,7 @@ def create_app(settings: Settings | None = None, *, demo: bool = False) -> FastA
         if settings.viser:
             from app.viz import LiveView
 
-            view = LiveView(manager, port=settings.viser_port)
+            view = LiveView(manager, port=settings.viser_port, host=settings.host)
             view.start()
             app.state.view = view
         if demo:
