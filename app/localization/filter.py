@@ -195,7 +195,7 @@ class ParticleFilter:
         self.predict(odometry)
         inject = self.correct(detections)
         self.resample(inject)
-        w = self.weights
+        w = self.weights if self.log_w.any() else np.full(self.n, 1.0 / self.n)
         raw = estimate_pose(
             self.x, self.y, self.theta, w, ess=effective_sample_size(w), rng=self.rng
         )

@@ -30,6 +30,8 @@ from app.localization.geometry import (
 CLASS_PATTERN = re.compile(r"^[a-z][a-z0-9_-]*$")
 #: A map name is usable as a file name and in a URL.
 NAME_PATTERN = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]*$")
+#: Every point of the free space is at least this far from every wall, in metres.
+WALL_CLEARANCE_M = 0.1
 #: An object closer than this to a wall is mounted in it (doors, windows), in metres.
 MOUNT_TOLERANCE_M = 0.05
 
@@ -300,7 +302,11 @@ class SemanticMap:
 
     @cached_property
     def free_space(self) -> FreeSpaceGrid:
-        """Cells enclosed by walls in all four axis directions and >= 0.1 m from walls.
+        """Cells enclosed by walls in all four axis directions, wholly >= 0.1 m from walls.
+
+        Every point of a free cell is at least ``WALL_CLEARANCE_M`` from every wall (the
+        cell centre is tested with the half-diagonal added), which the motion model
+        relies on to skip ray tests for short moves.
 
         A map without walls is free everywhere within its bounds plus one metre.
         Computed once per map and cached.
@@ -327,9 +333,9 @@ class SemanticMap:
             clear = np.ones_like(mask)
             for start in range(0, centres.shape[0], 20_000):
                 part = centres[start : start + 20_000]
-                clear[start : start + 20_000] = (
-                    point_segment_distance(part, self.walls).min(axis=1) >= 0.1
-                )
+                clear[start : start + 20_000] = point_segment_distance(part, self.walls).min(
+                    axis=1
+                ) >= WALL_CLEARANCE_M + res * np.sqrt(0.5)
             mask &= clear
         mask2d = mask.reshape(rows, cols)
         return FreeSpaceGrid(min_x, min_y, res, mask2d, np.flatnonzero(mask))

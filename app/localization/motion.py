@@ -14,12 +14,14 @@ from numpy.typing import NDArray
 
 from app.localization.config import FilterConfig
 from app.localization.geometry import segments_cross_walls
-from app.localization.map import SemanticMap
+from app.localization.map import WALL_CLEARANCE_M, SemanticMap
 from app.localization.types import Odometry
 
 #: When a frame carries no odometry the person may still have moved: diffuse this much.
 NO_ODOMETRY_STD_M = 0.15
 NO_ODOMETRY_STD_RAD = np.radians(10.0)
+#: Twice the free space's clearance from walls (see :meth:`SemanticMap.free_space`).
+LONG_MOVE_M = 2 * WALL_CLEARANCE_M
 
 
 @njit(cache=True, nogil=True, fastmath={"nsz", "arcp", "contract", "afn", "reassoc"})
@@ -65,10 +67,24 @@ def sample_motion(
             np.radians(config.rot_noise_floor_deg)
         )
         fwd, left, turn = odometry.forward_m, odometry.left_m, odometry.turn_rad
-    noise = rng.standard_normal((3, x.shape[0]))
+    noise = rng.standard_normal((3, x.shape[0]), dtype=np.float32)
     new_x, new_y, new_theta = x.copy(), y.copy(), theta.copy()
     _move(new_x, new_y, new_theta, float(fwd), float(left), float(turn), std_t, std_r, noise)
     return new_x, new_y, new_theta
+
+
+@njit(cache=True, nogil=True)
+def _free_check(x0, y0, x1, y1, mask, ox, oy, res, long_sq, penalty, long_move):  # fmt: skip
+    """In place: -inf penalty off the free space; flag free moves longer than sqrt(long_sq)."""
+    rows, cols = mask.shape
+    for i in range(x1.shape[0]):
+        c = int(np.floor((x1[i] - ox) / res))
+        r = int(np.floor((y1[i] - oy) / res))
+        free = 0 <= c < cols and 0 <= r < rows and mask[r, c]
+        penalty[i] = 0.0 if free else -np.inf
+        dx = x1[i] - x0[i]
+        dy = y1[i] - y0[i]
+        long_move[i] = free and dx * dx + dy * dy > long_sq
 
 
 def motion_log_penalty(
@@ -80,17 +96,21 @@ def motion_log_penalty(
 ) -> NDArray[np.float64]:
     """0 for a possible move, -inf for one that ends off the free space or crosses a wall.
 
-    Free space keeps a clearance from every wall, so only moves longer than twice that
-    clearance can jump a wall between two free cells; only those are ray-tested.
+    Free space keeps a clearance of 0.1 m from every wall, so a move that starts and
+    ends in free space can only cross a wall if it is longer than twice that
+    (``LONG_MOVE_M``); only those are ray-tested.
     """
-    free = semantic_map.free_space.is_free(x1, y1)
-    penalty = np.where(free, 0.0, -np.inf)
-    if semantic_map.walls.shape[0]:
-        long_move = free & ((x1 - x0) ** 2 + (y1 - y0) ** 2 > 0.15**2)
-        if long_move.any():
-            idx = np.flatnonzero(long_move)
-            start = np.column_stack([x0[idx], y0[idx]])
-            end = np.column_stack([x1[idx], y1[idx]])
-            crossed = segments_cross_walls(start, end, semantic_map.walls)
-            penalty[idx[crossed]] = -np.inf
+    fs = semantic_map.free_space
+    penalty = np.empty(x1.shape[0])
+    long_move = np.empty(x1.shape[0], dtype=np.bool_)
+    _free_check(
+        x0, y0, x1, y1, fs.mask, fs.origin_x, fs.origin_y, fs.resolution_m, LONG_MOVE_M**2,
+        penalty, long_move,
+    )  # fmt: skip
+    if semantic_map.walls.shape[0] and long_move.any():
+        idx = np.flatnonzero(long_move)
+        start = np.column_stack([x0[idx], y0[idx]])
+        end = np.column_stack([x1[idx], y1[idx]])
+        crossed = segments_cross_walls(start, end, semantic_map.walls)
+        penalty[idx[crossed]] = -np.inf
     return penalty
