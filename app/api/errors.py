@@ -26,22 +26,18 @@ def _plain(errors: list[dict]) -> list[dict]:
     return [{k: v for k, v in e.items() if k in ("type", "loc", "msg")} for e in errors]
 
 
-def install_error_handlers(app: FastAPI) -> None:
-    @app.exception_handler(RequestValidationError)
-    async def _validation(_: Request, exc: RequestValidationError) -> JSONResponse:
-        errors = list(exc.errors())
-        return JSONResponse(
-            status_code=422,
-            content={"detail": _plain(errors), "message": describe_validation(errors)},
-        )
+async def _validation(_: Request, exc: Exception) -> JSONResponse:
+    """422 for a request body (or a model built from it) that fails validation."""
+    errors = list(exc.errors())  # type: ignore[attr-defined]
+    return JSONResponse(
+        status_code=422,
+        content={"detail": _plain(errors), "message": describe_validation(errors)},
+    )
 
-    @app.exception_handler(ValidationError)
-    async def _pydantic(_: Request, exc: ValidationError) -> JSONResponse:
-        errors = list(exc.errors())
-        return JSONResponse(
-            status_code=422,
-            content={"detail": _plain(errors), "message": describe_validation(errors)},
-        )
+
+def install_error_handlers(app: FastAPI) -> None:
+    app.add_exception_handler(RequestValidationError, _validation)
+    app.add_exception_handler(ValidationError, _validation)
 
     @app.exception_handler(StarletteHTTPException)
     async def _http(_: Request, exc: StarletteHTTPException) -> JSONResponse:

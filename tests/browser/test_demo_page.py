@@ -8,17 +8,15 @@ from __future__ import annotations
 
 import os
 import shutil
-import socket
-import threading
 import time
 from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
-import uvicorn
 
 from app.main import create_app
 from tests.api.conftest import make_settings
+from tests.support import free_port, serving
 
 CHROMIUM = "/usr/bin/chromium"
 ARTIFACTS = Path("test-artifacts")
@@ -42,26 +40,12 @@ pytestmark = [
 ]
 
 
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
 @pytest.fixture(scope="module")
 def live_app() -> Iterator[tuple[str, object]]:
     port, viser_port = free_port(), free_port()
     app = create_app(make_settings(viser=True, viser_port=viser_port, port=port))
-    server = uvicorn.Server(uvicorn.Config(app, host="127.0.0.1", port=port, log_level="warning"))
-    thread = threading.Thread(target=server.run, daemon=True)
-    thread.start()
-    deadline = time.time() + 60
-    while not server.started:
-        assert time.time() < deadline, "server did not start"
-        time.sleep(0.05)
-    yield f"http://127.0.0.1:{port}", app
-    server.should_exit = True
-    thread.join(timeout=10)
+    with serving(app, port) as url:
+        yield f"http://{url}", app
 
 
 def keep(page, name: str) -> None:

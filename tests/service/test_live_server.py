@@ -4,15 +4,12 @@ from __future__ import annotations
 
 import asyncio
 import json
-import socket
-import threading
 import time
 from collections.abc import Iterator
 
 import httpx
 import numpy as np
 import pytest
-import uvicorn
 import websockets
 
 from app.localization.map import bundled_maps_dir, load_map
@@ -20,29 +17,14 @@ from app.main import create_app
 from app.simulation.scenarios import paper_config
 from app.simulation.simulator import simulate
 from tests.api.conftest import make_settings
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
+from tests.support import free_port, serving
 
 
 @pytest.fixture(scope="module")
 def server_url() -> Iterator[str]:
     port = free_port()
-    settings = make_settings(max_sessions=50, port=port)
-    config = uvicorn.Config(create_app(settings), host="127.0.0.1", port=port, log_level="warning")
-    server = uvicorn.Server(config)
-    thread = threading.Thread(target=server.run, daemon=True)
-    thread.start()
-    deadline = time.time() + 30
-    while not server.started:
-        assert time.time() < deadline, "server did not start"
-        time.sleep(0.05)
-    yield f"127.0.0.1:{port}"
-    server.should_exit = True
-    thread.join(timeout=10)
+    with serving(create_app(make_settings(max_sessions=50, port=port)), port) as url:
+        yield url
 
 
 FRAMES = [

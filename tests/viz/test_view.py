@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import asyncio
-import socket
 import time
 
 import numpy as np
@@ -20,14 +19,9 @@ from app.viz.particles import MAX_DRAWN, detection_rays, sample_particles
 from app.viz.scene import build_map_scene, top_down_camera
 from app.viz.view import LiveView
 from tests.api.conftest import make_settings
+from tests.support import free_port
 
 OFFICE = load_map(bundled_maps_dir() / "paper_office.json")
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 @pytest.fixture
