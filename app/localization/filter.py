@@ -72,9 +72,7 @@ class ParticleFilter:
         """Start again: around ``initial_pose`` or, when None, anywhere."""
         n = self.config.particles
         if initial_pose is None:
-            pts = self.map.free_space.sample(n, self.rng)
-            self.x, self.y = pts[:, 0].copy(), pts[:, 1].copy()
-            self.theta = self.rng.uniform(-np.pi, np.pi, n)
+            self.x, self.y, self.theta = self._anywhere(n)
         else:
             self.x = self.rng.normal(initial_pose.x, initial_pose.std_xy_m, n)
             self.y = self.rng.normal(initial_pose.y, initial_pose.std_xy_m, n)
@@ -89,6 +87,8 @@ class ParticleFilter:
         #: Smoothed mean squared bearing residual (in stds) at the estimate; None before any.
         self.fit: float | None = None
         self.frames_without_evidence = 0
+        #: How often every particle became impossible and the filter started again.
+        self.restarts = 0
         self.steps = 0
         self.estimate: Estimate = estimate_pose(self.x, self.y, self.theta, self.weights)
 
@@ -110,6 +110,24 @@ class ParticleFilter:
             self.x, self.y, self.theta, odometry, self.config, self.rng
         )
         self.log_w = self.log_w + motion_log_penalty(x0, y0, self.x, self.y, self.map)
+        if not np.isfinite(self.log_w).any():
+            # Every hypothesis walked through a wall or off the map: the belief is
+            # wrong everywhere. Start again from no knowledge rather than keep ghosts.
+            self._restart_global()
+
+    def _anywhere(self, n: int) -> tuple[NDArray[np.float64], ...]:
+        """``n`` poses uniform over the free space with uniform headings."""
+        pts = self.map.free_space.sample(n, self.rng)
+        return pts[:, 0].copy(), pts[:, 1].copy(), self.rng.uniform(-np.pi, np.pi, n)
+
+    def _restart_global(self) -> None:
+        n = self.config.particles
+        self.x, self.y, self.theta = self._anywhere(n)
+        self.log_w = np.zeros(n, dtype=np.float64)
+        self._seed_from_observation = self.config.recovery
+        self._recovery.reset()
+        self._gate.reset()
+        self.restarts += 1
 
     def observation_log_likelihood(self, obs: Observation) -> NDArray[np.float64]:
         """log P(Z | s, M) for every particle, shape (N,)."""

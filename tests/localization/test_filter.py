@@ -122,3 +122,15 @@ def test_weights_stay_finite_when_nothing_fits(small_room: SemanticMap) -> None:
         e = pf.step(None, [Detection("door", 0.0), Detection("door", np.pi)])
     assert np.isfinite(pf.weights).all() and np.isclose(pf.weights.sum(), 1.0)
     assert np.isfinite(e.x) and np.isfinite(e.y)
+
+
+def test_a_belief_with_no_possible_particle_starts_again(paper_office: SemanticMap) -> None:
+    """A known start outside the building: every particle is impossible, so the filter
+    starts again from no knowledge (never NaN, never stuck) and finds the person."""
+    sim = replace(paper_config("nominal", 360), duration_s=10.0)
+    outside = InitialPose(12.0, 3.5, 0.0, 0.2, 0.1)
+    for cfg in (FilterConfig.paper(particles=4000), FilterConfig(particles=4000)):
+        pf, out = run(paper_office, sim, cfg, initial=outside)
+        assert pf.restarts == 1
+        assert np.isfinite(pf.weights).all()
+        assert np.mean([err for f, _, err in out if f.t >= 6.0]) < 0.15
