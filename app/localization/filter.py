@@ -154,9 +154,10 @@ class ParticleFilter:
         if self._seed_from_observation:
             self._seed_cloud(obs)
         log_lik = self.observation_log_likelihood(obs)
-        prior = self.log_w - log_sum_exp(self.log_w)
+        before = log_sum_exp(self.log_w)
         self.log_w = self.log_w + log_lik
-        mean_ll = log_sum_exp(prior + log_lik)
+        # log of the prior-weighted mean likelihood: lse(w + l) - lse(w)
+        mean_ll = log_sum_exp(self.log_w) - before
         per_class = mean_ll / max(obs.group_kappa.size, 1)
         if not np.isfinite(per_class):
             per_class = -1e3

@@ -9,6 +9,7 @@ and costs one ``searchsorted``.
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 from numpy.typing import NDArray
 
 
@@ -43,10 +44,30 @@ def effective_sample_size(weights: NDArray[np.floating]) -> float:
     return float(1.0 / np.sum(w * w))
 
 
+@njit(cache=True, nogil=True)
+def _systematic(weights: NDArray[np.float64], n: int, u0: float) -> NDArray[np.int64]:
+    out = np.empty(n, dtype=np.int64)
+    m = weights.shape[0]
+    i = 0
+    c = weights[0]
+    for k in range(n):
+        u = (u0 + k) / n
+        while u > c and i < m - 1:  # one merge pass over weights and pointers
+            i += 1
+            c += weights[i]
+        out[k] = i
+    return out
+
+
 def systematic_resample(
     weights: NDArray[np.floating], n: int, rng: np.random.Generator
 ) -> NDArray[np.int64]:
     """Indexes of ``n`` particles drawn by systematic resampling.
+
+    One uniform offset ``u0``, pointers ``(u0 + k) / n``, and a single merge pass of
+    the pointers against the running sum of the weights (O(N + n)). The last pointer
+    can never run past the end, even when round-off leaves the weights summing to a
+    little under one.
 
     Args:
         weights: normalized weights, shape (M,).
@@ -56,7 +77,4 @@ def systematic_resample(
     Returns:
         Indexes into ``weights``, sorted ascending, shape (n,).
     """
-    cumulative = np.cumsum(np.asarray(weights, dtype=np.float64))
-    cumulative[-1] = 1.0  # guard against round-off leaving the last bin short
-    pointers = (rng.random() + np.arange(n)) / n
-    return np.searchsorted(cumulative, pointers, side="right").astype(np.int64)
+    return _systematic(np.ascontiguousarray(weights, dtype=np.float64), int(n), rng.random())
