@@ -63,6 +63,3 @@ class FilterConfig:
         """The paper's model only: no visibility, no clutter floor, no recovery."""
         base = cls(visibility=False, clutter=False, recovery=False, adaptive=False)
         return replace(base, **overrides)  # type: ignore[arg-type]
-
-    def replace(self, **overrides: object) -> FilterConfig:
-        return replace(self, **overrides)  # type: ignore[arg-type]

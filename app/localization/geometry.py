@@ -29,24 +29,6 @@ def wrap_deg(angle_deg: float) -> float:
     return float(np.degrees(wrap_angle(np.radians(angle_deg))))
 
 
-def circular_mean(angles_rad: ArrayLike, weights: ArrayLike | None = None) -> float:
-    """Weighted circular mean of angles (radians), in (-pi, pi]."""
-    a = np.asarray(angles_rad, dtype=np.float64)
-    w = np.ones_like(a) if weights is None else np.asarray(weights, dtype=np.float64)
-    return float(wrap_angle(np.arctan2(np.sum(w * np.sin(a)), np.sum(w * np.cos(a)))))
-
-
-def circular_std(angles_rad: ArrayLike, weights: ArrayLike | None = None) -> float:
-    """Weighted circular standard deviation, sqrt(-2 ln R), in radians."""
-    a = np.asarray(angles_rad, dtype=np.float64)
-    w = np.ones_like(a) if weights is None else np.asarray(weights, dtype=np.float64)
-    total = float(np.sum(w))
-    if total <= 0.0:
-        return float("inf")
-    r = np.hypot(np.sum(w * np.cos(a)), np.sum(w * np.sin(a))) / total
-    return float(np.sqrt(-2.0 * np.log(np.clip(r, 1e-300, 1.0))))
-
-
 def segments_cross_walls(
     start: ArrayLike, end: ArrayLike, walls: ArrayLike, *, ignore: ArrayLike | None = None
 ) -> NDArray[np.bool_]:

@@ -83,7 +83,3 @@ class Estimate:
     hypotheses: tuple[Hypothesis, ...] = field(default_factory=tuple)
     n_particles: int = 0
     ess: float = 0.0
-
-    @property
-    def pose(self) -> Pose:
-        return Pose(self.x, self.y, self.theta_rad)

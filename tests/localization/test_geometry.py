@@ -7,8 +7,6 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from app.localization.geometry import (
-    circular_mean,
-    circular_std,
     points_in_polygon,
     segments_cross_walls,
     wrap_angle,
@@ -30,13 +28,6 @@ def test_wrap_deg_edges() -> None:
     assert np.isclose(wrap_deg(540.0), 180.0)
     assert np.isclose(wrap_deg(-90.0), -90.0)
     assert np.isclose(wrap_deg(370.0), 10.0)
-
-
-def test_circular_mean_across_the_seam() -> None:
-    a = np.radians([170.0, -170.0])
-    assert np.isclose(abs(circular_mean(a)), np.pi)
-    assert circular_std(np.zeros(5)) < 1e-6
-    assert circular_std(np.radians([0.0, 180.0])) > 3.0
 
 
 def test_segment_crossing_cases() -> None:
