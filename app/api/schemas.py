@@ -74,6 +74,8 @@ class Frame(_In):
 
 
 class SensorSettings(_In):
+    """The camera and detector: bearing noise and field of view."""
+
     bearing_std_deg: Finite = Field(
         2.0, gt=0.0, le=90.0, description="bearing noise standard deviation, degrees"
     )
@@ -120,22 +122,22 @@ class PoseOut(_Out):
 
 
 class Uncertainty(_Out):
-    std_x_m: float
-    std_y_m: float
-    std_theta_deg: float
+    std_x_m: float = Field(description="standard deviation of x in the best cluster, metres")
+    std_y_m: float = Field(description="standard deviation of y in the best cluster, metres")
+    std_theta_deg: float = Field(description="circular standard deviation of heading, degrees")
 
 
 class HypothesisOut(_Out):
-    x: float
-    y: float
-    theta_deg: float
+    x: float = Field(description="metres")
+    y: float = Field(description="metres")
+    theta_deg: float = Field(description="heading, degrees CCW from +x")
     weight: float = Field(description="share of the belief's weight, 0..1")
     region: str | None = Field(description="named region containing it, or null")
 
 
 class FeedbackItemOut(_Out):
-    cls: str = Field(alias="class", serialization_alias="class")
-    label: str | None
+    cls: str = Field(alias="class", serialization_alias="class", description="object class")
+    label: str | None = Field(description="the map's label for the object, or null")
     clock: int | None = Field(description="clock direction 1..12 (12 ahead), null if unknown")
     bearing_deg: float | None = Field(description="degrees, CCW positive, null if unknown")
     distance_m: float | None = Field(description="metres, null if unknown")
@@ -157,27 +159,27 @@ class FrameResult(_Out):
 
 
 class SessionOut(_Out):
-    id: str
-    map: str
-    particles: int
-    created_at: datetime
-    frames: int
-    last_result: FrameResult | None
+    id: str = Field(description="random, unguessable session id (192 bits)")
+    map: str = Field(description="map name")
+    particles: int = Field(description="particle count (the maximum when adaptive)")
+    created_at: datetime = Field(description="creation time, UTC")
+    frames: int = Field(description="frames processed so far")
+    last_result: FrameResult | None = Field(description="latest result, or null")
 
 
 class Bounds(_Out):
-    min_x: float
-    min_y: float
-    max_x: float
-    max_y: float
+    min_x: float = Field(description="metres")
+    min_y: float = Field(description="metres")
+    max_x: float = Field(description="metres")
+    max_y: float = Field(description="metres")
 
 
 class MapSummary(_Out):
-    name: str
-    description: str
-    classes: list[str]
-    object_count: int
-    bounds: Bounds
+    name: str = Field(description="map name, also its file name without .json")
+    description: str = Field(description="free text")
+    classes: list[str] = Field(description="object classes on the map")
+    object_count: int = Field(description="number of objects")
+    bounds: Bounds = Field(description="extent of walls and objects, metres")
 
 
 class ErrorBody(_Out):

@@ -197,3 +197,18 @@ def test_demo_loops_are_closed_and_walkable() -> None:
     other = loop_path(ROOM, rng)
     assert other[0] == other[-1]
     assert all(ROOM.free_space.is_free([x], [y])[0] for x, y in other)
+
+
+@pytest.mark.parametrize(
+    ("pose", "index", "hour"),
+    [
+        (Pose(4.5, 2.5, 0.0), 2, 9),  # facing east, the window is to the left
+        (Pose(4.5, 2.5, 0.0), 3, 3),  # ...and the table to the right
+        (Pose(4.5, 2.5, math.pi / 2), 2, 12),  # facing north: the window is ahead
+        (Pose(4.5, 2.5, -math.pi / 2), 2, 6),  # facing south: behind
+    ],
+)
+def test_clock_of_a_known_bearing(pose: Pose, index: int, hour: int) -> None:
+    from app.feedback import clock_from_bearing_deg
+
+    assert clock_from_bearing_deg(seen(pose, 360)[index]) == hour
