@@ -113,7 +113,8 @@ class ViewControls:
                 text = f"**{s.map.name}**, {s.frames} frames, {state}"
                 if r is not None and r.feedback.text:
                     text += f"\n\n_{r.feedback.text}_"
-                self.status.content = text
+                if self.status.content != text:  # only send what changed
+                    self.status.content = text
 
     def shutdown(self) -> None:
         for walk in list(self.walks.values()):
