@@ -131,13 +131,8 @@ class ParticleFilter:
 
     def observation_log_likelihood(self, obs: Observation) -> NDArray[np.float64]:
         """log P(Z | s, M) for every particle, shape (N,)."""
-        if self._vis is not None:
-            cells = self._vis.cells(self.x, self.y)
-            table = self._vis.by_object
-        else:
-            cells = table = None
         return sensor_kernel.log_likelihood(
-            self.x, self.y, self.theta, obs, self.map, self.config, cells, table
+            self.x, self.y, self.theta, obs, self.map, self.config, self._vis
         )
 
     def correct(self, detections: Sequence[Detection]) -> float:

@@ -41,8 +41,9 @@ class VisibilityGrid:
     resolution_m: float
     shape: tuple[int, int]
     table: NDArray[np.bool_]
-    #: The same table transposed, shape (N, rows * cols): fast per-object lookups.
-    by_object: NDArray[np.bool_]
+    #: The same table packed in bits, shape (rows * cols, ceil(N / 64)): bit ``o % 64``
+    #: of word ``o // 64`` is object ``o``. One load per particle serves 64 objects.
+    bits: NDArray[np.uint64]
 
     def cells(self, x: ArrayLike, y: ArrayLike) -> NDArray[np.int64]:
         """Flat cell index per point, clipped onto the grid, shape (M,)."""
@@ -85,9 +86,17 @@ def build_visibility_grid(semantic_map: SemanticMap) -> VisibilityGrid:
     for start in range(0, idx.size, step):
         part = idx[start : start + step]
         table[part] = semantic_map.line_of_sight(centres[part])
-    return VisibilityGrid(
-        fs.origin_x, fs.origin_y, res, (rows, cols), table, np.ascontiguousarray(table.T)
-    )
+    return VisibilityGrid(fs.origin_x, fs.origin_y, res, (rows, cols), table, pack_bits(table))
+
+
+def pack_bits(table: NDArray[np.bool_]) -> NDArray[np.uint64]:
+    """Pack a boolean (cells, N) table into (cells, ceil(N / 64)) little-endian words."""
+    cells, n = table.shape
+    words = max((n + 63) // 64, 1)
+    padded = np.zeros((cells, words * 64), dtype=bool)
+    padded[:, :n] = table
+    packed = np.packbits(padded.reshape(cells, words, 64), axis=2, bitorder="little")
+    return packed.view("<u8").reshape(cells, words).astype(np.uint64)
 
 
 def visibility_grid(semantic_map: SemanticMap) -> VisibilityGrid:

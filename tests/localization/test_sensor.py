@@ -29,8 +29,7 @@ def loglik(m, cfg, x, y, th, dets, *, kernel: bool = True) -> np.ndarray:
     obs = prepare_observation(dets, m, cfg)
     if kernel:
         grid = visibility_grid(m) if cfg.visibility else None
-        cells = grid.cells(x, y) if grid else None
-        return log_likelihood(x, y, th, obs, m, cfg, cells, grid.by_object if grid else None)
+        return log_likelihood(x, y, th, obs, m, cfg, grid)
     rows = visibility_grid(m).visible(x, y) if cfg.visibility else None
     return log_likelihood_reference(x, y, th, obs, m, cfg, rows)
 

@@ -1,0 +1,69 @@
+"""The compiled building blocks: polynomial sincos and softplus, tabulated normal noise."""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from app.localization.fastmath import FAST, NORMAL_TAIL_SIGMA, fill_normal, sincos, softplus
+from app.localization.visibility import pack_bits
+
+
+@njit(fastmath=FAST, error_model="numpy")
+def _sincos_all(t, s, c):  # fmt: skip
+    for i in range(t.shape[0]):
+        s[i], c[i] = sincos(t[i])
+
+
+@njit(fastmath=FAST, error_model="numpy")
+def _softplus_all(z, out):  # fmt: skip
+    for i in range(z.shape[0]):
+        out[i] = softplus(z[i])
+
+
+def test_sincos_matches_the_library_everywhere() -> None:
+    t = np.concatenate(
+        [
+            np.random.default_rng(0).uniform(-100.0, 100.0, 100_000),
+            np.arange(-8, 9) * np.pi / 4,  # quadrant boundaries
+            [np.pi, -np.pi, 0.0, 1e-12, -1e-12],
+        ]
+    )
+    s, c = np.empty_like(t), np.empty_like(t)
+    _sincos_all(t, s, c)
+    assert np.abs(s - np.sin(t)).max() < 1e-8
+    assert np.abs(c - np.cos(t)).max() < 1e-8
+
+
+def test_softplus_matches_logaddexp_over_the_whole_range() -> None:
+    z = np.concatenate([np.linspace(-2000.0, 50.0, 200_001), [0.0, -20.0, 20.0]])
+    out = np.empty_like(z)
+    _softplus_all(z, out)
+    assert np.abs(out - np.logaddexp(0.0, z)).max() < 5e-9
+    assert (out >= 0.0).all()
+
+
+def test_tabulated_normal_has_the_normal_moments_and_quantiles() -> None:
+    z = fill_normal(np.random.default_rng(3), 1_000_000).astype(np.float64)
+    assert abs(z.mean()) < 0.005
+    assert abs(z.std() - 1.0) < 0.005
+    assert np.abs(z).max() <= NORMAL_TAIL_SIGMA * 1.01
+    # Shares inside 1, 2 and 3 standard deviations: 68.27 %, 95.45 %, 99.73 %.
+    for k, share in [(1, 0.6827), (2, 0.9545), (3, 0.9973)]:
+        assert abs(np.mean(np.abs(z) < k) - share) < 0.003
+
+
+def test_tabulated_normal_is_reproducible_and_uses_the_given_generator() -> None:
+    a = fill_normal(np.random.default_rng(7), 1001)
+    b = fill_normal(np.random.default_rng(7), 1001)
+    c = fill_normal(np.random.default_rng(8), 1001)
+    assert a.shape == (1001,) and np.array_equal(a, b) and not np.array_equal(a, c)
+
+
+def test_packed_visibility_bits_hold_the_table() -> None:
+    table = np.random.default_rng(1).random((7, 130)) < 0.5
+    bits = pack_bits(table)
+    assert bits.shape == (7, 3) and bits.dtype == np.uint64
+    objects = np.arange(130)
+    unpacked = (bits[:, objects // 64] >> (objects % 64).astype(np.uint64)) & np.uint64(1)
+    assert np.array_equal(unpacked.astype(bool), table)
