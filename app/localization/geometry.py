@@ -10,7 +10,8 @@ from numpy.typing import ArrayLike, NDArray
 
 FloatArray = NDArray[np.float64]
 
-_EPS = 1e-9
+#: Tolerance of the segment tests (parallel lines, touching end points).
+GEOMETRY_EPS = 1e-9
 
 
 def wrap_angle(angle_rad: ArrayLike) -> FloatArray:
@@ -57,11 +58,11 @@ def segments_cross_walls(
     denom = r[..., 0] * s[..., 1] - r[..., 1] * s[..., 0]  # (M, W)
     t_num = ap[..., 0] * s[..., 1] - ap[..., 1] * s[..., 0]
     u_num = ap[..., 0] * r[..., 1] - ap[..., 1] * r[..., 0]
-    parallel = np.abs(denom) < _EPS
+    parallel = np.abs(denom) < GEOMETRY_EPS
     safe = np.where(parallel, 1.0, denom)
     t = t_num / safe
     u = u_num / safe
-    hit = (~parallel) & (t > _EPS) & (t < 1.0 - _EPS) & (u >= -_EPS) & (u <= 1.0 + _EPS)
+    hit = (~parallel) & (t > GEOMETRY_EPS) & (t < 1.0 - GEOMETRY_EPS) & (u >= -GEOMETRY_EPS) & (u <= 1.0 + GEOMETRY_EPS)
     if ignore is not None:
         hit &= ~np.broadcast_to(np.asarray(ignore, dtype=bool), hit.shape)
     return hit.any(axis=1)
@@ -81,7 +82,7 @@ def point_segment_distance(points: ArrayLike, walls: ArrayLike) -> FloatArray:
     w = np.asarray(walls, dtype=np.float64).reshape(-1, 4)
     a = w[None, :, 0:2]
     d = (w[:, 2:4] - w[:, 0:2])[None, :, :]
-    length_sq = np.maximum(np.sum(d * d, axis=-1), _EPS)
+    length_sq = np.maximum(np.sum(d * d, axis=-1), GEOMETRY_EPS)
     t = np.clip(np.sum((p - a) * d, axis=-1) / length_sq, 0.0, 1.0)
     closest = a + t[..., None] * d
     return np.linalg.norm(p - closest, axis=-1)

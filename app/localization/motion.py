@@ -17,7 +17,7 @@ from numpy.typing import NDArray
 
 from app.localization.config import FilterConfig
 from app.localization.fastmath import FAST, fill_normal, sincos
-from app.localization.geometry import segments_cross_walls
+from app.localization.geometry import GEOMETRY_EPS
 from app.localization.map import WALL_CLEARANCE_M, SemanticMap
 from app.localization.types import Odometry
 
@@ -84,18 +84,46 @@ def sample_motion(
     return new_x, new_y, new_theta
 
 
-@njit(cache=True, nogil=True)
-def _free_check(x0, y0, x1, y1, mask, ox, oy, res, long_sq, penalty, long_move):  # fmt: skip
-    """In place: -inf penalty off the free space; flag free moves longer than sqrt(long_sq)."""
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _crosses_a_wall(px, py, qx, qy, walls, eps):  # fmt: skip  # pragma: no cover - compiled
+    """Whether segment p->q properly crosses a wall: :func:`segments_cross_walls`, one segment."""
+    rx = qx - px
+    ry = qy - py
+    for w in range(walls.shape[0]):
+        ax = walls[w, 0]
+        ay = walls[w, 1]
+        sx = walls[w, 2] - ax
+        sy = walls[w, 3] - ay
+        denom = rx * sy - ry * sx
+        if abs(denom) < eps:
+            continue
+        apx = ax - px
+        apy = ay - py
+        t = (apx * sy - apy * sx) / denom
+        u = (apx * ry - apy * rx) / denom
+        if eps < t < 1.0 - eps and -eps <= u <= 1.0 + eps:
+            return True
+    return False
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _free_check(x0, y0, x1, y1, mask, ox, oy, res, long_sq, walls, eps, penalty):  # fmt: skip
+    """In place: -inf penalty off the free space or through a wall, else 0."""
     rows, cols = mask.shape
+    flat = mask.reshape(-1)
+    inv = 1.0 / res
     for i in range(x1.shape[0]):
-        c = int(np.floor((x1[i] - ox) / res))
-        r = int(np.floor((y1[i] - oy) / res))
-        free = 0 <= c < cols and 0 <= r < rows and mask[r, c]
-        penalty[i] = 0.0 if free else -np.inf
+        fc = np.floor((x1[i] - ox) * inv)
+        fr = np.floor((y1[i] - oy) * inv)
+        inside = (fc >= 0.0) & (fc < cols) & (fr >= 0.0) & (fr < rows)
+        c = int(min(max(fc, 0.0), cols - 1.0))
+        r = int(min(max(fr, 0.0), rows - 1.0))
+        free = inside and flat[r * cols + c]
         dx = x1[i] - x0[i]
         dy = y1[i] - y0[i]
-        long_move[i] = free and dx * dx + dy * dy > long_sq
+        if free and dx * dx + dy * dy > long_sq:
+            free = not _crosses_a_wall(x0[i], y0[i], x1[i], y1[i], walls, eps)
+        penalty[i] = 0.0 if free else -np.inf
 
 
 def motion_log_penalty(
@@ -113,15 +141,9 @@ def motion_log_penalty(
     """
     fs = semantic_map.free_space
     penalty = np.empty(x1.shape[0])
-    long_move = np.empty(x1.shape[0], dtype=np.bool_)
+    walls = np.ascontiguousarray(semantic_map.walls, dtype=np.float64).reshape(-1, 4)
     _free_check(
         x0, y0, x1, y1, fs.mask, fs.origin_x, fs.origin_y, fs.resolution_m, LONG_MOVE_M**2,
-        penalty, long_move,
+        walls, GEOMETRY_EPS, penalty,
     )  # fmt: skip
-    if semantic_map.walls.shape[0] and long_move.any():
-        idx = np.flatnonzero(long_move)
-        start = np.column_stack([x0[idx], y0[idx]])
-        end = np.column_stack([x1[idx], y1[idx]])
-        crossed = segments_cross_walls(start, end, semantic_map.walls)
-        penalty[idx[crossed]] = -np.inf
     return penalty

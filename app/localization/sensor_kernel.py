@@ -36,14 +36,16 @@ HIDDEN = -4.0
 
 @njit(cache=True, fastmath=FAST, nogil=True, error_model="numpy")
 def _kernel(
-    x, y, theta, cells, vis_bits, cos_half_fov, check_fov, max_range_sq,
+    x, y, theta, use_vis, grid, vis_bits, cos_half_fov, check_fov, max_range_sq,
     obj_x, obj_y, det_cos, det_sin, det_score, det_group,
     group_kappa, group_weight, group_log_floor, group_log_keep, member_start, members, out,
 ):  # fmt: skip  # pragma: no cover - compiled
     f32 = np.float32
     n = x.shape[0]
     k_total = det_cos.shape[0]
-    use_vis = cells.shape[0] == n
+    # grid: origin x, origin y, 1 / resolution, rows, cols of the visibility grid.
+    gx, gy, g_inv = grid[0], grid[1], grid[2]
+    g_rows, g_cols = grid[3], grid[4]
     n_words = vis_bits.shape[1]
     check_range = max_range_sq < np.inf
     range_sq = f32(max_range_sq) if check_range else f32(0.0)
@@ -55,6 +57,7 @@ def _kernel(
     fx = np.empty(BLOCK, dtype=f32)
     fy = np.empty(BLOCK, dtype=f32)
     off = np.zeros(BLOCK, dtype=f32)
+    cell = np.empty(BLOCK, dtype=np.int64)
     bits = np.empty((n_words, BLOCK), dtype=np.uint64)
     best = np.empty((k_total, BLOCK), dtype=f32)
     one = np.uint64(1)
@@ -70,11 +73,14 @@ def _kernel(
             ct[i] = f32(c)
             st[i] = f32(s)
         if use_vis:
-            b_cells = cells[start : start + m]
+            for i in range(m):  # the particle's grid cell, clipped onto the grid
+                fc = min(max(np.floor((bx[i] - gx) * g_inv), 0.0), g_cols - 1.0)
+                fr = min(max(np.floor((by[i] - gy) * g_inv), 0.0), g_rows - 1.0)
+                cell[i] = int(fr * g_cols + fc)
             for w in range(n_words):
                 b_bits = bits[w]
                 for i in range(m):
-                    b_bits[i] = vis_bits[b_cells[i], w]
+                    b_bits[i] = vis_bits[cell[i], w]
         for k in range(k_total):
             row = best[k]
             for i in range(m):
@@ -156,13 +162,17 @@ def log_likelihood(
     x = np.ascontiguousarray(x, dtype=np.float64)
     y = np.ascontiguousarray(y, dtype=np.float64)
     if config.visibility and grid is not None:
-        cells, vis_bits = grid.cells(x, y), grid.bits
-    elif config.visibility:
-        # No grid: field of view and range still apply, every object is in sight.
-        words = max((semantic_map.object_count + 63) // 64, 1)
-        cells, vis_bits = np.zeros(n, dtype=np.int64), np.full((1, words), ~np.uint64(0))
+        vis_bits = grid.bits
+        rows, cols = grid.shape
+        geometry = np.array(
+            [grid.origin_x, grid.origin_y, 1.0 / grid.resolution_m, rows, cols], dtype=np.float64
+        )
     else:
-        cells, vis_bits = np.zeros(0, dtype=np.int64), np.zeros((1, 1), dtype=np.uint64)
+        # No grid: field of view and range still apply (with visibility on), every
+        # object is in line of sight from the one cell.
+        words = max((semantic_map.object_count + 63) // 64, 1)
+        vis_bits = np.full((1, words), ~np.uint64(0))
+        geometry = np.array([0.0, 0.0, 1.0, 1.0, 1.0])
     check_fov = config.visibility and config.fov_deg < 360.0
     max_range = config.max_range_m if config.visibility else None
     max_range_sq = np.inf if max_range is None else max_range**2
@@ -173,7 +183,8 @@ def log_likelihood(
         x,
         y,
         np.ascontiguousarray(theta, dtype=np.float64),
-        cells,
+        bool(config.visibility),
+        geometry,
         vis_bits,
         float(np.cos(np.radians(config.fov_deg) / 2.0)),
         check_fov,

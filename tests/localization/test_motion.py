@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from app.localization.config import FilterConfig
+from app.localization.geometry import segments_cross_walls
 from app.localization.motion import NO_ODOMETRY_STD_M, motion_log_penalty, sample_motion
 from app.localization.types import Odometry
 from tests.localization.conftest import room
@@ -63,3 +64,22 @@ def test_moves_through_walls_or_off_the_map_are_impossible() -> None:
     y1 = np.array([2.0, 2.0, 1.0, 2.0])
     penalty = motion_log_penalty(x0, y0, x1, y1, m)
     assert penalty.tolist() == [-np.inf, 0.0, 0.0, -np.inf]
+
+
+def test_wall_test_of_long_moves_agrees_with_the_geometry_module() -> None:
+    """The compiled crossing test gives the same answer as segments_cross_walls."""
+    walls = [
+        {"x1": 3, "y1": 0, "x2": 3, "y2": 1.5},
+        {"x1": 3, "y1": 2.5, "x2": 3, "y2": 4},
+        {"x1": 0, "y1": 2, "x2": 2, "y2": 2},
+    ]
+    m = room([{"class": "door", "x": 6, "y": 2}], walls=walls)
+    rng = np.random.default_rng(5)
+    start = m.free_space.sample(5000, rng)
+    end = start + rng.normal(0.0, 1.0, start.shape)  # many long moves, some through walls
+    penalty = motion_log_penalty(start[:, 0], start[:, 1], end[:, 0], end[:, 1], m)
+    expected = m.free_space.is_free(end[:, 0], end[:, 1]) & ~segments_cross_walls(
+        start, end, m.walls
+    )
+    assert np.array_equal(penalty == 0.0, expected)
+    assert 100 < np.count_nonzero(~expected) < 4900  # both outcomes are exercised
