@@ -19,6 +19,7 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 
 import numpy as np
+from numba import njit
 from numpy.typing import NDArray
 
 from app.localization.geometry import wrap_angle
@@ -43,38 +44,110 @@ class ClusterSettings:
 DEFAULT_CLUSTERING = ClusterSettings()
 
 
-def _summary(
-    w: NDArray[np.float64],
-    x: NDArray[np.float64],
-    y: NDArray[np.float64],
-    cos_t: NDArray[np.float64],
-    sin_t: NDArray[np.float64],
-) -> tuple[float, float, float, float, float, float, float]:
-    """(mass, mean x, mean y, circular mean heading, std x, std y, circular std)."""
-    mass = float(w.sum())
-    wn = w / mass
-    mx = float(wn @ x)
-    my = float(wn @ y)
-    c = float(wn @ cos_t)
-    s = float(wn @ sin_t)
-    sx = float(np.sqrt(max(float(wn @ (x - mx) ** 2), 0.0)))
-    sy = float(np.sqrt(max(float(wn @ (y - my) ** 2), 0.0)))
-    r = min(max(float(np.hypot(c, s)), 1e-300), 1.0)
-    return mass, mx, my, float(np.arctan2(s, c)), sx, sy, float(np.sqrt(-2.0 * np.log(r)))
+@njit(cache=True, nogil=True, error_model="numpy")
+def _cluster(
+    x, y, theta, w, cell_m, heading_bins, radius_m, heading_window_rad, out
+):  # fmt: skip  # pragma: no cover - compiled
+    """Greedy mode seeking (module docstring); fills ``out`` rows, returns how many.
+
+    Each row of ``out`` is (mass, mean x, mean y, circular mean heading, std x, std y,
+    circular std) of one hypothesis, in the order found.
+    """
+    n = x.shape[0]
+    cos_t = np.cos(theta)
+    sin_t = np.sin(theta)
+    bin_width = 2.0 * np.pi / heading_bins
+    x0 = x.min()
+    y0 = y.min()
+    flat = np.empty(n, dtype=np.int64)
+    cx = np.empty(n, dtype=np.int64)
+    for i in range(n):
+        cx[i] = int(np.floor((x[i] - x0) / cell_m))
+    width = cx.max() + 1
+    for i in range(n):
+        cy = int(np.floor((y[i] - y0) / cell_m))
+        ct = int(np.floor((theta[i] + np.pi) / bin_width)) % heading_bins
+        flat[i] = (cy * width + cx[i]) * heading_bins + ct
+    hist = np.zeros(flat.max() + 1)
+    remaining = w > 0.0
+    members = np.zeros(n, dtype=np.bool_)
+    near = np.zeros(n, dtype=np.bool_)
+    cos_window = np.cos(heading_window_rad)
+    r2 = radius_m * radius_m
+    found = 0
+    for _ in range(out.shape[0]):
+        left = 0.0
+        hist[:] = 0.0
+        for i in range(n):
+            if remaining[i]:
+                left += w[i]
+                hist[flat[i]] += w[i]
+        if left < 0.01:
+            break
+        top = np.argmax(hist)
+        for i in range(n):
+            members[i] = remaining[i] and flat[i] == top
+        mx, my, mc, ms = _centre(w, x, y, cos_t, sin_t, members)
+        for _ in range(3):  # re-centre on the particles near the centre
+            any_near = False
+            same = True
+            for i in range(n):
+                dx = x[i] - mx
+                dy = y[i] - my
+                near[i] = (
+                    remaining[i]
+                    and dx * dx + dy * dy <= r2
+                    and cos_t[i] * mc + sin_t[i] * ms >= cos_window
+                )
+                any_near = any_near or near[i]
+                same = same and near[i] == members[i]
+            if not any_near:
+                break
+            members[:] = near
+            if same:
+                break
+            mx, my, mc, ms = _centre(w, x, y, cos_t, sin_t, members)
+        mass = sx = sy = mcos = msin = 0.0
+        for i in range(n):
+            if members[i]:
+                mass += w[i]
+                sx += w[i] * x[i]
+                sy += w[i] * y[i]
+                mcos += w[i] * cos_t[i]
+                msin += w[i] * sin_t[i]
+        mx, my, mcos, msin = sx / mass, sy / mass, mcos / mass, msin / mass
+        vx = vy = 0.0
+        for i in range(n):
+            if members[i]:
+                vx += w[i] * (x[i] - mx) ** 2
+                vy += w[i] * (y[i] - my) ** 2
+        r = min(max(np.hypot(mcos, msin), 1e-300), 1.0)
+        out[found, 0] = mass
+        out[found, 1] = mx
+        out[found, 2] = my
+        out[found, 3] = np.arctan2(msin, mcos)
+        out[found, 4] = np.sqrt(max(vx / mass, 0.0))
+        out[found, 5] = np.sqrt(max(vy / mass, 0.0))
+        out[found, 6] = np.sqrt(-2.0 * np.log(r))
+        found += 1
+        for i in range(n):
+            remaining[i] = remaining[i] and not members[i]
+    return found
 
 
-def _centre(
-    w: NDArray[np.float64],
-    x: NDArray[np.float64],
-    y: NDArray[np.float64],
-    cos_t: NDArray[np.float64],
-    sin_t: NDArray[np.float64],
-) -> tuple[float, float, float, float]:
-    """Weighted mean position and mean heading direction (cos, sin) of weights ``w``."""
-    mass = float(w.sum())
-    c, s = float(w @ cos_t), float(w @ sin_t)
-    norm = max(float(np.hypot(c, s)), 1e-300)
-    return float(w @ x) / mass, float(w @ y) / mass, c / norm, s / norm
+@njit(cache=True, nogil=True, error_model="numpy")
+def _centre(w, x, y, cos_t, sin_t, members):  # fmt: skip  # pragma: no cover - compiled
+    """Weighted mean position and mean heading direction (cos, sin) of the members."""
+    mass = sx = sy = c = s = 0.0
+    for i in range(x.shape[0]):
+        if members[i]:
+            mass += w[i]
+            sx += w[i] * x[i]
+            sy += w[i] * y[i]
+            c += w[i] * cos_t[i]
+            s += w[i] * sin_t[i]
+    norm = max(np.hypot(c, s), 1e-300)
+    return sx / mass, sy / mass, c / norm, s / norm
 
 
 def estimate_pose(
@@ -107,40 +180,25 @@ def estimate_pose(
         idx = systematic_resample(weights, max_points, rng)
         x, y, theta = x[idx], y[idx], theta[idx]
         weights = np.full(max_points, 1.0 / max_points)
-    remaining = weights > 0.0
-    cos_t, sin_t = np.cos(theta), np.sin(theta)
-    bin_width = 2.0 * np.pi / settings.heading_bins
-    cx = np.floor((x - x.min()) / settings.cell_m).astype(np.int64)
-    cy = np.floor((y - y.min()) / settings.cell_m).astype(np.int64)
-    ct = np.floor((theta + np.pi) / bin_width).astype(np.int64) % settings.heading_bins
-    flat = (cy * (cx.max() + 1) + cx) * settings.heading_bins + ct
-    cos_window = np.cos(settings.heading_window_rad)
-    hyps: list[tuple[float, float, float, float, float, float, float]] = []
-    for _ in range(settings.max_hypotheses):
-        w_left = np.where(remaining, weights, 0.0)
-        if w_left.sum() < 0.01:
-            break
-        hist = np.bincount(flat, weights=w_left)
-        members = remaining & (flat == int(np.argmax(hist)))
-        mx, my, mc, ms = _centre(np.where(members, weights, 0.0), x, y, cos_t, sin_t)
-        for _ in range(3):  # re-centre on the particles near the centre
-            near = (
-                remaining
-                & ((x - mx) ** 2 + (y - my) ** 2 <= settings.radius_m**2)
-                & (cos_t * mc + sin_t * ms >= cos_window)
-            )
-            if not near.any() or np.array_equal(near, members):
-                members = near if near.any() else members
-                break
-            members = near
-            mx, my, mc, ms = _centre(np.where(near, weights, 0.0), x, y, cos_t, sin_t)
-        hyps.append(
-            _summary(weights[members], x[members], y[members], cos_t[members], sin_t[members])
+    rows = np.empty((settings.max_hypotheses, 7))
+    found = (
+        _cluster(
+            np.ascontiguousarray(x, dtype=np.float64),
+            np.ascontiguousarray(y, dtype=np.float64),
+            np.ascontiguousarray(theta, dtype=np.float64),
+            np.ascontiguousarray(weights, dtype=np.float64),
+            float(settings.cell_m),
+            int(settings.heading_bins),
+            float(settings.radius_m),
+            float(settings.heading_window_rad),
+            rows,
         )
-        remaining &= ~members
-    if not hyps:  # no weight anywhere: say so honestly
+        if n
+        else 0
+    )
+    if not found:  # no weight anywhere: say so honestly
         return Estimate(0.0, 0.0, 0.0, np.inf, np.inf, np.pi, False, (), n, ess)
-    hyps.sort(key=lambda h: -h[0])
+    hyps = sorted(rows[:found].tolist(), key=lambda h: -h[0])
     mass, mx, my, mt, sx, sy, st = hyps[0]
     converged = (
         mass >= settings.min_mass

@@ -62,7 +62,8 @@ def segments_cross_walls(
     safe = np.where(parallel, 1.0, denom)
     t = t_num / safe
     u = u_num / safe
-    hit = (~parallel) & (t > GEOMETRY_EPS) & (t < 1.0 - GEOMETRY_EPS) & (u >= -GEOMETRY_EPS) & (u <= 1.0 + GEOMETRY_EPS)
+    eps = GEOMETRY_EPS
+    hit = (~parallel) & (t > eps) & (t < 1.0 - eps) & (u >= -eps) & (u <= 1.0 + eps)
     if ignore is not None:
         hit &= ~np.broadcast_to(np.asarray(ignore, dtype=bool), hit.shape)
     return hit.any(axis=1)

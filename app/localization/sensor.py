@@ -35,6 +35,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 from numpy.typing import NDArray
 
 from app.localization.config import FilterConfig
@@ -213,6 +214,31 @@ def log_likelihood_reference(
     return total
 
 
+@njit(cache=True, nogil=True, error_model="numpy")
+def _residuals(
+    x, y, theta, visible, check_fov, cos_half_fov, max_range_sq,
+    obj_x, obj_y, det_bearing, det_group, group_kappa, member_start, members, out,
+):  # fmt: skip  # pragma: no cover - compiled
+    c = np.cos(theta)
+    s = np.sin(theta)
+    two_pi = 2.0 * np.pi
+    for k in range(det_bearing.shape[0]):
+        g = det_group[k]
+        best = np.inf
+        for j in range(member_start[g], member_start[g + 1]):
+            o = members[j]
+            dx = obj_x[o] - x
+            dy = obj_y[o] - y
+            d2 = dx * dx + dy * dy
+            if not visible[o] or d2 > max_range_sq:
+                continue
+            if check_fov and (c * dx + s * dy) / (np.sqrt(d2) + 1e-12) < cos_half_fov:
+                continue
+            err = det_bearing[k] - (np.arctan2(dy, dx) - theta)
+            best = min(best, abs(err - two_pi * np.round(err / two_pi)))
+        out[k] = best * np.sqrt(group_kappa[g])
+
+
 def normalized_residuals(
     x: float,
     y: float,
@@ -232,22 +258,20 @@ def normalized_residuals(
     out = np.full(obs.det_cos.size, np.inf)
     if obs.empty:
         return out
-    px, py, pt = np.array([x]), np.array([y]), np.array([theta])
-    rows = None
-    if config.visibility:
-        rows = (
-            semantic_map.line_of_sight(np.array([[x, y]]))
-            if visible_row is None
-            else visible_row[None, :]
-        )
-    for g in range(obs.group_kappa.size):
-        objs = obs.members[obs.member_start[g] : obs.member_start[g + 1]]
-        ok = candidate_mask(px, py, pt, objs, semantic_map, config, rows)[0]
-        if not ok.any():
-            continue
-        d = semantic_map.object_xy[objs[ok]] - np.array([x, y])
-        predicted = np.arctan2(d[:, 1], d[:, 0]) - theta
-        for k in np.flatnonzero(obs.det_group == g):
-            err = np.abs(np.angle(np.exp(1j * (obs.det_bearing[k] - predicted))))
-            out[k] = float(err.min() * np.sqrt(obs.group_kappa[g]))
+    n_obj = semantic_map.object_count
+    if not config.visibility:
+        visible = np.ones(n_obj, dtype=np.bool_)
+    elif visible_row is None:
+        visible = semantic_map.line_of_sight(np.array([[x, y]], dtype=np.float64))[0]
+    else:
+        visible = np.ascontiguousarray(visible_row, dtype=np.bool_)
+    check_fov = config.visibility and config.fov_deg < 360.0
+    max_range = config.max_range_m if config.visibility else None
+    _residuals(
+        float(x), float(y), float(theta), visible, check_fov,
+        float(np.cos(np.radians(config.fov_deg) / 2.0)),
+        np.inf if max_range is None else float(max_range) ** 2,
+        semantic_map.object_xy[:, 0].copy(), semantic_map.object_xy[:, 1].copy(),
+        obs.det_bearing, obs.det_group, obs.group_kappa, obs.member_start, obs.members, out,
+    )  # fmt: skip
     return out

@@ -8,8 +8,14 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from app.localization.config import FilterConfig
+from app.localization.geometry import wrap_angle
 from app.localization.map import SemanticMap, parse_map
-from app.localization.sensor import log_likelihood_reference, prepare_observation
+from app.localization.sensor import (
+    candidate_mask,
+    log_likelihood_reference,
+    normalized_residuals,
+    prepare_observation,
+)
 from app.localization.sensor_kernel import log_likelihood
 from app.localization.types import Detection, Pose
 from app.localization.visibility import visibility_grid
@@ -186,3 +192,50 @@ def test_compiled_kernel_matches_the_numpy_reference(paper_office: SemanticMap, 
     # The kernel works in float32 and reads softplus from a table: its log-likelihoods
     # match the float64 reference within 1e-3 (weights within 0.1 %).
     assert np.abs(fast[finite] - ref[finite]).max() < 1e-3
+
+
+@pytest.mark.parametrize(
+    "cfg",
+    [FilterConfig(), FilterConfig(fov_deg=180.0, max_range_m=3.0), FilterConfig.paper()],
+    ids=["bearings", "fov-range", "paper"],
+)
+def test_residuals_are_bearing_errors_to_the_best_visible_object(
+    small_room: SemanticMap, cfg: FilterConfig
+) -> None:
+    """Against a brute force over the candidates of candidate_mask, at many poses."""
+    rng = np.random.default_rng(4)
+    dets = [
+        Detection("door", 0.4),
+        Detection("window", -2.0),
+        Detection("window", 2.9),
+        Detection("table", -0.2),
+    ]
+    obs = prepare_observation(dets, small_room, cfg)
+    grid = visibility_grid(small_room)
+    pts = small_room.free_space.sample(200, rng)
+    for (x, y), th in zip(pts, rng.uniform(-np.pi, np.pi, 200), strict=True):
+        row = grid.visible(x, y)[0]
+        got = normalized_residuals(x, y, th, obs, small_room, cfg, row)
+        for k in range(len(dets)):  # in the observation's (grouped) order
+            cls, bearing = obs.classes[obs.det_group[k]], obs.det_bearing[k]
+            objs = small_room.class_members[cls]
+            ok = candidate_mask(
+                np.array([x]), np.array([y]), np.array([th]), objs, small_room, cfg, row[None]
+            )[0]
+            rel = small_room.object_xy[objs[ok]] - [x, y]
+            err = np.abs(wrap_angle(bearing - (np.arctan2(rel[:, 1], rel[:, 0]) - th)))
+            want = err.min() / cfg.bearing_std_rad(cls) if ok.any() else np.inf
+            assert got[k] == pytest.approx(want, rel=1e-9, abs=1e-9)
+
+
+def test_residuals_are_zero_at_the_true_pose_and_three_for_a_three_sigma_error(
+    small_room: SemanticMap,
+) -> None:
+    cfg = FilterConfig()
+    truth = (2.5, 1.5, 0.4)
+    dets = observe(small_room, *truth)
+    obs = prepare_observation(dets, small_room, cfg)
+    assert np.allclose(normalized_residuals(*truth, obs, small_room, cfg), 0.0, atol=1e-9)
+    off = [Detection(d.cls, d.bearing_rad + 3 * cfg.bearing_std_rad(d.cls)) for d in dets[:1]]
+    r = normalized_residuals(*truth, prepare_observation(off, small_room, cfg), small_room, cfg)
+    assert r[0] == pytest.approx(3.0, abs=1e-6)
