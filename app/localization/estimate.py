@@ -135,7 +135,7 @@ def _cluster(
     return found
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
 def _centre(w, x, y, cos_t, sin_t, members):  # fmt: skip  # pragma: no cover - compiled
     """Weighted mean position and mean heading direction (cos, sin) of the members."""
     mass = sx = sy = c = s = 0.0

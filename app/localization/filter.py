@@ -241,7 +241,12 @@ class ParticleFilter:
 
 
 def warm_up() -> None:
-    """Compile the numba kernels now (cached on disk), so no request waits for it."""
+    """Compile every numba kernel now (or load it from the disk cache).
+
+    Runs each compiled path once on a tiny map, so no request waits for a compiler:
+    both sensor configurations, motion with and without odometry (and a move long
+    enough for the wall test), resampling, clustering and the residual check.
+    """
     from app.localization.map import parse_map
 
     tiny = parse_map(
@@ -256,6 +261,11 @@ def warm_up() -> None:
             "objects": [{"class": "door", "x": 2, "y": 1}],
         }
     )
+    door = [Detection("door", 0.0, 1.0)]
     for cfg in (FilterConfig(particles=50), FilterConfig.paper(particles=50)):
         pf = ParticleFilter(tiny, cfg, rng=np.random.default_rng(0))
-        pf.step(Odometry(0.1, 0.0, 0.0), [Detection("door", 0.0, 1.0)])
+        pf.step(Odometry(0.5, 0.0, 0.0), door)
+        pf.step(None, door)
+        pf.resample()
+        obs = prepare_observation(door, tiny, cfg)
+        normalized_residuals(1.0, 1.0, 0.0, obs, tiny, cfg)
