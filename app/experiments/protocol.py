@@ -2,8 +2,10 @@
 
 Tables I-III follow the paper's protocol (see :mod:`app.simulation.scenarios`) for
 cameras of 180, 270 and 360 degrees, each in two configurations: ``paper`` (the
-paper's model only) and ``bearings`` (our defaults). Table IV goes beyond the paper:
-noisier bearings and false detections, as a real detector would give.
+paper's model only) and ``bearings`` (our defaults, adaptive particle count), plus
+``bearings-fixed`` (our defaults with the particle count fixed) so that the adaptive
+count is judged on the same walks. Table IV goes beyond the paper: noisier bearings and
+false detections, as a real detector would give.
 """
 
 from __future__ import annotations
@@ -16,6 +18,8 @@ from app.simulation.simulator import SimulationConfig
 
 FOVS = (180.0, 270.0, 360.0)
 CONFIGS = ("paper", "bearings")
+#: Our defaults without the adaptive particle count (Tables I-III only).
+FIXED = "bearings-fixed"
 SCENARIO_OF_TABLE: dict[str, Scenario] = {"I": "nominal", "II": "occlusion", "III": "missing"}
 TABLE4_FOVS = (360.0, 180.0)
 TABLE4_NOISE_DEG = (1.0, 2.0, 5.0, 10.0)
@@ -62,7 +66,10 @@ class Cell:
             return FilterConfig.paper(
                 particles=particles, fov_deg=self.fov_deg, bearing_std_deg=std
             )
-        return FilterConfig(particles=particles, fov_deg=self.fov_deg, bearing_std_deg=std)
+        adaptive = self.config != FIXED
+        return FilterConfig(
+            particles=particles, fov_deg=self.fov_deg, bearing_std_deg=std, adaptive=adaptive
+        )
 
 
 def cells(tables: tuple[str, ...]) -> list[Cell]:
@@ -71,7 +78,7 @@ def cells(tables: tuple[str, ...]) -> list[Cell]:
     for table in tables:
         if table in SCENARIO_OF_TABLE:
             for fov in FOVS:
-                for cfg in CONFIGS:
+                for cfg in (*CONFIGS, FIXED):
                     out.append(Cell(table, SCENARIO_OF_TABLE[table], fov, cfg))
         elif table == "IV":
             for fov in TABLE4_FOVS:

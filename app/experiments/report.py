@@ -6,7 +6,7 @@ from collections import defaultdict
 
 import numpy as np
 
-from app.experiments.protocol import PAPER_RESULTS, Cell
+from app.experiments.protocol import FIXED, PAPER_RESULTS, Cell
 from app.experiments.runner import Run
 
 TABLE_TITLES = {
@@ -98,6 +98,7 @@ def markdown(rows: list[dict[str, object]], *, seconds: float, particles: int) -
                             f"| {_fmt(r['worst_seed_mean_m'])} | {r['seeds']} |"  # type: ignore[arg-type]
                         )
         lines.append("")
+    lines += _adaptive_section(rows)
     sel = [r for r in rows if r["table"] == "IV"]
     if sel:
         lines += [f"## {TABLE_TITLES['IV']}", ""]
@@ -130,3 +131,37 @@ def markdown(rows: list[dict[str, object]], *, seconds: float, particles: int) -
             )
         lines.append("")
     return "\n".join(lines)
+
+
+def _adaptive_section(rows: list[dict[str, object]]) -> list[str]:
+    """Adaptive vs fixed particle count on the same walks (Tables I-III, our defaults)."""
+    pairs = []
+    for r in rows:
+        if r["config"] != "bearings" or r["table"] == "IV":
+            continue
+        for f in rows:
+            if f["config"] == FIXED and (f["table"], f["fov_deg"]) == (r["table"], r["fov_deg"]):
+                pairs.append((r, f))
+    if not pairs:
+        return []
+    lines = [
+        "## Adaptive particle count (issue 8)",
+        "",
+        "Our defaults with KLD-sampling (all particles while lost, at least 500 once "
+        "converged) against the same filter with the count fixed, on the same walks and "
+        "seeds. Mean position error (m), final-third mean in brackets, and the average "
+        "number of particles per step.",
+        "",
+        "| table | FOV | adaptive | particles / step | fixed | particles / step |",
+        "|---|---|---|---|---|---|",
+    ]
+    for r, f in pairs:
+        lines.append(
+            f"| {r['table']} | {float(r['fov_deg']):.0f} "  # type: ignore[arg-type]
+            f"| {_fmt(r['mean_m'])} ({_fmt(r['final_third_mean_m'])}) "  # type: ignore[arg-type]
+            f"| {float(r['mean_particles']):,.0f} "  # type: ignore[arg-type]
+            f"| {_fmt(f['mean_m'])} ({_fmt(f['final_third_mean_m'])}) "  # type: ignore[arg-type]
+            f"| {float(f['mean_particles']):,.0f} |"  # type: ignore[arg-type]
+        )
+    lines.append("")
+    return lines

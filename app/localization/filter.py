@@ -179,7 +179,10 @@ class ParticleFilter:
     def resample(self, inject_share: float = 0.0) -> bool:
         """Resample when the ESS is low or particles are to be injected; True if done."""
         w = self.weights
-        ess = effective_sample_size(w)
+        return self._resample(w, effective_sample_size(w), inject_share)
+
+    def _resample(self, w: NDArray[np.float64], ess: float, inject_share: float) -> bool:
+        """:meth:`resample` with the normalized weights and their ESS already at hand."""
         n_target = self.n
         if self.config.adaptive:
             # Lost: keep every particle. Localized: as few as KLD-sampling allows.
@@ -208,11 +211,11 @@ class ParticleFilter:
         """One full filter step: predict, correct, resample when due, estimate."""
         self.predict(odometry)
         inject = self.correct(detections)
-        self.resample(inject)
-        w = self.weights if self.log_w.any() else np.full(self.n, 1.0 / self.n)
-        raw = estimate_pose(
-            self.x, self.y, self.theta, w, ess=effective_sample_size(w), rng=self.rng
-        )
+        w = self.weights
+        ess = effective_sample_size(w)
+        if self._resample(w, ess, inject):  # equal weights now
+            w, ess = np.full(self.n, 1.0 / self.n), float(self.n)
+        raw = estimate_pose(self.x, self.y, self.theta, w, ess=ess, rng=self.rng)
         self._update_fit(raw)
         moved = 1.0 if odometry is None else float(np.hypot(odometry.forward_m, odometry.left_m))
         turned = np.pi if odometry is None else odometry.turn_rad

@@ -76,8 +76,10 @@ def sample_from_observation(
     """
     pts = semantic_map.free_space.sample(n, rng)
     x, y = pts[:, 0], pts[:, 1]
-    p = obs.det_score / obs.det_score.sum()
-    k = rng.choice(obs.det_cos.size, size=n, p=p)
+    # Detections drawn in proportion to their scores (inverse CDF of the scores).
+    cumulative = np.cumsum(obs.det_score)
+    k = np.searchsorted(cumulative, rng.random(n) * cumulative[-1], side="right")
+    k = np.minimum(k, obs.det_cos.size - 1)
     g = obs.det_group[k]
     start = obs.member_start[g]
     count = obs.member_start[g + 1] - start

@@ -23,7 +23,7 @@ ROW_KEYS = {
 
 def test_protocol_covers_every_cell() -> None:
     todo = cells(("I", "II", "III"))
-    assert len(todo) == 3 * 3 * 2
+    assert len(todo) == 3 * 3 * 3  # paper, bearings, bearings with a fixed particle count
     assert {(c.table, c.fov_deg) for c in todo} == set(PAPER_RESULTS)
     assert len(cells(("IV",))) == 2 * 4 * 3 * 2
     with pytest.raises(ValueError, match="unknown table"):
@@ -49,7 +49,7 @@ def test_small_end_to_end_run(tmp_path: Path) -> None:
     )
     assert cli.run(args) == 0
     rows = json.loads((tmp_path / "tables.json").read_text())
-    assert len(rows) == 6
+    assert len(rows) == 9
     for row in rows:
         assert set(row) >= ROW_KEYS
         assert row["table"] == "I" and row["scenario"] == "nominal" and row["seeds"] == 1
@@ -57,6 +57,7 @@ def test_small_end_to_end_run(tmp_path: Path) -> None:
     md = (tmp_path / "tables.md").read_text()
     assert "0.033" in md  # the paper's published 360 deg figure stands beside ours
     assert "degrees" in md
+    assert "## Adaptive particle count" in md and md.count("| I | ") == 3
     for name in ("fig5_trajectories_tableI.png", "fig6_errors_tableI.png"):
         data = (tmp_path / name).read_bytes()
         assert data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) > 10_000
