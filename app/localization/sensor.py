@@ -31,6 +31,7 @@ log space; only differences between particles matter to the filter.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -66,8 +67,9 @@ class Observation:
         det_group: class group of each detection, shape (K,).
         group_kappa: von Mises concentration per group, shape (G,).
         group_weight: 1 / size(O_i) per group (eq. 2), shape (G,).
-        group_floor: relative clutter density eps * I0e(kappa) (0 when off), shape (G,).
-        group_keep: 1 - eps (1 when clutter is off), shape (G,).
+        group_log_floor: log of the relative clutter density eps * I0e(kappa), -inf
+            when clutter is off, shape (G,).
+        group_log_keep: log(1 - eps) (0 when clutter is off), shape (G,).
         member_start: group g's objects are members[member_start[g]:member_start[g+1]].
         members: object indices, shape (M,).
         classes: class word per group.
@@ -81,8 +83,8 @@ class Observation:
     det_group: NDArray[np.int64]
     group_kappa: NDArray[np.float64]
     group_weight: NDArray[np.float64]
-    group_floor: NDArray[np.float64]
-    group_keep: NDArray[np.float64]
+    group_log_floor: NDArray[np.float64]
+    group_log_keep: NDArray[np.float64]
     member_start: NDArray[np.int64]
     members: NDArray[np.int64]
     classes: tuple[str, ...]
@@ -120,8 +122,8 @@ def prepare_observation(
         k = 1.0 / config.bearing_std_rad(cls) ** 2
         kappa.append(k)
         weight.append(1.0 / len(dets))
-        floor.append(eps * scaled_bessel_i0(k))
-        keep.append(1.0 - eps)
+        floor.append(math.log(eps * scaled_bessel_i0(k)) if eps > 0.0 else -math.inf)
+        keep.append(math.log1p(-eps))
         members.extend(semantic_map.class_members[cls].tolist())
         starts.append(len(members))
     bearing = np.array(bearing_l, dtype=np.float64)
@@ -133,8 +135,8 @@ def prepare_observation(
         det_group=np.array(group_l, dtype=np.int64),
         group_kappa=np.array(kappa, dtype=np.float64),
         group_weight=np.array(weight, dtype=np.float64),
-        group_floor=np.array(floor, dtype=np.float64),
-        group_keep=np.array(keep, dtype=np.float64),
+        group_log_floor=np.array(floor, dtype=np.float64),
+        group_log_keep=np.array(keep, dtype=np.float64),
         member_start=np.array(starts, dtype=np.int64),
         members=np.array(members, dtype=np.int64),
         classes=classes,
@@ -201,9 +203,8 @@ def log_likelihood_reference(
         by = (-sin_t * dx + cos_t * dy) / dist
         cand = candidate_mask(x, y, theta, objs, semantic_map, config, visible_rows)
         kappa = obs.group_kappa[g]
-        with np.errstate(divide="ignore"):
-            log_keep = np.log(obs.group_keep[g])
-            log_floor = np.log(obs.group_floor[g])
+        log_keep = obs.group_log_keep[g]
+        log_floor = obs.group_log_floor[g]
         for k in np.flatnonzero(obs.det_group == g):
             cos_err = obs.det_cos[k] * bx + obs.det_sin[k] * by
             best = np.max(np.where(cand, cos_err, -np.inf), axis=1)  # eq. (3)

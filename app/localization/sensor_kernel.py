@@ -176,9 +176,6 @@ def log_likelihood(
     check_fov = config.visibility and config.fov_deg < 360.0
     max_range = config.max_range_m if config.visibility else None
     max_range_sq = np.inf if max_range is None else max_range**2
-    with np.errstate(divide="ignore"):
-        log_floor = np.log(obs.group_floor)
-        log_keep = np.log(obs.group_keep)
     _kernel(
         x,
         y,
@@ -197,8 +194,8 @@ def log_likelihood(
         obs.det_group,
         obs.group_kappa,
         obs.group_weight,
-        log_floor,
-        log_keep,
+        obs.group_log_floor,
+        obs.group_log_keep,
         obs.member_start,
         obs.members,
         out,
