@@ -107,15 +107,7 @@ def _cluster(
             if same:
                 break
             mx, my, mc, ms = _centre(w, x, y, cos_t, sin_t, members)
-        mass = sx = sy = mcos = msin = 0.0
-        for i in range(n):
-            if members[i]:
-                mass += w[i]
-                sx += w[i] * x[i]
-                sy += w[i] * y[i]
-                mcos += w[i] * cos_t[i]
-                msin += w[i] * sin_t[i]
-        mx, my, mcos, msin = sx / mass, sy / mass, mcos / mass, msin / mass
+        mass, mx, my, mcos, msin = _moments(w, x, y, cos_t, sin_t, members)
         vx = vy = 0.0
         for i in range(n):
             if members[i]:
@@ -136,8 +128,8 @@ def _cluster(
 
 
 @njit(cache=True, nogil=True, error_model="numpy", inline="always")
-def _centre(w, x, y, cos_t, sin_t, members):  # fmt: skip  # pragma: no cover - compiled
-    """Weighted mean position and mean heading direction (cos, sin) of the members."""
+def _moments(w, x, y, cos_t, sin_t, members):  # fmt: skip  # pragma: no cover - compiled
+    """Mass and weighted means of x, y, cos(theta), sin(theta) over the members."""
     mass = sx = sy = c = s = 0.0
     for i in range(x.shape[0]):
         if members[i]:
@@ -146,8 +138,15 @@ def _centre(w, x, y, cos_t, sin_t, members):  # fmt: skip  # pragma: no cover - 
             sy += w[i] * y[i]
             c += w[i] * cos_t[i]
             s += w[i] * sin_t[i]
+    return mass, sx / mass, sy / mass, c / mass, s / mass
+
+
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _centre(w, x, y, cos_t, sin_t, members):  # fmt: skip  # pragma: no cover - compiled
+    """Weighted mean position and mean heading direction (cos, sin) of the members."""
+    _, mx, my, c, s = _moments(w, x, y, cos_t, sin_t, members)
     norm = max(np.hypot(c, s), 1e-300)
-    return sx / mass, sy / mass, c / norm, s / norm
+    return mx, my, c / norm, s / norm
 
 
 def estimate_pose(
