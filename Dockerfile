@@ -24,6 +24,10 @@ COPY static ./static
 RUN pip install -e . && chown -R bearings:bearings /srv/bearings
 
 USER bearings
+# Compile the numba kernels into the image's cache, so a container on the same kind of
+# CPU starts without compiling (another CPU recompiles once, at start-up, never on a
+# request: the server warms up before it reports healthy).
+RUN python -c "from app.localization.filter import warm_up; warm_up()"
 EXPOSE 8000 8080
 
 HEALTHCHECK --interval=30s --timeout=5s --start-period=20s --retries=3 \

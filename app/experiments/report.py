@@ -147,7 +147,7 @@ def _adaptive_section(rows: list[dict[str, object]]) -> list[str]:
     lines = [
         "## Adaptive particle count (issue 8)",
         "",
-        "Our defaults with KLD-sampling (all particles while lost, at least 500 once "
+        "Our defaults with KLD-sampling (all particles while lost, at least 2,000 once "
         "converged) against the same filter with the count fixed, on the same walks and "
         "seeds. Mean position error (m), final-third mean in brackets, and the average "
         "number of particles per step.",

@@ -38,9 +38,11 @@ class FilterConfig:
     alpha_slow: float = 0.02
     alpha_fast: float = 0.3
     #: Adaptive particle count: all ``particles`` while lost, KLD-sampling (at least
-    #: ``min_particles``) once converged.
+    #: ``min_particles``) once converged. 2,000 rather than fewer: on the paper's walks
+    #: 500 cost 1.0 mm of mean error against a fixed 10,000, 2,000 cost none measurable
+    #: (benchmarks/README.md).
     adaptive: bool = True
-    min_particles: int = 500
+    min_particles: int = 2_000
 
     # --- Motion model (odometry, Probabilistic Robotics sample_motion_odometry) ---------
     #: Translation noise as a fraction of the distance moved.

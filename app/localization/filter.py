@@ -188,8 +188,9 @@ class ParticleFilter:
             # Lost: keep every particle. Localized: as few as KLD-sampling allows.
             n_target = self.config.particles
             if self.estimate.converged:
+                n_min = min(self.config.min_particles, self.config.particles)
                 n_target = kld_sample_size(
-                    self.x, self.y, self.theta, w, self.config.min_particles, self.config.particles
+                    self.x, self.y, self.theta, w, n_min, self.config.particles
                 )
         due = ess < self.config.resample_threshold * self.n or not np.isfinite(self.log_w).any()
         if not (due or inject_share > 0.0 or n_target != self.n):
@@ -208,13 +209,15 @@ class ParticleFilter:
         return True
 
     def step(self, odometry: Odometry | None, detections: Sequence[Detection]) -> Estimate:
-        """One full filter step: predict, correct, resample when due, estimate."""
+        """One full filter step: predict, correct, estimate, resample when due.
+
+        The estimate summarizes the weighted particles before resampling: resampling
+        only adds noise to what they say (and to what the injected particles say).
+        """
         self.predict(odometry)
         inject = self.correct(detections)
         w = self.weights
         ess = effective_sample_size(w)
-        if self._resample(w, ess, inject):  # equal weights now
-            w, ess = np.full(self.n, 1.0 / self.n), float(self.n)
         raw = estimate_pose(self.x, self.y, self.theta, w, ess=ess, rng=self.rng)
         self._update_fit(raw)
         moved = 1.0 if odometry is None else float(np.hypot(odometry.forward_m, odometry.left_m))
@@ -222,6 +225,7 @@ class ParticleFilter:
         self.estimate = self._gate.confirm(
             raw, moved, turned, self.fit, self.frames_without_evidence
         )
+        self._resample(w, ess, inject)
         self.steps += 1
         return self.estimate
 
@@ -272,3 +276,4 @@ def warm_up() -> None:
         pf.resample()
         obs = prepare_observation(door, tiny, cfg)
         normalized_residuals(1.0, 1.0, 0.0, obs, tiny, cfg)
+        estimate_pose(pf.x, pf.y, pf.theta, pf.weights, rng=pf.rng, max_points=10)

@@ -68,6 +68,30 @@ def test_kidnapped_person_is_found_again(paper_office: SemanticMap) -> None:
     assert all(err < 0.5 for _, e, err in after if e.converged)
 
 
+def test_particle_count_shrinks_once_localized_and_grows_when_lost(
+    paper_office: SemanticMap,
+) -> None:
+    """KLD-sampling: every particle while lost, few once converged, all again after a kidnap."""
+    sim = replace(
+        paper_config("nominal", 360),
+        duration_s=24.0,
+        kidnap_at_s=10.0,
+        kidnap_pose=(8.0, 5.0, 90.0),
+    )
+    cfg = FilterConfig(particles=6000, min_particles=600)
+    _, out = run(paper_office, sim, cfg, seed=2)
+    counts = {round(f.t, 1): e.n_particles for f, e, _ in out}
+    assert counts[0.0] == 6000
+    settled = [e.n_particles for f, e, _ in out if 6.0 <= f.t < 10.0]
+    assert all(600 <= n <= 2000 for n in settled), settled
+    assert max(e.n_particles for f, e, _ in out if 10.0 <= f.t < 14.0) == 6000
+    late = [e.n_particles for f, e, _ in out if f.t >= 20.0]
+    assert np.median(late) <= 2000
+    fixed = replace(cfg, adaptive=False)
+    _, out_fixed = run(paper_office, sim, fixed, seed=2)
+    assert {e.n_particles for _, e, _ in out_fixed} == {6000}
+
+
 def test_paper_model_has_no_recovery(paper_office: SemanticMap) -> None:
     sim = replace(
         paper_config("nominal", 360),
