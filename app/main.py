@@ -67,6 +67,7 @@ def create_app(settings: Settings | None = None, *, demo: bool = False) -> FastA
                     await task
             if view is not None:
                 view.stop()
+            manager.close()
 
     app = FastAPI(
         title="Bearings",

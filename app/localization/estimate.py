@@ -22,6 +22,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
+from app.localization.fastmath import FAST, sincos
 from app.localization.geometry import wrap_angle
 from app.localization.resampling import systematic_resample
 from app.localization.types import Estimate, Hypothesis
@@ -54,8 +55,7 @@ def _cluster(
     circular std) of one hypothesis, in the order found.
     """
     n = x.shape[0]
-    cos_t = np.cos(theta)
-    sin_t = np.sin(theta)
+    cos_t, sin_t = _unit_vectors(theta)
     bin_width = 2.0 * np.pi / heading_bins
     x0 = x.min()
     y0 = y.min()
@@ -123,8 +123,7 @@ def _refine(x, y, theta, w, rows, found, radius_m, heading_window_rad):  # pragm
     becomes their weighted summary (no resampling noise left in the reported pose).
     """
     n = x.shape[0]
-    cos_t = np.cos(theta)
-    sin_t = np.sin(theta)
+    cos_t, sin_t = _unit_vectors(theta)
     remaining = w > 0.0
     members = np.zeros(n, dtype=np.bool_)
     cos_window = np.cos(heading_window_rad)
@@ -147,6 +146,16 @@ def _refine(x, y, theta, w, rows, found, radius_m, heading_window_rad):  # pragm
         _summary(w, x, y, cos_t, sin_t, members, rows[h])
         for i in range(n):
             remaining[i] = remaining[i] and not members[i]
+
+
+@njit(cache=True, nogil=True, error_model="numpy", fastmath=FAST, inline="always")
+def _unit_vectors(theta):  # fmt: skip  # pragma: no cover - compiled
+    """(cos theta, sin theta) arrays, vectorized (see :func:`fastmath.sincos`)."""
+    cos_t = np.empty_like(theta)
+    sin_t = np.empty_like(theta)
+    for i in range(theta.shape[0]):
+        sin_t[i], cos_t[i] = sincos(theta[i])
+    return cos_t, sin_t
 
 
 @njit(cache=True, nogil=True, error_model="numpy", inline="always")
