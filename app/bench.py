@@ -2,7 +2,7 @@
 
 The map is a walled floor (a grid of rooms with door gaps) with ``--objects``
 objects over three classes; each step predicts with a small odometry step, corrects
-with ``--detections`` detections (visibility on), resamples when due and estimates.
+with ``--detections`` detections (visibility on), estimates and resamples when due.
 Compilation and the visibility grid are built before timing starts.
 """
 

@@ -1,11 +1,11 @@
 """The particle filter: Monte Carlo localization on a semantic map (paper, eq. 1).
 
 Each step predicts with odometry (:mod:`~app.localization.motion`), corrects with the
-bearing-only semantic sensor model (:mod:`~app.localization.sensor`), resamples when
-the effective sample size drops (:mod:`~app.localization.resampling`), optionally
-injects particles drawn from the observation (:mod:`~app.localization.recovery`), and
-summarizes the belief (:mod:`~app.localization.estimate`). Particles are a structure
-of arrays (x, y, theta, log-weight); nothing loops over particles in Python.
+bearing-only semantic sensor model (:mod:`~app.localization.sensor`), summarizes the
+weighted belief (:mod:`~app.localization.estimate`), then resamples when the effective
+sample size drops (:mod:`~app.localization.resampling`), optionally injecting particles
+drawn from the observation (:mod:`~app.localization.recovery`). Particles are a
+structure of arrays (x, y, theta, log-weight); nothing loops over particles in Python.
 """
 
 from __future__ import annotations

@@ -7,6 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from app.bench import generated_map
 from app.localization.config import FilterConfig
 from app.localization.geometry import wrap_angle
 from app.localization.map import SemanticMap, parse_map
@@ -21,6 +22,9 @@ from app.localization.types import Detection, Pose
 from app.localization.visibility import visibility_grid
 from app.simulation.camera import CameraModel, visible_objects
 from tests.localization.conftest import room
+
+#: Detections that match nothing in particular (false or far-off ones), one per class.
+CLASS_BEARINGS = [("door", 0.5), ("window", -2.5), ("table", 3.0)]
 
 
 def observe(
@@ -189,9 +193,33 @@ def test_compiled_kernel_matches_the_numpy_reference(paper_office: SemanticMap, 
     ref = loglik(paper_office, cfg, pts[:, 0], pts[:, 1], th, dets, kernel=False)
     finite = np.isfinite(ref)
     assert np.array_equal(finite, np.isfinite(fast))
-    # The kernel works in float32 and reads softplus from a table: its log-likelihoods
-    # match the float64 reference within 1e-3 (weights within 0.1 %).
+    # The kernel works in float32 (with polynomial sine, cosine and softplus): its
+    # log-likelihoods match the float64 reference within 1e-3 (weights within 0.1 %).
     assert np.abs(fast[finite] - ref[finite]).max() < 1e-3
+
+
+@pytest.mark.parametrize(
+    "cfg",
+    [FilterConfig(), FilterConfig(fov_deg=200.0, max_range_m=6.0), FilterConfig.paper()],
+    ids=["bearings", "fov-range", "paper"],
+)
+def test_compiled_kernel_matches_the_reference_on_a_map_of_many_objects(cfg) -> None:
+    """150 objects: visibility bits span three 64-bit words; particles span many blocks."""
+    m = generated_map(150, seed=3)
+    rng = np.random.default_rng(6)
+    pts = m.free_space.sample(1000, rng)
+    th = rng.uniform(-np.pi, np.pi, 1000)
+    dets = observe(m, 7.3, 4.1, -2.0) + [Detection(c, b, 0.7) for c, b in CLASS_BEARINGS]
+    fast = loglik(m, cfg, pts[:, 0], pts[:, 1], th, dets)
+    ref = loglik(m, cfg, pts[:, 0], pts[:, 1], th, dets, kernel=False)
+    finite = np.isfinite(ref)
+    assert np.array_equal(finite, np.isfinite(fast))
+    # Within 1e-3 where weights matter; float32 cosines leave a relative error of about
+    # 1e-6 on hopeless particles (log-likelihood -900: weight e^-900 either way).
+    err = np.abs(fast[finite] - ref[finite])
+    assert (err <= 1e-3 + 1e-5 * np.abs(ref[finite])).all()
+    assert err[ref[finite] > ref[finite].max() - 20.0].max() < 1e-3
+    assert np.ptp(ref[finite]) > 1.0  # the particles really differ
 
 
 @pytest.mark.parametrize(
