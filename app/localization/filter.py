@@ -252,7 +252,8 @@ def warm_up() -> None:
 
     Runs each compiled path once on a tiny map, so no request waits for a compiler:
     both sensor configurations, motion with and without odometry (and a move long
-    enough for the wall test), resampling, clustering and the residual check.
+    enough for the wall test), resampling, clustering, KLD-sampling and the residual
+    check.
     """
     from app.localization.map import parse_map
 
@@ -277,3 +278,4 @@ def warm_up() -> None:
         obs = prepare_observation(door, tiny, cfg)
         normalized_residuals(1.0, 1.0, 0.0, obs, tiny, cfg)
         estimate_pose(pf.x, pf.y, pf.theta, pf.weights, rng=pf.rng, max_points=10)
+        kld_sample_size(pf.x, pf.y, pf.theta, pf.weights, 10, 50)

@@ -14,6 +14,7 @@ Here k counts the (x, y, heading) bins whose weight is at least one particle's s
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 from numpy.typing import NDArray
 
 #: Bin sizes: metres, metres, radians.
@@ -31,6 +32,48 @@ def kld_bound(k: int, epsilon: float = EPSILON, z: float = Z_QUANTILE) -> int:
     return int(np.ceil((k - 1) / (2.0 * epsilon) * (1.0 - a + np.sqrt(a) * z) ** 3))
 
 
+#: Largest dense (x, y, heading) histogram, in bins; beyond it the bins are sorted.
+MAX_DENSE_BINS = 1 << 21
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _occupied_bins(x, y, theta, w, bin_xy, bin_theta, min_mass):  # fmt: skip  # pragma: no cover
+    """How many (x, y, heading) bins hold at least ``min_mass`` (> 0) of the weight."""
+    n = x.shape[0]
+    if n == 0:
+        return 0
+    n_theta = int(2.0 * np.pi / bin_theta) + 1
+    bx = np.empty(n, dtype=np.int64)
+    by = np.empty(n, dtype=np.int64)
+    for i in range(n):
+        bx[i] = int(np.floor(x[i] / bin_xy))
+        by[i] = int(np.floor(y[i] / bin_xy))
+    x0, y0 = bx.min(), by.min()
+    width = bx.max() - x0 + 1
+    height = by.max() - y0 + 1
+    key = np.empty(n, dtype=np.int64)
+    for i in range(n):
+        bt = int(np.floor((theta[i] + np.pi) / bin_theta))
+        key[i] = ((by[i] - y0) * width + (bx[i] - x0)) * n_theta + bt
+    count = 0
+    if width * height * n_theta <= MAX_DENSE_BINS:
+        mass = np.zeros(width * height * n_theta)
+        for i in range(n):
+            mass[key[i]] += w[i]
+        for b in range(mass.shape[0]):
+            count += mass[b] >= min_mass
+        return count
+    order = np.argsort(key)  # a huge, sparse cloud: sort the keys instead
+    run = 0.0
+    for j in range(n):
+        i = order[j]
+        run += w[i]
+        if j == n - 1 or key[order[j + 1]] != key[i]:
+            count += run >= min_mass
+            run = 0.0
+    return count
+
+
 def kld_sample_size(
     x: NDArray[np.float64],
     y: NDArray[np.float64],
@@ -45,13 +88,13 @@ def kld_sample_size(
         x, y, theta: particle poses, shape (N,).
         weights: normalized weights, shape (N,).
     """
-    bx = np.floor(x / BIN_XY_M).astype(np.int64)
-    by = np.floor(y / BIN_XY_M).astype(np.int64)
-    bt = np.floor((theta + np.pi) / BIN_THETA_RAD).astype(np.int64)
-    bx -= bx.min()
-    by -= by.min()
-    key = (by * (bx.max() + 1) + bx) * (int(2 * np.pi / BIN_THETA_RAD) + 1) + bt
-    _, inverse = np.unique(key, return_inverse=True)
-    mass = np.bincount(inverse, weights=weights)
-    k = int(np.count_nonzero(mass >= 1.0 / n_max))
-    return int(np.clip(kld_bound(k), n_min, n_max))
+    k = _occupied_bins(
+        np.ascontiguousarray(x, dtype=np.float64),
+        np.ascontiguousarray(y, dtype=np.float64),
+        np.ascontiguousarray(theta, dtype=np.float64),
+        np.ascontiguousarray(weights, dtype=np.float64),
+        BIN_XY_M,
+        float(BIN_THETA_RAD),
+        1.0 / n_max,
+    )
+    return int(np.clip(kld_bound(int(k)), n_min, n_max))
