@@ -225,15 +225,17 @@ class Narrator:
         bearing = wrap_angle(np.arctan2(rel[:, 1], rel[:, 0]) - estimate.theta_rad)
         in_view = visible & (np.abs(bearing) <= math.radians(fov_deg) / 2 + 1e-9)
         matched: list[int] = []
-        for d in dets:
-            members = self.map.class_members[d.cls]
-            cand = members[in_view[members]]
-            if cand.size == 0:
-                continue
-            err = np.abs(wrap_angle(bearing[cand] - d.bearing_rad))
-            best = int(cand[np.argmin(err)])
-            if best not in matched:
-                matched.append(best)
+        if dets:
+            # Each detection's best visible object of its class, all detections at once.
+            det_bearing = np.array([d.bearing_rad for d in dets])
+            det_class = np.array([self.map.classes.index(d.cls) for d in dets])
+            err = np.abs(wrap_angle(bearing[None, :] - det_bearing[:, None]))
+            allowed = in_view[None, :] & (self.map.object_class[None, :] == det_class[:, None])
+            err = np.where(allowed, err, np.inf)
+            for k in np.flatnonzero(allowed.any(axis=1)):
+                best = int(np.argmin(err[k]))
+                if best not in matched:
+                    matched.append(best)
         matched.sort(key=lambda i: dist[i])  # nearest first: a stable, useful order
         others = [int(i) for i in np.argsort(dist) if visible[i] and int(i) not in matched]
         return matched + others
