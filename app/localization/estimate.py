@@ -89,20 +89,10 @@ def _cluster(
             members[i] = remaining[i] and flat[i] == top
         mx, my, mc, ms = _centre(w, x, y, cos_t, sin_t, members)
         for _ in range(3):  # re-centre on the particles near the centre
-            any_near = False
-            same = True
-            for i in range(n):
-                dx = x[i] - mx
-                dy = y[i] - my
-                near[i] = (
-                    remaining[i]
-                    and dx * dx + dy * dy <= r2
-                    and cos_t[i] * mc + sin_t[i] * ms >= cos_window
-                )
-                any_near = any_near or near[i]
-                same = same and near[i] == members[i]
-            if not any_near:
+            _near(x, y, cos_t, sin_t, remaining, mx, my, mc, ms, r2, cos_window, near)
+            if not near.any():
                 break
+            same = (near == members).all()
             members[:] = near
             if same:
                 break
@@ -131,21 +121,24 @@ def _refine(x, y, theta, w, rows, found, radius_m, heading_window_rad):  # pragm
     for h in range(found):
         mx, my, mt = rows[h, 1], rows[h, 2], rows[h, 3]
         mc, ms = np.cos(mt), np.sin(mt)
-        mass = 0.0
-        for i in range(n):
-            dx = x[i] - mx
-            dy = y[i] - my
-            members[i] = (
-                remaining[i]
-                and dx * dx + dy * dy <= r2
-                and cos_t[i] * mc + sin_t[i] * ms >= cos_window
-            )
-            mass += w[i] if members[i] else 0.0
-        if mass <= 0.0:
+        _near(x, y, cos_t, sin_t, remaining, mx, my, mc, ms, r2, cos_window, members)
+        if w[members].sum() <= 0.0:
             continue  # keep the subsample's summary
         _summary(w, x, y, cos_t, sin_t, members, rows[h])
         for i in range(n):
             remaining[i] = remaining[i] and not members[i]
+
+
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _near(x, y, cos_t, sin_t, remaining, mx, my, mc, ms, r2, cos_window, out):  # pragma: no cover
+    """out = particles still remaining within sqrt(r2) of (mx, my) and the heading window
+    (cosine at least ``cos_window``) around the direction (mc, ms)."""
+    for i in range(x.shape[0]):
+        dx = x[i] - mx
+        dy = y[i] - my
+        out[i] = (
+            remaining[i] and dx * dx + dy * dy <= r2 and cos_t[i] * mc + sin_t[i] * ms >= cos_window
+        )
 
 
 @njit(cache=True, nogil=True, error_model="numpy", fastmath=FAST, inline="always")

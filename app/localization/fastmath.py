@@ -49,6 +49,21 @@ def sincos(t: float) -> tuple[float, float]:  # pragma: no cover - compiled
     return sin_t, cos_t
 
 
+@njit(cache=True, inline="always", error_model="numpy")
+def grid_cell(x, y, origin_x, origin_y, inv_res, rows, cols):  # fmt: skip  # pragma: no cover
+    """(row-major flat index of the cell holding (x, y), clipped onto the grid; inside?).
+
+    The compiled form of :meth:`VisibilityGrid.cells` / :meth:`FreeSpaceGrid.cell_index`
+    for one point, branch-free so that the loops calling it vectorize.
+    """
+    fc = np.floor((x - origin_x) * inv_res)
+    fr = np.floor((y - origin_y) * inv_res)
+    inside = (fc >= 0.0) & (fc < cols) & (fr >= 0.0) & (fr < rows)
+    c = min(max(fc, 0.0), cols - 1.0)
+    r = min(max(fr, 0.0), rows - 1.0)
+    return int(r * cols + c), inside
+
+
 #: Intervals of the tabulated inverse normal CDF (a power of two).
 NORMAL_KNOTS = 4096
 #: Where the tabulated normal ends, in standard deviations.

@@ -16,7 +16,7 @@ from numba import njit
 from numpy.typing import NDArray
 
 from app.localization.config import FilterConfig
-from app.localization.fastmath import FAST, fill_normal, sincos
+from app.localization.fastmath import FAST, fill_normal, grid_cell, sincos
 from app.localization.geometry import GEOMETRY_EPS
 from app.localization.map import WALL_CLEARANCE_M, SemanticMap
 from app.localization.types import Odometry
@@ -28,7 +28,7 @@ NO_ODOMETRY_STD_RAD = np.radians(10.0)
 LONG_MOVE_M = 2 * WALL_CLEARANCE_M
 
 
-@njit(cache=True, nogil=True, fastmath=FAST)
+@njit(cache=True, nogil=True, fastmath=FAST, error_model="numpy")
 def _move(x, y, theta, fwd, left, turn, std_t, std_r, noise, new_x, new_y, new_theta):  # fmt: skip
     """Apply the body-frame motion plus scaled standard-normal noise (3N,) to new arrays."""
     two_pi = 2.0 * np.pi
@@ -113,12 +113,8 @@ def _free_check(x0, y0, x1, y1, mask, ox, oy, res, long_sq, walls, eps, penalty)
     flat = mask.reshape(-1)
     inv = 1.0 / res
     for i in range(x1.shape[0]):
-        fc = np.floor((x1[i] - ox) * inv)
-        fr = np.floor((y1[i] - oy) * inv)
-        inside = (fc >= 0.0) & (fc < cols) & (fr >= 0.0) & (fr < rows)
-        c = int(min(max(fc, 0.0), cols - 1.0))
-        r = int(min(max(fr, 0.0), rows - 1.0))
-        free = inside and flat[r * cols + c]
+        cell, inside = grid_cell(x1[i], y1[i], ox, oy, inv, rows, cols)
+        free = inside and flat[cell]
         dx = x1[i] - x0[i]
         dy = y1[i] - y0[i]
         if free and dx * dx + dy * dy > long_sq:

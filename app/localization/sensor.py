@@ -218,7 +218,7 @@ def log_likelihood_reference(
 @njit(cache=True, nogil=True, error_model="numpy")
 def _residuals(
     x, y, theta, visible, check_fov, cos_half_fov, max_range_sq,
-    obj_x, obj_y, det_bearing, det_group, group_kappa, member_start, members, out,
+    obj_xy, det_bearing, det_group, group_kappa, member_start, members, out,
 ):  # fmt: skip  # pragma: no cover - compiled
     c = np.cos(theta)
     s = np.sin(theta)
@@ -228,8 +228,8 @@ def _residuals(
         best = np.inf
         for j in range(member_start[g], member_start[g + 1]):
             o = members[j]
-            dx = obj_x[o] - x
-            dy = obj_y[o] - y
+            dx = obj_xy[o, 0] - x
+            dy = obj_xy[o, 1] - y
             d2 = dx * dx + dy * dy
             if not visible[o] or d2 > max_range_sq:
                 continue
@@ -272,7 +272,7 @@ def normalized_residuals(
         float(x), float(y), float(theta), visible, check_fov,
         float(np.cos(np.radians(config.fov_deg) / 2.0)),
         np.inf if max_range is None else float(max_range) ** 2,
-        semantic_map.object_xy[:, 0].copy(), semantic_map.object_xy[:, 1].copy(),
+        semantic_map.object_xy.reshape(-1, 2),
         obs.det_bearing, obs.det_group, obs.group_kappa, obs.member_start, obs.members, out,
     )  # fmt: skip
     return out

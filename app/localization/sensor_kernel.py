@@ -21,7 +21,7 @@ from numba import njit
 from numpy.typing import NDArray
 
 from app.localization.config import FilterConfig
-from app.localization.fastmath import FAST, sincos, softplus
+from app.localization.fastmath import FAST, grid_cell, sincos, softplus
 from app.localization.map import SemanticMap
 from app.localization.sensor import Observation
 from app.localization.visibility import VisibilityGrid
@@ -38,7 +38,7 @@ HIDDEN = -4.0
 @njit(cache=True, fastmath=FAST, nogil=True, error_model="numpy")
 def _kernel(
     x, y, theta, use_vis, grid, vis_bits, cos_half_fov, check_fov, max_range_sq,
-    obj_x, obj_y, det_cos, det_sin, det_score, det_group,
+    obj_xy, det_cos, det_sin, det_score, det_group,
     group_kappa, group_weight, group_log_floor, group_log_keep, member_start, members, out,
 ):  # fmt: skip  # pragma: no cover - compiled
     f32 = np.float32
@@ -75,9 +75,7 @@ def _kernel(
             st[i] = f32(s)
         if use_vis:
             for i in range(m):  # the particle's grid cell, clipped onto the grid
-                fc = min(max(np.floor((bx[i] - gx) * g_inv), 0.0), g_cols - 1.0)
-                fr = min(max(np.floor((by[i] - gy) * g_inv), 0.0), g_rows - 1.0)
-                cell[i] = int(fr * g_cols + fc)
+                cell[i] = grid_cell(bx[i], by[i], gx, gy, g_inv, g_rows, g_cols)[0]
             for w in range(n_words):
                 b_bits = bits[w]
                 for i in range(m):
@@ -89,8 +87,8 @@ def _kernel(
         for g in range(group_kappa.shape[0]):
             for j in range(member_start[g], member_start[g + 1]):
                 o = members[j]
-                ox = f32(obj_x[o])
-                oy = f32(obj_y[o])
+                ox = f32(obj_xy[o, 0])
+                oy = f32(obj_xy[o, 1])
                 for i in range(m):
                     dx = ox - xs[i]
                     dy = oy - ys[i]
@@ -187,8 +185,7 @@ def log_likelihood(
         float(np.cos(np.radians(config.fov_deg) / 2.0)),
         check_fov,
         float(max_range_sq),
-        semantic_map.object_xy[:, 0].copy(),
-        semantic_map.object_xy[:, 1].copy(),
+        semantic_map.object_xy.reshape(-1, 2),
         obs.det_cos,
         obs.det_sin,
         obs.det_score,
