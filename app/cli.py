@@ -45,6 +45,12 @@ def _add_server_flags(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--max-particles", type=int, help="most particles per session (BEARINGS_MAX_PARTICLES)"
     )
+    p.add_argument(
+        "--store",
+        metavar="memory|redis://HOST:PORT/DB",
+        help="where sessions live (BEARINGS_STORE, default memory): a Redis URL shares them "
+        "between workers, checkpointed, so any worker resumes them",
+    )
 
 
 def settings_from_args(args: argparse.Namespace) -> Settings:

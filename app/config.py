@@ -4,8 +4,9 @@ from __future__ import annotations
 
 from functools import lru_cache
 from pathlib import Path
+from urllib.parse import urlsplit
 
-from pydantic import Field
+from pydantic import Field, field_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
 
@@ -30,9 +31,29 @@ class Settings(BaseSettings):
     default_particles: int = Field(10_000, ge=100, description="particles when not asked")
     max_particles: int = Field(100_000, ge=100, description="most particles per session")
     max_detections: int = Field(200, ge=1, description="most detections in one frame")
+    store: str = Field(
+        "memory",
+        description="where sessions live: 'memory' (this process only) or "
+        "redis://HOST:PORT/DB (shared by every worker given the same URL)",
+    )
+    store_lease_s: float = Field(
+        1.5, gt=0, description="a worker's hold on a session in a shared store (seconds)"
+    )
+    checkpoint_interval_s: float = Field(
+        1.0, gt=0, description="seconds between checkpoints of a changed session (shared store)"
+    )
     max_message_bytes: int = Field(
         65_536, ge=1024, description="largest accepted request body or WebSocket message"
     )
+
+    @field_validator("store")
+    @classmethod
+    def _store_url(cls, value: str) -> str:
+        if value != "memory" and urlsplit(value).scheme not in ("redis", "rediss", "unix"):
+            raise ValueError(
+                "store must be 'memory' or a Redis URL such as redis://localhost:6379/0"
+            )
+        return value
 
 
 @lru_cache

@@ -19,6 +19,7 @@ from app.config import Settings, get_settings
 from app.localization.map import SemanticMap, bundled_maps_dir, load_map_dir
 from app.service.metrics import Metrics
 from app.service.sessions import SessionManager
+from app.service.store import open_store
 
 log = logging.getLogger("bearings")
 
@@ -43,9 +44,12 @@ def create_app(settings: Settings | None = None, *, demo: bool = False) -> FastA
         from app.localization.filter import warm_up
 
         await asyncio.to_thread(warm_up)
-        manager = SessionManager(load_maps(settings), settings, metrics_)
+        store = await asyncio.to_thread(open_store, settings.store)
+        manager = SessionManager(load_maps(settings), settings, metrics_, store)
         app.state.manager = manager
         tasks = [asyncio.create_task(manager.run_sweeper())]
+        if manager.sharing is not None:
+            tasks.append(asyncio.create_task(manager.sharing.run_keeper()))
         view = None
         if settings.viser:
             from app.viz import LiveView
@@ -67,6 +71,8 @@ def create_app(settings: Settings | None = None, *, demo: bool = False) -> FastA
                     await task
             if view is not None:
                 view.stop()
+            if manager.sharing is not None:  # checkpoint everything, release the leases
+                await manager.sharing.shutdown()
             manager.close()
 
     app = FastAPI(

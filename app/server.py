@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import logging
+import sys
 
 import uvicorn
 
@@ -15,6 +16,15 @@ def run(settings: Settings, *, demo: bool = False) -> int:
     logging.basicConfig(
         level=settings.log_level.upper(), format="%(levelname)s %(name)s %(message)s"
     )
+    if settings.store != "memory":
+        from app.service.store import StoreUnavailable, open_store, redacted
+
+        try:  # say at once when the store cannot be reached, before serving anything
+            open_store(settings.store).close()
+        except StoreUnavailable as exc:
+            print(f"bearings: {exc}", file=sys.stderr)
+            return 2
+        print(f"Sessions are shared through {redacted(settings.store)}")
     app = create_app(settings, demo=demo)
     shown = "localhost" if settings.host in ("0.0.0.0", "::") else settings.host
     print(f"Bearings API and demo page: http://{shown}:{settings.port}/  (docs: /docs)")

@@ -14,12 +14,17 @@ from app.service.sessions import (
     LimitReached,
     RequestTooLarge,
     SessionNotFound,
+    SessionUnavailable,
     UnknownMap,
 )
 
 #: The HTTP status of each service limit: the service says what was hit, the API
 #: decides how HTTP says it.
-LIMIT_STATUS: dict[type[LimitReached], int] = {CapacityReached: 429, RequestTooLarge: 422}
+LIMIT_STATUS: dict[type[LimitReached], int] = {
+    CapacityReached: 429,
+    RequestTooLarge: 422,
+    SessionUnavailable: 503,
+}
 
 
 def limit_status(exc: LimitReached) -> int:

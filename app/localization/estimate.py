@@ -16,7 +16,9 @@ heading). ``converged`` is true only when that cluster holds at least
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 from numba import njit
@@ -26,6 +28,7 @@ from app.localization.fastmath import FAST, sincos
 from app.localization.geometry import wrap_angle
 from app.localization.resampling import systematic_resample
 from app.localization.types import Estimate, Hypothesis
+from app.state import from_plain, to_plain
 
 
 @dataclass(frozen=True)
@@ -293,6 +296,14 @@ class ConvergenceGate:
     def reset(self) -> None:
         self._streak = 0
         self._last = None
+
+    def checkpoint(self) -> dict[str, Any]:
+        """The streak and the last raw estimate, as plain data."""
+        return {"streak": self._streak, "last": to_plain(self._last)}
+
+    def restore(self, state: Mapping[str, Any]) -> None:
+        self._streak = int(state["streak"])
+        self._last = from_plain(Estimate, state["last"])
 
     def confirm(
         self,

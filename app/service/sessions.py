@@ -16,7 +16,7 @@ import secrets
 import threading
 import time
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from datetime import UTC, datetime
 
 import numpy as np
@@ -28,6 +28,8 @@ from app.localization.filter import ParticleFilter
 from app.localization.map import SemanticMap
 from app.localization.types import Detection, Estimate, Pose
 from app.service.metrics import Metrics
+from app.service.sharing import SessionSharing
+from app.service.store import MemoryStore, SessionStore
 from app.service.types import FrameInput, FrameOutcome, SessionSpec
 
 log = logging.getLogger("bearings.sessions")
@@ -58,6 +60,11 @@ class CapacityReached(LimitReached):
 
 class RequestTooLarge(LimitReached):
     """One request asks for more than the service ever allows (particles, detections)."""
+
+
+class SessionUnavailable(LimitReached):
+    """The session exists but cannot be served here right now (another worker still
+    holds it, or this worker is stopping); retrying soon, or reconnecting, serves it."""
 
 
 class InvalidSessionSpec(ValueError):
@@ -112,6 +119,8 @@ class Session:
     narrator: Narrator
     particles: int
     created_at: datetime
+    #: What the session was built from (a checkpoint rebuilds it from this).
+    spec: SessionSpec | None = None
     last_active: float = field(default_factory=time.monotonic)
     frames: int = 0
     last_outcome: FrameOutcome | None = None
@@ -182,11 +191,30 @@ class Session:
 class SessionManager:
     """Creates, finds, feeds and expires sessions, within the service's limits."""
 
-    def __init__(self, maps: dict[str, SemanticMap], settings: Settings, metrics: Metrics) -> None:
+    def __init__(
+        self,
+        maps: dict[str, SemanticMap],
+        settings: Settings,
+        metrics: Metrics,
+        store: SessionStore | None = None,
+    ) -> None:
         self.maps = maps
         self.settings = settings
         self.metrics = metrics
         self._sessions: dict[str, Session] = {}
+        self.store = store or MemoryStore()
+        #: With a shared store (Redis): checkpoints, journal and leases; else None.
+        self.sharing = (
+            SessionSharing(
+                self,
+                self.store,
+                lease_s=settings.store_lease_s,
+                checkpoint_interval_s=settings.checkpoint_interval_s,
+                idle_timeout_s=settings.session_idle_timeout_s,
+            )
+            if self.store.shared
+            else None
+        )
         # Filter steps are CPU-bound and release the GIL inside their kernels: one
         # thread per core runs them, so they never crowd out the event loop's thread
         # (a larger default pool measured higher latency under load, same throughput).
@@ -195,18 +223,47 @@ class SessionManager:
     def close(self) -> None:
         """Stop the step threads (at shutdown); frames still queued are dropped."""
         self._steps.shutdown(wait=False, cancel_futures=True)
+        if self.sharing is not None:
+            self.sharing.close()
 
     def sessions(self) -> list[Session]:
         """Live sessions, oldest first."""
         return list(self._sessions.values())
 
     def get(self, session_id: str) -> Session:
+        """A session in this process's memory."""
         try:
             return self._sessions[session_id]
         except KeyError:
             raise SessionNotFound(session_id) from None
 
-    def _build(self, request: SessionSpec) -> Session:
+    async def find(self, session_id: str) -> Session:
+        """A session in memory or, with a shared store, resumed from it."""
+        session = self._sessions.get(session_id)
+        if session is not None:
+            return session
+        if self.sharing is None:
+            raise SessionNotFound(session_id)
+        return await self.sharing.resume(session_id)
+
+    def adopt(self, session: Session) -> None:
+        """Serve a session resumed from the store."""
+        self._sessions[session.id] = session
+        self.metrics.active_sessions.set(len(self._sessions))
+
+    def forget(self, session: Session) -> None:
+        """Stop serving a session here (it lives on in the store)."""
+        if self._sessions.get(session.id) is session:
+            del self._sessions[session.id]
+            self.metrics.active_sessions.set(len(self._sessions))
+
+    def _build(
+        self,
+        request: SessionSpec,
+        *,
+        session_id: str | None = None,
+        created_at: datetime | None = None,
+    ) -> Session:
         if request.map_name not in self.maps:
             raise UnknownMap(request.map_name, sorted(self.maps))
         semantic_map = self.maps[request.map_name]
@@ -237,12 +294,13 @@ class SessionManager:
         )
         narrator = Narrator(semantic_map, request.feedback)
         return Session(
-            id=secrets.token_urlsafe(24),  # 192 random bits
+            id=session_id or secrets.token_urlsafe(24),  # 192 random bits
             map=semantic_map,
             filter=pf,
             narrator=narrator,
             particles=particles,
-            created_at=datetime.now(UTC),
+            created_at=created_at or datetime.now(UTC),
+            spec=replace(request, seed=seed),  # rebuilds this very filter
         )
 
     async def create(self, request: SessionSpec) -> Session:
@@ -259,8 +317,11 @@ class SessionManager:
                 f"the service already runs its maximum of {self.settings.max_sessions} sessions",
                 code="too_many_sessions",
             )
-        self._sessions[session.id] = session
-        self.metrics.active_sessions.set(len(self._sessions))
+        if self.sharing is not None:
+            await self.sharing.publish(session)  # any worker may get its frames
+        else:
+            self._sessions[session.id] = session
+            self.metrics.active_sessions.set(len(self._sessions))
         self.metrics.sessions_created.inc()
         log_event(
             "session_created",
@@ -273,30 +334,53 @@ class SessionManager:
 
     async def process(self, session_id: str, frame: FrameInput) -> FrameOutcome:
         """Run one frame, strictly after the session's previous ones."""
-        session = self.get(session_id)
         if len(frame.detections) > self.settings.max_detections:
             raise RequestTooLarge(
                 f"detections: {len(frame.detections)} detections in one frame; the limit is "
                 f"{self.settings.max_detections}",
                 code="too_many_detections",
             )
-        async with session.order:
-            if session_id not in self._sessions:
-                raise SessionNotFound(session_id)
-            started = time.perf_counter()
-            loop = asyncio.get_running_loop()
-            result = await loop.run_in_executor(self._steps, session.process_sync, frame)
-            self.metrics.step_seconds.observe(time.perf_counter() - started)
-            self.metrics.frames.inc()
+        for _ in range(3):  # the session may move out of memory while this frame waits
+            session = await self.find(session_id)
             session.last_active = time.monotonic()
-            return result
+            async with session.order:
+                if self._sessions.get(session_id) is not session:
+                    continue
+                return await self._step(session, frame)
+        raise SessionUnavailable(
+            "the session moved while this frame waited; send it again", code="session_moved"
+        )
+
+    def _step_sync(self, session: Session, frame: FrameInput) -> tuple[FrameOutcome, bytes | None]:
+        result = session.process_sync(frame)
+        entry = None if self.sharing is None else self.sharing.entry(result.seq, frame)
+        return result, entry
+
+    async def _step(self, session: Session, frame: FrameInput) -> FrameOutcome:
+        started = time.perf_counter()
+        loop = asyncio.get_running_loop()
+        result, entry = await loop.run_in_executor(self._steps, self._step_sync, session, frame)
+        # With a shared store the answer leaves only once the frame is in the journal.
+        sharing = self.sharing
+        if entry is not None and sharing is not None and not await sharing.journal(session, entry):
+            self.forget(session)
+            raise SessionUnavailable(
+                "another worker took this session over; reconnect to go on",
+                code="session_moved",
+            )
+        self.metrics.step_seconds.observe(time.perf_counter() - started)
+        self.metrics.frames.inc()
+        session.last_active = time.monotonic()
+        return result
 
     async def delete(self, session_id: str, *, reason: str = "deleted") -> None:
         session = self._sessions.pop(session_id, None)
-        if session is None:
+        stored = self.sharing is not None and await self.sharing.delete(session_id)
+        if session is None and not stored:
             raise SessionNotFound(session_id)
         self.metrics.active_sessions.set(len(self._sessions))
-        log_event(f"session_{reason}", session=session_id[:8], frames=session.frames)
+        frames = session.frames if session is not None else None
+        log_event(f"session_{reason}", session=session_id[:8], frames=frames)
 
     async def expire_idle(self) -> int:
         """Remove sessions idle longer than the timeout; return how many."""

@@ -25,7 +25,7 @@ async def create_session(body: SessionCreate, manager: ManagerDep) -> SessionOut
 @router.get("/{session_id}", response_model=SessionOut)
 async def get_session(session_id: str, manager: ManagerDep) -> SessionOut:
     """The session with its latest result (or null)."""
-    return session_out(manager.get(session_id))
+    return session_out(await manager.find(session_id))
 
 
 @router.post("/{session_id}/frames", response_model=FrameResult)
@@ -51,9 +51,12 @@ async def stream(ws: WebSocket, session_id: str) -> None:
     limit = ws.app.state.settings.max_message_bytes
     await ws.accept()
     try:
-        manager.get(session_id)
+        await manager.find(session_id)  # with a shared store: resumed here if need be
     except SessionNotFound as exc:
         await ws.close(code=status.WS_1008_POLICY_VIOLATION, reason=exc.message[:120])
+        return
+    except LimitReached as exc:  # held elsewhere for now, or this worker is stopping
+        await ws.close(code=status.WS_1013_TRY_AGAIN_LATER, reason=str(exc)[:120])
         return
     try:
         while True:
