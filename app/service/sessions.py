@@ -251,6 +251,12 @@ class SessionManager:
         self._sessions[session.id] = session
         self.metrics.active_sessions.set(len(self._sessions))
 
+    async def let_go(self, session_id: str) -> None:
+        """Its client went away (WebSocket closed): with a shared store, checkpoint the
+        session and release it, so that its next connection may land on any worker."""
+        if self.sharing is not None:
+            await self.sharing.let_go(session_id)
+
     def forget(self, session: Session) -> None:
         """Stop serving a session here (it lives on in the store)."""
         if self._sessions.get(session.id) is session:

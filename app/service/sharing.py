@@ -70,6 +70,8 @@ class SessionSharing:
         self.owner = f"{socket.gethostname()}:{os.getpid()}:{secrets.token_hex(4)}"
         self.stopping = False
         self._io = ThreadPoolExecutor(max_workers=2, thread_name_prefix="store")
+        # Lease renewals never queue behind loads or checkpoints.
+        self._lease_io = ThreadPoolExecutor(max_workers=1, thread_name_prefix="lease")
         self._resuming: dict[str, asyncio.Future[Session]] = {}
         self._releasing: set[str] = set()  # let go of, lease not yet released
         self._saved: dict[str, int] = {}  # session id -> version last checkpointed
@@ -208,9 +210,48 @@ class SessionSharing:
         return checkpoint.encode_frame(seq, frame)
 
     async def journal(self, session: Session, entry: bytes) -> bool:
-        """Store one answered frame's entry; False if the lease was lost meanwhile."""
+        """Store one answered frame's entry; False if another worker has the session."""
+        done = self.store.append(session.id, entry, self.owner, self.idle_timeout_s)
+        if await asyncio.wrap_future(done):
+            return True
+        # The lease ran out (this worker stalled): take it back if nobody stepped the
+        # session meanwhile, i.e. the store still ends at the frame before this one.
+        if not await self.reclaim(session, session.frames - 1):
+            return False
         done = self.store.append(session.id, entry, self.owner, self.idle_timeout_s)
         return await asyncio.wrap_future(done)
+
+    async def reclaim(self, session: Session, stored_frames: int) -> bool:
+        """Take a lapsed lease back if the store still holds exactly ``stored_frames``
+        frames of this session (no other worker went on with it)."""
+        sid = session.id
+        if not await self._run(self.store.acquire, sid, self.owner, self.lease_s):
+            return False
+        data, journal = await self._run(self.store.load, sid)
+        last = -1
+        if data is not None:
+            last = int(checkpoint.unpack(data)["frames"])
+            if journal:
+                last = max(last, checkpoint.decode_frame(journal[-1])[0])
+        if last == stored_frames:
+            log.warning("lease of a session lapsed and was taken back (worker stalled)")
+            return True
+        await self._run(self.store.release, [sid], self.owner)
+        return False
+
+    async def let_go(self, session_id: str) -> None:
+        """Checkpoint a session and release it now (its WebSocket closed: the client may
+        come back through another worker, which then need not wait)."""
+        session = self.manager._sessions.get(session_id)
+        if session is None or session.order.locked() or self.stopping:
+            return
+        self._releasing.add(session_id)
+        try:
+            self._drop(session, None)
+            if not await self.save([session]):
+                await self._run(self.store.release, [session_id], self.owner)
+        finally:
+            self._releasing.discard(session_id)
 
     async def delete(self, session_id: str) -> bool:
         """Remove the session from the store; False if it had no checkpoint."""
@@ -233,9 +274,15 @@ class SessionSharing:
     async def keep(self) -> None:
         manager = self.manager
         sessions = manager.sessions()
-        held = await self._run(self.store.renew, [s.id for s in sessions], self.owner, self.lease_s)
-        for session, ok in zip(sessions, held, strict=True):
-            if not ok:
+        loop = asyncio.get_running_loop()
+        held = await loop.run_in_executor(
+            self._lease_io, self.store.renew, [s.id for s in sessions], self.owner, self.lease_s
+        )
+        for i, (session, ok) in enumerate(zip(sessions, held, strict=True)):
+            if ok or session.order.locked():  # a step in flight checks as it journals
+                continue
+            held[i] = await self.reclaim(session, session.frames)
+            if not held[i]:
                 self._drop(session, "lease_lost")
         now = time.monotonic()
         live = [s for s, ok in zip(sessions, held, strict=True) if ok]
@@ -281,4 +328,5 @@ class SessionSharing:
 
     def close(self) -> None:
         self._io.shutdown(wait=True)
+        self._lease_io.shutdown(wait=True)
         self.store.close()

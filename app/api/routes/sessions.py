@@ -11,7 +11,12 @@ from app.api.convert import frame_input, frame_result, session_out, session_spec
 from app.api.deps import ManagerDep
 from app.api.errors import describe_validation
 from app.api.schemas import Frame, FrameResult, SessionCreate, SessionOut
-from app.service.sessions import LimitReached, SessionManager, SessionNotFound
+from app.service.sessions import (
+    LimitReached,
+    SessionManager,
+    SessionNotFound,
+    SessionUnavailable,
+)
 
 router = APIRouter(prefix="/sessions", tags=["sessions"])
 
@@ -87,9 +92,15 @@ async def stream(ws: WebSocket, session_id: str) -> None:
                 await _send_error(ws, "session_not_found", exc.message)
                 await ws.close(code=status.WS_1008_POLICY_VIOLATION, reason="session ended")
                 return
+            except SessionUnavailable as exc:  # served elsewhere now: reconnect
+                await _send_error(ws, exc.code, str(exc))
+                await ws.close(code=status.WS_1012_SERVICE_RESTART, reason=str(exc)[:120])
+                return
             except LimitReached as exc:
                 await _send_error(ws, exc.code, str(exc))
                 continue
             await ws.send_text(frame_result(outcome).model_dump_json(by_alias=True))
     except WebSocketDisconnect:
         return
+    finally:
+        await manager.let_go(session_id)
