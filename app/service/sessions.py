@@ -246,6 +246,18 @@ class SessionManager:
             raise SessionNotFound(session_id)
         return await self.sharing.resume(session_id)
 
+    async def settled(self, session_id: str) -> Session:
+        """:meth:`find`, once no frame of the session is in flight: what it reports
+        (frames, last result) is then also what the store holds."""
+        for _ in range(3):
+            session = await self.find(session_id)
+            async with session.order:
+                if self._sessions.get(session_id) is session or self.sharing is None:
+                    return session
+        raise SessionUnavailable(
+            "the session moved while being read; ask again", code="session_moved"
+        )
+
     def adopt(self, session: Session) -> None:
         """Serve a session resumed from the store."""
         self._sessions[session.id] = session

@@ -281,11 +281,17 @@ class SessionSharing:
         for i, (session, ok) in enumerate(zip(sessions, held, strict=True)):
             if ok or session.order.locked():  # a step in flight checks as it journals
                 continue
+            if manager._sessions.get(session.id) is not session:
+                continue  # let go of while the renewal ran: not ours to take back
             held[i] = await self.reclaim(session, session.frames)
             if not held[i]:
                 self._drop(session, "lease_lost")
         now = time.monotonic()
-        live = [s for s, ok in zip(sessions, held, strict=True) if ok]
+        live = [
+            s
+            for s, ok in zip(sessions, held, strict=True)
+            if ok and manager._sessions.get(s.id) is s
+        ]
         idle = [
             s for s in live if now - s.last_active > self.handoff_idle_s and not s.order.locked()
         ]

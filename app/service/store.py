@@ -8,7 +8,8 @@ and a lease naming the one worker that may step it.
 
 Keys of one session share a Redis Cluster hash tag, ``bearings:{ID}:...``:
 
-* ``:ckpt``: the latest checkpoint, expiring after the idle timeout;
+* ``:ckpt``: the latest checkpoint, expiring after the idle timeout (``:ckpt:frames``:
+  how many frames it covers; an older checkpoint never replaces a newer one);
 * ``:journal``: a list of the frames answered since that checkpoint (same expiry);
 * ``:lease``: the serving worker's token, with a short expiry (``--lease-s``) that the
   worker renews while it serves the session.
@@ -151,11 +152,15 @@ class MemoryStore:
                 if self._get(f"{sid}:lease") != owner:
                     out.append(False)
                     continue
+                out.append(True)
+                stored = self._get(f"{sid}:ckpt:frames")
+                if stored is not None and frames < stored:  # type: ignore[operator]
+                    continue  # overtaken by a newer checkpoint
                 self._put(f"{sid}:ckpt", data, ttl_s)
+                self._put(f"{sid}:ckpt:frames", frames, ttl_s)
                 journal = self._get(f"{sid}:journal") or []
                 kept = [e for e in journal if _seq(e) > frames]  # type: ignore[attr-defined]
                 self._put(f"{sid}:journal", kept, ttl_s)
-                out.append(True)
         return out
 
     def append(self, session_id: str, entry: bytes, owner: str, ttl_s: float) -> Future[bool]:
@@ -166,12 +171,13 @@ class MemoryStore:
                 journal = self._get(f"{session_id}:journal") or []
                 self._put(f"{session_id}:journal", [*journal, entry], ttl_s)  # type: ignore[misc]
                 self._touch(f"{session_id}:ckpt", ttl_s)
+                self._touch(f"{session_id}:ckpt:frames", ttl_s)
         done.set_result(ok)
         return done
 
     def delete(self, session_id: str) -> None:
         with self._lock:
-            for part in ("ckpt", "journal", "lease"):
+            for part in ("ckpt", "ckpt:frames", "journal", "lease"):
                 self._values.pop(f"{session_id}:{part}", None)
 
     def close(self) -> None:
@@ -202,19 +208,24 @@ end
 return 0
 """
 # KEYS: lease, ckpt, journal per session; ARGV: token, ttl_ms, then (data, frames) each.
+# A checkpoint older than the stored one (two writes overtaking each other) is ignored.
 _SAVE = """
 local out = {}
 for i = 1, #KEYS / 3 do
   local lease, ckpt, journal = KEYS[3*i-2], KEYS[3*i-1], KEYS[3*i]
   if redis.call('GET', lease) == ARGV[1] then
-    redis.call('SET', ckpt, ARGV[2*i+1], 'PX', ARGV[2])
     local frames = tonumber(ARGV[2*i+2])
-    while true do
-      local head = redis.call('LINDEX', journal, 0)
-      if not head then break end
-      local seq = tonumber(string.match(head, '^(%d+)|'))
-      if seq == nil or seq > frames then break end
-      redis.call('LPOP', journal)
+    local stored = tonumber(redis.call('GET', ckpt .. ':frames') or '-1')
+    if frames >= stored then
+      redis.call('SET', ckpt, ARGV[2*i+1], 'PX', ARGV[2])
+      redis.call('SET', ckpt .. ':frames', frames, 'PX', ARGV[2])
+      while true do
+        local head = redis.call('LINDEX', journal, 0)
+        if not head then break end
+        local seq = tonumber(string.match(head, '^(%d+)|'))
+        if seq == nil or seq > frames then break end
+        redis.call('LPOP', journal)
+      end
     end
     redis.call('PEXPIRE', journal, ARGV[2])
     out[i] = 1
@@ -231,6 +242,7 @@ for i = 1, #KEYS / 3 do
     redis.call('RPUSH', journal, ARGV[i+2])
     redis.call('PEXPIRE', journal, ARGV[2])
     redis.call('PEXPIRE', ckpt, ARGV[2])
+    redis.call('PEXPIRE', ckpt .. ':frames', ARGV[2])
     out[i] = 1
   else out[i] = 0 end
 end
@@ -380,7 +392,8 @@ class RedisStore:
         return [results[i] for i in range(len(batch))]
 
     def delete(self, session_id: str) -> None:
-        self._redis.delete(*_keys(session_id))
+        lease, ckpt, journal = _keys(session_id)
+        self._redis.delete(lease, ckpt, f"{ckpt}:frames", journal)
 
     def close(self) -> None:
         self._journal.close()

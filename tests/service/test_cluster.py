@@ -209,8 +209,11 @@ async def stream_through(cluster: Cluster, disrupt) -> list[Client]:  # type: ig
             await c.create(http)
     tasks = [asyncio.create_task(c.run()) for c in clients]
     try:
-        await asyncio.sleep(4.0)  # every session converges (about 1 s at 10 Hz)
-        assert all(c.answers and c.answers[-1][2] for c in clients), "not all converged"
+        deadline = time.monotonic() + 30.0  # converging takes about 1 s at 10 Hz
+        while not all(c.answers and c.answers[-1][2] for c in clients):
+            assert time.monotonic() < deadline, "not every session converged in 30 s"
+            await asyncio.sleep(0.2)
+        await asyncio.sleep(1.0)
         await disrupt()
         await asyncio.sleep(3.0)
     finally:

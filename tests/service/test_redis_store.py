@@ -1,6 +1,7 @@
-"""The Redis store against a real redis-server: leases, fencing, journal, expiry.
+"""The session stores: leases, fencing, journal, expiry; the same rules for the Redis
+store (against a real redis-server) and the in-process one.
 
-Skipped where redis-server is missing; required in CI (CI=true).
+The Redis cases are skipped where redis-server is missing; required in CI (CI=true).
 """
 
 from __future__ import annotations
@@ -12,7 +13,13 @@ from collections.abc import Iterator
 import pytest
 import redis
 
-from app.service.store import RedisStore, StoreUnavailable, open_store
+from app.service.store import (
+    MemoryStore,
+    RedisStore,
+    SessionStore,
+    StoreUnavailable,
+    open_store,
+)
 from tests.support import free_port, redis_server
 
 
@@ -22,15 +29,19 @@ def url() -> Iterator[str]:
         yield u
 
 
-@pytest.fixture
-def store(url: str) -> Iterator[RedisStore]:
+@pytest.fixture(params=["redis", "memory"])
+def store(request: pytest.FixtureRequest) -> Iterator[SessionStore]:
+    if request.param == "memory":
+        yield MemoryStore(shared=True)
+        return
+    url = request.getfixturevalue("url")
     redis.Redis.from_url(url).flushdb()
     s = RedisStore(url)
     yield s
     s.close()
 
 
-def test_one_lease_at_a_time_and_it_runs_out(store: RedisStore) -> None:
+def test_one_lease_at_a_time_and_it_runs_out(store: SessionStore) -> None:
     assert store.acquire("s1", "w1", 0.3)
     assert store.acquire("s1", "w1", 0.3)  # the holder keeps it
     assert not store.acquire("s1", "w2", 0.3)
@@ -44,7 +55,7 @@ def test_one_lease_at_a_time_and_it_runs_out(store: RedisStore) -> None:
     assert store.acquire("s1", "w1", 0.3)
 
 
-def test_writes_need_the_lease(store: RedisStore) -> None:
+def test_writes_need_the_lease(store: SessionStore) -> None:
     assert store.save([("s1", b"ckpt", 0)], "w1", 60) == [False]
     assert not store.append("s1", b"1|{}", "w1", 60).result(5)
     assert store.load("s1") == (None, [])
@@ -57,9 +68,14 @@ def test_writes_need_the_lease(store: RedisStore) -> None:
     assert store.load("s1") == (b"ckpt-2", [b"3|{}"])
     assert store.save([("s1", b"other", 9)], "w2", 60) == [False]
     assert store.load("s1")[0] == b"ckpt-2"
+    # Two writes overtaking each other: the older checkpoint does not replace the newer.
+    assert store.append("s1", b"4|{}", "w1", 60).result(5)
+    assert store.save([("s1", b"ckpt-4", 4)], "w1", 60) == [True]
+    assert store.save([("s1", b"ckpt-3", 3)], "w1", 60) == [True]
+    assert store.load("s1") == (b"ckpt-4", [])
 
 
-def test_journal_entries_from_many_sessions_in_one_round_trip(store: RedisStore) -> None:
+def test_journal_entries_from_many_sessions_in_one_round_trip(store: SessionStore) -> None:
     ids = [f"s{i}" for i in range(50)]
     for sid in ids:
         assert store.acquire(sid, "w1", 5)
@@ -68,7 +84,7 @@ def test_journal_entries_from_many_sessions_in_one_round_trip(store: RedisStore)
     assert all(len(store.load(sid)[1]) == 3 for sid in ids)
 
 
-def test_checkpoints_expire_after_the_idle_timeout(store: RedisStore) -> None:
+def test_checkpoints_expire_after_the_idle_timeout(store: SessionStore) -> None:
     assert store.acquire("s1", "w1", 5)
     assert store.save([("s1", b"ckpt", 0)], "w1", 0.3) == [True]
     assert store.append("s1", b"1|{}", "w1", 0.3).result(5)
@@ -76,7 +92,7 @@ def test_checkpoints_expire_after_the_idle_timeout(store: RedisStore) -> None:
     assert store.load("s1") == (None, [])
 
 
-def test_delete_forgets_everything(store: RedisStore) -> None:
+def test_delete_forgets_everything(store: SessionStore) -> None:
     assert store.acquire("s1", "w1", 5)
     store.save([("s1", b"ckpt", 0)], "w1", 60)
     store.delete("s1")

@@ -30,7 +30,7 @@ async def create_session(body: SessionCreate, manager: ManagerDep) -> SessionOut
 @router.get("/{session_id}", response_model=SessionOut)
 async def get_session(session_id: str, manager: ManagerDep) -> SessionOut:
     """The session with its latest result (or null)."""
-    return session_out(await manager.find(session_id))
+    return session_out(await manager.settled(session_id))
 
 
 @router.post("/{session_id}/frames", response_model=FrameResult)
