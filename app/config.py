@@ -37,7 +37,7 @@ class Settings(BaseSettings):
         "redis://HOST:PORT/DB (shared by every worker given the same URL)",
     )
     store_lease_s: float = Field(
-        1.5, gt=0, description="a worker's hold on a session in a shared store (seconds)"
+        1.2, gt=0, description="a worker's hold on a session in a shared store (seconds)"
     )
     checkpoint_interval_s: float = Field(
         1.0, gt=0, description="seconds between checkpoints of a changed session (shared store)"

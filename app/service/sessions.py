@@ -252,7 +252,12 @@ class SessionManager:
         for _ in range(3):
             session = await self.find(session_id)
             async with session.order:
-                if self._sessions.get(session_id) is session or self.sharing is None:
+                if self.sharing is None:
+                    return session
+                # A copy in memory may be stale if this worker stalled past its lease.
+                if self._sessions.get(session_id) is session and await self.sharing.confirm(
+                    session
+                ):
                     return session
         raise SessionUnavailable(
             "the session moved while being read; ask again", code="session_moved"
@@ -364,7 +369,9 @@ class SessionManager:
             async with session.order:
                 if self._sessions.get(session_id) is not session:
                     continue
-                return await self._step(session, frame)
+                result = await self._step(session, frame)
+                if result is not None:
+                    return result
         raise SessionUnavailable(
             "the session moved while this frame waited; send it again", code="session_moved"
         )
@@ -374,18 +381,15 @@ class SessionManager:
         entry = None if self.sharing is None else self.sharing.entry(result.seq, frame)
         return result, entry
 
-    async def _step(self, session: Session, frame: FrameInput) -> FrameOutcome:
+    async def _step(self, session: Session, frame: FrameInput) -> FrameOutcome | None:
+        """One step; None if it cannot be kept (the session is no longer this worker's)."""
         started = time.perf_counter()
         loop = asyncio.get_running_loop()
         result, entry = await loop.run_in_executor(self._steps, self._step_sync, session, frame)
         # With a shared store the answer leaves only once the frame is in the journal.
         sharing = self.sharing
         if entry is not None and sharing is not None and not await sharing.journal(session, entry):
-            self.forget(session)
-            raise SessionUnavailable(
-                "another worker took this session over; reconnect to go on",
-                code="session_moved",
-            )
+            return None
         self.metrics.step_seconds.observe(time.perf_counter() - started)
         self.metrics.frames.inc()
         session.last_active = time.monotonic()

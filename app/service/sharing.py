@@ -28,6 +28,7 @@ import logging
 import os
 import secrets
 import socket
+import threading
 import time
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
@@ -74,6 +75,8 @@ class SessionSharing:
         self._lease_io = ThreadPoolExecutor(max_workers=1, thread_name_prefix="lease")
         self._resuming: dict[str, asyncio.Future[Session]] = {}
         self._releasing: set[str] = set()  # let go of, lease not yet released
+        self._lost: set[str] = set()  # leases the renewal thread found lost
+        self._lost_lock = threading.Lock()
         self._saved: dict[str, int] = {}  # session id -> version last checkpointed
         self._saved_at = time.monotonic()
 
@@ -158,6 +161,7 @@ class SessionSharing:
                     code="session_busy",
                 )
             await asyncio.sleep(POLL_S)
+        leased = time.monotonic()
         try:
             data, journal = await self._run(self.store.load, sid)
             if data is None:
@@ -179,7 +183,8 @@ class SessionSharing:
             session=sid[:8],
             frames=session.frames,
             replayed=replayed,
-            waited_s=round(time.monotonic() - started, 3),
+            lease_wait_s=round(leased - started, 3),
+            restore_s=round(time.monotonic() - leased, 3),
         )
         return session
 
@@ -210,34 +215,25 @@ class SessionSharing:
         return checkpoint.encode_frame(seq, frame)
 
     async def journal(self, session: Session, entry: bytes) -> bool:
-        """Store one answered frame's entry; False if another worker has the session."""
+        """Store one answered frame's entry; False if this worker no longer holds the
+        session (its lease ran out while it stalled, or another worker has it): the
+        step is then not kept, and the caller runs the frame again on the stored state."""
         done = self.store.append(session.id, entry, self.owner, self.idle_timeout_s)
         if await asyncio.wrap_future(done):
             return True
-        # The lease ran out (this worker stalled): take it back if nobody stepped the
-        # session meanwhile, i.e. the store still ends at the frame before this one.
-        if not await self.reclaim(session, session.frames - 1):
-            return False
-        done = self.store.append(session.id, entry, self.owner, self.idle_timeout_s)
-        return await asyncio.wrap_future(done)
-
-    async def reclaim(self, session: Session, stored_frames: int) -> bool:
-        """Take a lapsed lease back if the store still holds exactly ``stored_frames``
-        frames of this session (no other worker went on with it)."""
-        sid = session.id
-        if not await self._run(self.store.acquire, sid, self.owner, self.lease_s):
-            return False
-        data, journal = await self._run(self.store.load, sid)
-        last = -1
-        if data is not None:
-            last = int(checkpoint.unpack(data)["frames"])
-            if journal:
-                last = max(last, checkpoint.decode_frame(journal[-1])[0])
-        if last == stored_frames:
-            log.warning("lease of a session lapsed and was taken back (worker stalled)")
-            return True
-        await self._run(self.store.release, [sid], self.owner)
+        self._drop(session, "lease_lost")
         return False
+
+    async def confirm(self, session: Session) -> bool:
+        """Whether this worker still holds the session (and its copy is current); if
+        not, the copy is dropped and the caller finds the session again."""
+        loop = asyncio.get_running_loop()
+        (held,) = await loop.run_in_executor(
+            self._lease_io, self.store.renew, [session.id], self.owner, self.lease_s
+        )
+        if not held:
+            self._drop(session, "lease_lost")
+        return bool(held)
 
     async def let_go(self, session_id: str) -> None:
         """Checkpoint a session and release it now (its WebSocket closed: the client may
@@ -261,37 +257,56 @@ class SessionSharing:
         return data is not None
 
     # ------------------------------------------------------------------- keeper
-    async def run_keeper(self) -> None:
-        """Forever: renew leases, checkpoint what changed, let idle sessions go."""
-        tick = max(0.05, min(self.lease_s / 3, self.checkpoint_interval_s / 2))
-        while True:
-            await asyncio.sleep(tick)
+    def _renew_forever(self, stop: threading.Event) -> None:
+        """Thread: renew the leases of the sessions in memory, five times per lease.
+
+        On a thread of its own, so a busy event loop cannot delay it; leases found lost
+        are handed to the keeper, which drops those sessions.
+        """
+        period = self.lease_s / 5
+        while not stop.wait(period):
+            # Sessions being resumed too: a slow restore must not lose its lease.
+            ids = list(dict.fromkeys([*self.manager._sessions, *self._resuming]))
             try:
-                await self.keep()
+                held = self.store.renew(ids, self.owner, self.lease_s)
             except Exception:
-                log.exception("session store upkeep failed; retrying")
+                log.exception("lease renewal failed; retrying")
+                continue
+            lost = [sid for sid, ok in zip(ids, held, strict=True) if not ok]
+            if lost:
+                with self._lost_lock:
+                    self._lost.update(lost)
+
+    async def run_keeper(self) -> None:
+        """Forever: renew leases (a thread), checkpoint what changed, let idle sessions go."""
+        stop = threading.Event()
+        renewer = threading.Thread(
+            target=self._renew_forever, args=(stop,), name="lease-renewal", daemon=True
+        )
+        renewer.start()
+        tick = max(0.05, min(self.lease_s / 3, self.checkpoint_interval_s / 2))
+        try:
+            while True:
+                await asyncio.sleep(tick)
+                try:
+                    await self.keep()
+                except Exception:
+                    log.exception("session store upkeep failed; retrying")
+        finally:
+            stop.set()
 
     async def keep(self) -> None:
         manager = self.manager
-        sessions = manager.sessions()
-        loop = asyncio.get_running_loop()
-        held = await loop.run_in_executor(
-            self._lease_io, self.store.renew, [s.id for s in sessions], self.owner, self.lease_s
-        )
-        for i, (session, ok) in enumerate(zip(sessions, held, strict=True)):
-            if ok or session.order.locked():  # a step in flight checks as it journals
-                continue
-            if manager._sessions.get(session.id) is not session:
-                continue  # let go of while the renewal ran: not ours to take back
-            held[i] = await self.reclaim(session, session.frames)
-            if not held[i]:
+        with self._lost_lock:
+            lost, self._lost = self._lost, set()
+        for sid in lost:
+            session = manager._sessions.get(sid)
+            # A step in flight finds out itself, as it journals.
+            if session is not None and not session.order.locked():
                 self._drop(session, "lease_lost")
+        sessions = manager.sessions()
         now = time.monotonic()
-        live = [
-            s
-            for s, ok in zip(sessions, held, strict=True)
-            if ok and manager._sessions.get(s.id) is s
-        ]
+        live = sessions
         idle = [
             s for s in live if now - s.last_active > self.handoff_idle_s and not s.order.locked()
         ]
