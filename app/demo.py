@@ -16,8 +16,8 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from app.api.schemas import Frame, SessionCreate
-from app.localization.geometry import wrap_angle
 from app.localization.types import Odometry
+from app.maps.geometry import wrap_angle
 from app.service.sessions import SessionManager, SessionNotFound
 from app.simulation.simulator import SimFrame, simulate
 from app.simulation.walks import demo_config

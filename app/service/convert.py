@@ -14,9 +14,9 @@ from app.api.schemas import (
     Uncertainty,
 )
 from app.feedback import Feedback
-from app.localization.geometry import wrap_deg
-from app.localization.map import SemanticMap
 from app.localization.types import Detection, Estimate, Odometry, Pose
+from app.maps.geometry import wrap_deg
+from app.maps.model import SemanticMap
 
 
 def odometry_of(frame: Frame) -> Odometry | None:

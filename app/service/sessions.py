@@ -26,8 +26,8 @@ from app.config import Settings
 from app.feedback import FeedbackOptions, Narrator
 from app.localization.config import FilterConfig
 from app.localization.filter import ParticleFilter
-from app.localization.map import SemanticMap
 from app.localization.types import Detection, Estimate, InitialPose, Pose
+from app.maps.model import SemanticMap
 from app.service.convert import detections_of, frame_result, odometry_of, truth_of
 from app.service.metrics import Metrics
 

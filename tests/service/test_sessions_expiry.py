@@ -5,7 +5,7 @@ from __future__ import annotations
 import asyncio
 
 from app.api.schemas import Frame, SessionCreate
-from app.localization.map import bundled_maps_dir, load_map_dir
+from app.maps.model import bundled_maps_dir, load_map_dir
 from app.service.metrics import Metrics
 from app.service.sessions import SessionManager, SessionNotFound
 from tests.api.conftest import make_settings
