@@ -209,6 +209,11 @@ def metrics(runs: list[IntegrityRun]) -> dict[str, float | int]:
         "never_fixed": int(np.sum(~np.isfinite(fixes))),
         "tail_err_m": float(np.percentile(err[conv], 95)) if conv.any() else float("nan"),
         "coverage": float(covered.sum() / conv.sum()) if conv.any() else float("nan"),
+        # How much of the radius the truth needs: its 99th percentile calibrates it.
+        "error_over_radius_p99": float(np.percentile(err[conv] / prot[conv], 99))
+        if conv.any()
+        else float("nan"),
+        "median_protection_m": float(np.median(prot[conv])) if conv.any() else float("nan"),
         "median_step_ms": float(np.median(np.concatenate([r.step_ms for r in runs]))),
     }
 

@@ -292,8 +292,9 @@ class ConvergenceGate:
     **Held** while the cluster stays reasonably heavy and tight (``hold_*``), does not
     jump, still explains the detections (looser ``hold_fit`` and ``hold_unexplained``,
     no frame that most detections contradict), dead reckoning has not lasted longer
-    than ``hold_without_evidence`` frames, and the alternatives stay below
-    ``hold_alternatives``. A false detection explained by clutter does not count
+    than ``hold_without_evidence`` frames, the odometry has not broken off (a frame
+    without it after frames with it: the person may have been carried anywhere), and
+    the alternatives stay below ``hold_alternatives``. A false detection explained by clutter does not count
     against the estimate; a kidnap, a pose drifting away from the evidence, or an
     alternative place gaining probability does.
     """
@@ -338,6 +339,7 @@ class ConvergenceGate:
         frames_without_evidence: int = 0,
         alternatives: float = 0.0,
         searched_ago: int | None = 0,
+        motion_lost: bool = False,
     ) -> Estimate:
         """``raw`` with ``converged`` decided by the rules above."""
         last = self._last
@@ -360,6 +362,7 @@ class ConvergenceGate:
                 and not quality.bad_frame
                 and frames_without_evidence <= self.hold_without_evidence
                 and alternatives <= self.hold_alternatives
+                and not motion_lost
             )
             if not self._held:
                 self._streak = 0

@@ -241,6 +241,7 @@ class EvidenceTracker:
             not main_tight
             or main is None
             or last is None
+            or odometry is None
             or not self._near(
                 np.array([main.x]), np.array([main.y]), np.array([main.theta_rad]), last
             )[0]

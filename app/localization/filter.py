@@ -113,6 +113,7 @@ class ParticleFilter:
         #: log of this frame's evidence under the belief (prior-weighted mean likelihood,
         #: moves through walls included).
         self.log_evidence = 0.0
+        self._had_odometry = False
         self.frames_without_evidence = 0
         #: How often every particle became impossible and the filter started again.
         self.restarts = 0
@@ -258,8 +259,17 @@ class ParticleFilter:
         self._update_fit(raw)
         moved = 1.0 if odometry is None else float(np.hypot(odometry.forward_m, odometry.left_m))
         turned = np.pi if odometry is None else odometry.turn_rad
+        lost = odometry is None and self._had_odometry
+        self._had_odometry = odometry is not None
         est = self._gate.confirm(
-            raw, moved, turned, self.quality, self.frames_without_evidence, share, searched_ago
+            raw,
+            moved,
+            turned,
+            self.quality,
+            self.frames_without_evidence,
+            share,
+            searched_ago,
+            motion_lost=lost,
         )
         if self.evidence is not None:
             est = with_alternatives(est, self.evidence.hypotheses(), share)
