@@ -85,12 +85,14 @@ def grid_cells(
     resolution_m: float,
     shape: tuple[int, int],
 ) -> tuple[NDArray[np.int64], NDArray[np.bool_]]:
-    """:func:`grid_cell` for arrays of points: (flat cell index, on the grid?), each (M,).
+    """:func:`grid_cell` for arrays of points: (flat cell index, on the grid?).
 
+    Both outputs have the broadcast shape of ``x`` and ``y`` (shape (1,) for scalars).
     Points off the grid get the nearest edge cell (the flag says they are off it).
     """
-    xs = np.ascontiguousarray(np.atleast_1d(x), dtype=np.float64).reshape(-1)
-    ys = np.ascontiguousarray(np.atleast_1d(y), dtype=np.float64).reshape(-1)
+    shape_out = np.broadcast_shapes(np.shape(x), np.shape(y)) or (1,)
+    xs = np.ascontiguousarray(np.broadcast_to(x, shape_out), dtype=np.float64).reshape(-1)
+    ys = np.ascontiguousarray(np.broadcast_to(y, shape_out), dtype=np.float64).reshape(-1)
     cells = np.empty(xs.shape[0], dtype=np.int64)
     inside = np.empty(xs.shape[0], dtype=np.bool_)
     rows, cols = shape
@@ -98,7 +100,7 @@ def grid_cells(
         xs, ys, float(origin_x), float(origin_y), 1.0 / resolution_m, float(rows), float(cols),
         cells, inside,
     )  # fmt: skip
-    return cells, inside
+    return cells.reshape(shape_out), inside.reshape(shape_out)
 
 
 #: Intervals of the tabulated inverse normal CDF (a power of two).

@@ -42,6 +42,7 @@ def test_frame_result_matches_the_contract(client: TestClient, session_id: str) 
     res = r.json()
     assert set(res) == {
         "seq",
+        "protection_m",
         "pose",
         "uncertainty",
         "converged",
