@@ -103,9 +103,11 @@ class GuidanceSpeaker:
             self._arrived = True
             self._said_at, self._where = now, (x, y)
             return directions(guidance, self.style, self.units)
-        if self._arrived and guidance.path_m < LEAVE_M:
-            return ""  # still at the target, a step or two away: nothing new
-        self._arrived = False
+        if self._arrived:
+            if guidance.path_m < LEAVE_M:
+                return ""  # still at the target, a step or two away: nothing new
+            self._arrived = False
+            self._said_at = self._clock = None  # walked away: guide afresh
         aim = guidance.next.bearing_deg if guidance.next is not None else guidance.bearing_deg
         clock = clock_from_bearing_deg(aim)
         walked = (

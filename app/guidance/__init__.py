@@ -5,11 +5,12 @@ resolves what was asked for, :mod:`~app.guidance.planner` plans the walk once pe
 and target, :mod:`~app.guidance.guide` turns a pose and a plan into directions.
 """
 
-from app.guidance.guide import Guidance, NextTurn, guide
+from app.guidance.guide import ARRIVED_M, Guidance, NextTurn, guide
 from app.guidance.planner import Plan, Route, Unreachable, plan_for
 from app.guidance.targets import DestinationSpec, Target, UnknownDestination, resolve
 
 __all__ = [
+    "ARRIVED_M",
     "DestinationSpec",
     "Guidance",
     "NextTurn",
