@@ -186,11 +186,13 @@ class Plan:
         r = int(np.clip(np.floor((y - self.origin[1]) / self.res), 0, rows - 1))
         return r * cols + c
 
-    def _clear(self, a: NDArray[np.float64], ends: NDArray[np.float64]) -> NDArray[np.bool_]:
+    def _clear(
+        self, a: NDArray[np.float64], ends: NDArray[np.float64], relax_m: float = 0.0
+    ) -> NDArray[np.bool_]:
         """Whether each straight line from ``a`` to ``ends`` (M, 2) stays walkable.
 
-        Points within ``MAX_SNAP_M`` of a pose that is itself off the walkable cells are
-        only held to the free space, so a person close to a wall still gets a way out.
+        The first ``relax_m`` of each line are only held to the free space: a person
+        standing closer to a wall than the paths keep gets a way out, no more.
         """
         rows, cols = self.shape
         length = np.hypot(*(ends - a).T)
@@ -201,7 +203,7 @@ class Plan:
         r = np.clip(np.floor((pts[..., 1] - self.origin[1]) / self.res), 0, rows - 1)
         flat = (r * cols + c).astype(np.int64)
         ok = self.walkable.reshape(-1)[flat]
-        near_start = (f[None, :] * length[:, None]) <= MAX_SNAP_M
+        near_start = (f[None, :] * length[:, None]) <= relax_m
         ok |= near_start & self.map.free_space.mask.reshape(-1)[flat]
         return ok.all(axis=1)
 
@@ -215,11 +217,14 @@ class Plan:
         start = np.array([x, y], dtype=np.float64)
         flat = self._cell_of(x, y)
         node = self.node[flat]
+        relax = 0.0
         if node < 0 or not np.isfinite(self.dist[node]):
             snap = int(self.nearest[flat])
-            if np.hypot(*(self._centres(np.array([snap]))[0] - start)) > MAX_SNAP_M:
+            relax = float(np.hypot(*(self._centres(np.array([snap]))[0] - start)))
+            if relax > MAX_SNAP_M:
                 raise Unreachable(f"no walkable path from here to {self.target.name}")
             node = self.node[snap]
+            relax += self.res
         chain = [int(node)]
         while chain[-1] < self.n and self.pred[chain[-1]] >= 0:
             chain.append(int(self.pred[chain[-1]]))
@@ -230,7 +235,7 @@ class Plan:
             j = int(self.source[int(cell_nodes[0])]) - self.n  # which target point
             pts = np.vstack([pts, self.target.points[j]])
             end_object = int(self.target.objects[j])
-        legs = self._straighten(start, pts, end_object)
+        legs = self._straighten(start, pts, end_object, relax)
         return Route(legs, _length(legs), end_object)
 
     def _visible(
@@ -239,20 +244,25 @@ class Plan:
         chain: NDArray[np.float64],
         idx: NDArray[np.int64],
         end_object: int,
+        relax_m: float,
     ) -> NDArray[np.bool_]:
         """Whether ``anchor`` reaches each ``chain[idx]`` in a straight walkable line."""
         last = chain.shape[0] - 1
         if self.target.kind == "region" or idx[-1] != last:
-            return self._clear(anchor, chain[idx])
+            return self._clear(anchor, chain[idx], relax_m)
         # The target itself may sit in a wall (a door): held to the walls only.
         ok = np.empty(idx.size, dtype=bool)
         if idx.size > 1:
-            ok[:-1] = self._clear(anchor, chain[idx[:-1]])
-        ok[-1] = self._sees_end(anchor, chain[last], end_object)
+            ok[:-1] = self._clear(anchor, chain[idx[:-1]], relax_m)
+        ok[-1] = self._sees_end(anchor, chain[last], end_object, relax_m)
         return ok
 
     def _straighten(
-        self, start: NDArray[np.float64], chain: NDArray[np.float64], end_object: int
+        self,
+        start: NDArray[np.float64],
+        chain: NDArray[np.float64],
+        end_object: int,
+        relax_m: float = 0.0,
     ) -> NDArray[np.float64]:
         """Legs from ``start`` along ``chain``: each goes on while the line stays clear."""
         out = [start]
@@ -263,7 +273,7 @@ class Plan:
             j = i + 1
             while j <= last:
                 idx = np.arange(j, min(j + block, last + 1))
-                bad = np.flatnonzero(~self._visible(anchor, chain, idx, end_object))
+                bad = np.flatnonzero(~self._visible(anchor, chain, idx, end_object, relax_m))
                 if bad.size:
                     reach = max(reach, int(idx[bad[0]]) - 1)
                     break
@@ -272,9 +282,12 @@ class Plan:
             anchor = chain[reach]
             out.append(anchor)
             i = reach
+            relax_m = 0.0  # only the person's own first leg may start off the cells
         return np.array(out)
 
-    def _sees_end(self, a: NDArray[np.float64], end: NDArray[np.float64], obj: int) -> bool:
+    def _sees_end(
+        self, a: NDArray[np.float64], end: NDArray[np.float64], obj: int, relax_m: float = 0.0
+    ) -> bool:
         """Whether the final point (maybe in a wall) is reachable in a straight line:
         walkable until ``JOIN_RADIUS_M`` before it, then no wall crossed."""
         d = end - a
@@ -282,7 +295,7 @@ class Plan:
         if length < 1e-9:
             return True
         cut = max(length - JOIN_RADIUS_M, 0.0)
-        if cut > 0 and not self._clear(a, (a + d * (cut / length))[None])[0]:
+        if cut > 0 and not self._clear(a, (a + d * (cut / length))[None], relax_m)[0]:
             return False
         ignore = self.map.mounted_walls[obj] if obj >= 0 and self.map.walls.shape[0] else None
         return not segments_cross_walls(a[None], end[None], self.map.walls, ignore=ignore)[0]
