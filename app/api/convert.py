@@ -29,8 +29,8 @@ from app.feedback import FeedbackOptions, clock_from_bearing_deg
 from app.guidance import DestinationSpec, Guidance, Target
 from app.localization.camera import BoxError, Camera
 from app.localization.compass import CompassReading
-from app.localization.geometry import wrap_deg
 from app.localization.types import Detection, InitialPose, Odometry, Pose
+from app.maps.geometry import wrap_deg
 from app.service.sessions import Session
 from app.service.types import FrameInput, FrameOutcome, SensorSpec, SessionSpec
 

@@ -1,6 +1,6 @@
 """Guidance to a destination: shortest walkable paths and what to tell the person.
 
-Depends only on the map model (app.localization.map): :mod:`~app.guidance.targets`
+Depends only on the map model (app.maps.model): :mod:`~app.guidance.targets`
 resolves what was asked for, :mod:`~app.guidance.planner` plans the walk once per map
 and target, :mod:`~app.guidance.guide` turns a pose and a plan into directions.
 """

@@ -14,7 +14,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from app.guidance.planner import Plan
-from app.localization.geometry import wrap_deg
+from app.maps.geometry import wrap_deg
 
 #: Within this walking distance of the target the person has arrived (metres).
 ARRIVED_M = 1.0

@@ -27,8 +27,8 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import dijkstra
 
 from app.guidance.targets import DestinationSpec, Target, resolve
-from app.localization.geometry import points_in_polygon, segments_cross_walls
-from app.localization.map import SemanticMap
+from app.maps.geometry import points_in_polygon, segments_cross_walls
+from app.maps.model import SemanticMap
 
 #: Paths keep at least about this much room from walls where the map allows (metres).
 CLEARANCE_M = 0.3

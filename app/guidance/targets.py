@@ -15,7 +15,7 @@ from typing import Literal
 import numpy as np
 from numpy.typing import NDArray
 
-from app.localization.map import SemanticMap
+from app.maps.model import SemanticMap
 
 Kind = Literal["label", "class", "region", "point"]
 

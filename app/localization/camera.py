@@ -26,7 +26,7 @@ import math
 from dataclasses import dataclass
 from typing import Literal
 
-from app.localization.geometry import wrap_deg
+from app.maps.geometry import wrap_deg
 
 CameraKind = Literal["equirectangular", "pinhole"]
 

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from app.localization.map import SemanticMap
+from app.maps.model import SemanticMap
 
 #: Upper bound on grid cells x objects (bytes of the boolean table).
 MAX_TABLE_BYTES = 24_000_000

@@ -28,8 +28,8 @@ from app.guidance import DestinationSpec, Guidance, Plan, Target, Unreachable, g
 from app.localization.camera import Camera
 from app.localization.config import FilterConfig
 from app.localization.filter import ParticleFilter
-from app.localization.map import SemanticMap
 from app.localization.types import Detection, Estimate, Pose
+from app.maps.model import SemanticMap
 from app.service.metrics import Metrics
 from app.service.types import FrameInput, FrameOutcome, SessionSpec
 

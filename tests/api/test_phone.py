@@ -8,8 +8,8 @@ import math
 import pytest
 from fastapi.testclient import TestClient
 
-from app.localization.map import bundled_maps_dir, load_map
 from app.localization.types import Pose
+from app.maps.model import bundled_maps_dir, load_map
 from app.simulation.camera import CameraModel, visible_objects
 
 PINHOLE = {"model": "pinhole", "width_px": 2000, "fx_px": 1000.0, "cx_px": 1000.0}

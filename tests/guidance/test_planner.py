@@ -15,8 +15,8 @@ from app.guidance import (
     guide,
     plan_for,
 )
-from app.localization.geometry import segments_cross_walls
-from app.localization.map import SemanticMap, bundled_maps_dir, load_map, parse_map
+from app.maps.geometry import segments_cross_walls
+from app.maps.model import SemanticMap, bundled_maps_dir, load_map, parse_map
 
 SUITE = load_map(bundled_maps_dir() / "office_suite.json")
 #: Office 1 of the suite, behind the corridor wall y = 3 from the main entrance.
