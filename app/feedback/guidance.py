@@ -4,7 +4,8 @@
 direction and distance of the next turn of the path (or of the target itself when the
 way is straight), and the turn to take there (relative to the direction walked until
 then). It is spoken when guidance starts, again whenever the direction to walk changes
-by an hour on the clock, and every ``REPEAT_S`` seconds while the person walks; once on
+by an hour on the clock (at most every ``MIN_GAP_S`` seconds), and every ``REPEAT_S``
+seconds while the person walks; once on
 arrival ("You have arrived at main entrance."). While the filter has not converged no
 direction is given, since it would rest on a position that is not known: the person
 hears "Finding where you are before guiding you." instead.
@@ -27,6 +28,9 @@ from app.guidance import Guidance
 
 #: Repeat the directions this often while the person walks (seconds).
 REPEAT_S = 10.0
+#: A change of direction is spoken at most this often (seconds): turning on the spot
+#: sweeps the clock an hour at a time, and speech must keep up.
+MIN_GAP_S = 2.0
 #: Moving at least this far since the last directions counts as walking (metres).
 WALKING_M = 1.0
 #: Repeat "Finding where you are..." at most this often (seconds).
@@ -114,11 +118,16 @@ class GuidanceSpeaker:
             self._where is not None
             and ((x - self._where[0]) ** 2 + (y - self._where[1]) ** 2) ** 0.5 >= WALKING_M
         )
+        since = None if self._said_at is None else now - self._said_at
         due = (
-            self._said_at is None
+            since is None
             or self._clock is None
-            or clock_distance_hours(self._clock, clock) >= 1
-            or (walked and not 0 <= now - self._said_at < REPEAT_S)
+            or (
+                not 0 <= since < MIN_GAP_S  # (a clock going backwards counts as due)
+                and (
+                    clock_distance_hours(self._clock, clock) >= 1 or (walked and since >= REPEAT_S)
+                )
+            )
         )
         if not due:
             return ""

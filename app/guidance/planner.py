@@ -21,6 +21,7 @@ from collections import OrderedDict
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 from numpy.typing import NDArray
 from scipy import ndimage
 from scipy.sparse import coo_matrix
@@ -186,26 +187,23 @@ class Plan:
         r = int(np.clip(np.floor((y - self.origin[1]) / self.res), 0, rows - 1))
         return r * cols + c
 
-    def _clear(
-        self, a: NDArray[np.float64], ends: NDArray[np.float64], relax_m: float = 0.0
-    ) -> NDArray[np.bool_]:
-        """Whether each straight line from ``a`` to ``ends`` (M, 2) stays walkable.
+    def _clear(self, a: NDArray[np.float64], b: NDArray[np.float64], relax_m: float) -> bool:
+        """Whether the straight line a -> b stays walkable (see :func:`_line_clear`)."""
+        return bool(_line_clear(a[0], a[1], b[0], b[1], *self._grid_args(relax_m)))
 
-        The first ``relax_m`` of each line are only held to the free space: a person
-        standing closer to a wall than the paths keep gets a way out, no more.
-        """
+    def _grid_args(self, relax_m: float) -> tuple[object, ...]:
         rows, cols = self.shape
-        length = np.hypot(*(ends - a).T)
-        steps = max(int(np.ceil(length.max() / (0.5 * self.res))), 1) if length.size else 1
-        f = np.linspace(0.0, 1.0, steps + 1)
-        pts = a[None, None, :] + f[None, :, None] * (ends - a)[:, None, :]  # (M, S, 2)
-        c = np.clip(np.floor((pts[..., 0] - self.origin[0]) / self.res), 0, cols - 1)
-        r = np.clip(np.floor((pts[..., 1] - self.origin[1]) / self.res), 0, rows - 1)
-        flat = (r * cols + c).astype(np.int64)
-        ok = self.walkable.reshape(-1)[flat]
-        near_start = (f[None, :] * length[:, None]) <= relax_m
-        ok |= near_start & self.map.free_space.mask.reshape(-1)[flat]
-        return ok.all(axis=1)
+        return (
+            self.walkable.reshape(-1),
+            self.map.free_space.mask.reshape(-1),
+            float(self.origin[0]),
+            float(self.origin[1]),
+            1.0 / self.res,
+            rows,
+            cols,
+            0.5 * self.res,
+            relax_m,
+        )
 
     def route(self, x: float, y: float) -> Route:
         """The straightened shortest path from (x, y) to the target.
@@ -238,25 +236,6 @@ class Plan:
         legs = self._straighten(start, pts, end_object, relax)
         return Route(legs, _length(legs), end_object)
 
-    def _visible(
-        self,
-        anchor: NDArray[np.float64],
-        chain: NDArray[np.float64],
-        idx: NDArray[np.int64],
-        end_object: int,
-        relax_m: float,
-    ) -> NDArray[np.bool_]:
-        """Whether ``anchor`` reaches each ``chain[idx]`` in a straight walkable line."""
-        last = chain.shape[0] - 1
-        if self.target.kind == "region" or idx[-1] != last:
-            return self._clear(anchor, chain[idx], relax_m)
-        # The target itself may sit in a wall (a door): held to the walls only.
-        ok = np.empty(idx.size, dtype=bool)
-        if idx.size > 1:
-            ok[:-1] = self._clear(anchor, chain[idx[:-1]], relax_m)
-        ok[-1] = self._sees_end(anchor, chain[last], end_object, relax_m)
-        return ok
-
     def _straighten(
         self,
         start: NDArray[np.float64],
@@ -264,21 +243,26 @@ class Plan:
         end_object: int,
         relax_m: float = 0.0,
     ) -> NDArray[np.float64]:
-        """Legs from ``start`` along ``chain``: each goes on while the line stays clear."""
+        """Legs from ``start`` along ``chain``: each goes on while the line stays clear.
+
+        A leg ends at the last chain point before the first one its start cannot see in
+        a straight walkable line. The final point of a door or other object target may
+        sit in a wall and is tested by :meth:`_sees_end` instead.
+        """
         out = [start]
         anchor = start
-        i, last, block = 0, chain.shape[0] - 1, 64
+        i, last = 0, chain.shape[0] - 1
+        special_end = self.target.kind != "region"
         while i < last:
-            reach = i + 1  # at least one step of progress
-            j = i + 1
-            while j <= last:
-                idx = np.arange(j, min(j + block, last + 1))
-                bad = np.flatnonzero(~self._visible(anchor, chain, idx, end_object, relax_m))
-                if bad.size:
-                    reach = max(reach, int(idx[bad[0]]) - 1)
-                    break
-                reach = int(idx[-1])
-                j = reach + 1
+            stop = last - 1 if special_end else last
+            reach = int(_reach(anchor[0], anchor[1], chain, i + 1, stop, *self._grid_args(relax_m)))
+            if (
+                reach == stop
+                and special_end
+                and self._sees_end(anchor, chain[last], end_object, relax_m)
+            ):
+                reach = last
+            reach = max(reach, i + 1)  # at least one step of progress
             anchor = chain[reach]
             out.append(anchor)
             i = reach
@@ -295,10 +279,56 @@ class Plan:
         if length < 1e-9:
             return True
         cut = max(length - JOIN_RADIUS_M, 0.0)
-        if cut > 0 and not self._clear(a, (a + d * (cut / length))[None], relax_m)[0]:
+        if cut > 0 and not self._clear(a, a + d * (cut / length), relax_m):
             return False
         ignore = self.map.mounted_walls[obj] if obj >= 0 and self.map.walls.shape[0] else None
         return not segments_cross_walls(a[None], end[None], self.map.walls, ignore=ignore)[0]
+
+
+@njit(cache=True, nogil=True)
+def _line_clear(
+    ax, ay, bx, by, walkable, free, ox, oy, inv_res, rows, cols, step, relax
+):  # pragma: no cover - compiled
+    """Whether the line a -> b stays on walkable cells, sampled every ``step`` metres; the
+    first ``relax`` metres need only be in the free space."""
+    dx, dy = bx - ax, by - ay
+    length = np.sqrt(dx * dx + dy * dy)
+    n = max(int(np.ceil(length / step)), 1)
+    for s in range(n + 1):
+        f = s / n
+        c = min(max(int(np.floor((ax + f * dx - ox) * inv_res)), 0), cols - 1)
+        r = min(max(int(np.floor((ay + f * dy - oy) * inv_res)), 0), rows - 1)
+        k = r * cols + c
+        if walkable[k] or (f * length <= relax and free[k]):
+            continue
+        return False
+    return True
+
+
+@njit(cache=True, nogil=True)
+def _reach(
+    ax, ay, chain, start, stop, walkable, free, ox, oy, inv_res, rows, cols, step, relax
+):  # pragma: no cover - compiled
+    """The last index j in start..stop with every chain[start..j] clear from a (start - 1
+    when chain[start] is not)."""
+    for j in range(start, stop + 1):
+        if not _line_clear(
+            ax,
+            ay,
+            chain[j, 0],
+            chain[j, 1],
+            walkable,
+            free,
+            ox,
+            oy,
+            inv_res,
+            rows,
+            cols,
+            step,
+            relax,
+        ):
+            return j - 1
+    return stop
 
 
 def _length(points: NDArray[np.float64]) -> float:

@@ -60,6 +60,14 @@ def test_repeated_on_an_hour_of_change_or_every_ten_seconds_while_walking() -> N
     assert s.update(g(-60.0), True, 15.0, 3.0, 0.0) == ""
 
 
+def test_turning_on_the_spot_is_not_a_torrent_of_words() -> None:
+    s = GuidanceSpeaker()
+    assert s.update(g(-30.0), True, 0.0, 0.0, 0.0) != ""
+    assert s.update(g(-90.0), True, 0.5, 0.0, 0.0) == ""  # two hours, but just said
+    assert s.update(g(-150.0), True, 1.0, 0.0, 0.0) == ""
+    assert "go to 5 o'clock" in s.update(g(-150.0), True, 2.1, 0.0, 0.0)  # then the latest
+
+
 def test_arrival_is_said_once() -> None:
     s = GuidanceSpeaker()
     s.update(g(), True, 0.0, 0, 0)
