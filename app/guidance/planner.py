@@ -331,6 +331,15 @@ def _reach(
     return stop
 
 
+def warm_up() -> None:
+    """Compile the line tests now (or load them from the disk cache), so that no frame
+    waits for the compiler."""
+    cells = np.ones(4, dtype=np.bool_)
+    chain = np.zeros((2, 2))
+    _reach(0.0, 0.0, chain, 0, 1, cells, cells, 0.0, 0.0, 1.0, 2, 2, 0.5, 0.0)
+    _line_clear(0.0, 0.0, 1.0, 1.0, cells, cells, 0.0, 0.0, 1.0, 2, 2, 0.5, 0.0)
+
+
 def _length(points: NDArray[np.float64]) -> float:
     return float(np.hypot(*np.diff(points, axis=0).T).sum()) if len(points) > 1 else 0.0
 
