@@ -90,6 +90,14 @@ class GuidanceSpeaker:
         self._said_at = self._clock = self._where = self._finding_at = None
         self._arrived = False
 
+    def no_way(self, target: str, now: float) -> str:
+        """Located, but no walkable way leads from here to ``target`` (said now and then)."""
+        self._said_at = self._clock = self._where = None
+        if self._finding_at is None or not 0 <= now - self._finding_at < FINDING_REPEAT_S:
+            self._finding_at = now
+            return f"I cannot find a way from here to {target}."
+        return ""
+
     def update(
         self, guidance: Guidance | None, converged: bool, now: float, x: float, y: float
     ) -> str:

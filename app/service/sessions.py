@@ -145,14 +145,14 @@ class Session:
         """Directions from the estimate (only when converged) and what to say of them."""
         if self.destination is None:
             return None, ""
-        guidance = None
-        if estimate.converged:
-            try:
-                guidance = guide(self.destination, estimate.x, estimate.y, estimate.theta_rad)
-            except Unreachable as exc:
-                warnings.append(f"guidance: {exc}")
-        text = self.speaker.update(guidance, guidance is not None, now, estimate.x, estimate.y)
-        return guidance, text
+        if not estimate.converged:
+            return None, self.speaker.update(None, False, now, estimate.x, estimate.y)
+        try:
+            guidance = guide(self.destination, estimate.x, estimate.y, estimate.theta_rad)
+        except Unreachable as exc:
+            warnings.append(f"guidance: {exc}")
+            return None, self.speaker.no_way(self.destination.target.name, now)
+        return guidance, self.speaker.update(guidance, True, now, estimate.x, estimate.y)
 
     def process_sync(self, frame: FrameInput) -> FrameOutcome:
         """Run one frame through the filter and the narrator (worker thread)."""

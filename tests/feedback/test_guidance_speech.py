@@ -75,3 +75,10 @@ def test_arrival_is_said_once() -> None:
     assert s.update(g(arrived=True), True, 6.0, 0, 0) == ""
     assert s.update(g(distance=1.5, path_m=1.5), True, 7.0, 0, 0) == ""  # a step away
     assert s.update(g(distance=4.0, path_m=4.0), True, 8.0, 0, 0) != ""  # left: guide again
+
+
+def test_no_way_is_said_now_and_then_and_guidance_resumes() -> None:
+    s = GuidanceSpeaker()
+    assert s.no_way("main entrance", 0.0) == "I cannot find a way from here to main entrance."
+    assert s.no_way("main entrance", 5.0) == ""
+    assert "go to" in s.update(g(), True, 6.0, 0, 0)  # a way again: directions at once
