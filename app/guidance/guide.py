@@ -18,8 +18,6 @@ from app.maps.geometry import wrap_deg
 
 #: Within this walking distance of the target the person has arrived (metres).
 ARRIVED_M = 1.0
-#: A bend of the path smaller than this is no turn worth a word (degrees).
-MIN_TURN_DEG = 15.0
 
 
 @dataclass(frozen=True)
@@ -59,18 +57,6 @@ def _heading_deg(a: NDArray[np.float64], b: NDArray[np.float64]) -> float:
     return math.degrees(math.atan2(b[1] - a[1], b[0] - a[0]))
 
 
-def _merge_small_bends(points: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Drop inner points where the path bends by less than ``MIN_TURN_DEG``."""
-    keep = [points[0]]
-    for k in range(1, len(points) - 1):
-        into = _heading_deg(keep[-1], points[k])
-        out = _heading_deg(points[k], points[k + 1])
-        if abs(wrap_deg(out - into)) >= MIN_TURN_DEG:
-            keep.append(points[k])
-    keep.append(points[-1])
-    return np.array(keep)
-
-
 def guide(plan: Plan, x: float, y: float, theta_rad: float) -> Guidance:
     """Directions from pose (x, y, theta) to the plan's target.
 
@@ -78,8 +64,7 @@ def guide(plan: Plan, x: float, y: float, theta_rad: float) -> Guidance:
         Unreachable: no walkable path from this pose (see :meth:`Plan.route`).
     """
     route = plan.route(x, y)
-    pts = route.points
-    legs = _merge_small_bends(pts)
+    pts = route.points  # straightened, small bends merged
     here = pts[0]
     end = pts[-1]
     heading = math.degrees(theta_rad)
@@ -87,10 +72,10 @@ def guide(plan: Plan, x: float, y: float, theta_rad: float) -> Guidance:
     distance = float(np.hypot(*rel))
     bearing = wrap_deg(_heading_deg(here, end) - heading) if distance > 1e-9 else 0.0
     turn = None
-    if len(legs) > 2:
-        corner = legs[1]
+    if len(pts) > 2:
+        corner = pts[1]
         first = _heading_deg(here, corner)
-        second = _heading_deg(corner, legs[2])
+        second = _heading_deg(corner, pts[2])
         turn = NextTurn(
             bearing_deg=round(wrap_deg(first - heading), 1),
             distance_m=round(float(np.hypot(*(corner - here))), 2),

@@ -16,6 +16,7 @@ is the next turn. No search runs per frame.
 
 from __future__ import annotations
 
+import math
 import threading
 from collections import OrderedDict
 from dataclasses import dataclass
@@ -28,7 +29,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import dijkstra
 
 from app.guidance.targets import DestinationSpec, Target, resolve
-from app.maps.geometry import points_in_polygon, segments_cross_walls
+from app.maps.geometry import points_in_polygon, segments_cross_walls, wrap_deg
 from app.maps.model import SemanticMap
 
 #: Paths keep at least about this much room from walls where the map allows (metres).
@@ -39,6 +40,8 @@ JOIN_RADIUS_M = 1.0
 MAX_JOIN_RADIUS_M = 3.0
 #: A pose off the walkable cells (estimate near a wall) snaps to one within this (metres).
 MAX_SNAP_M = 1.5
+#: A bend of the path smaller than this is no turn worth a word (degrees).
+MIN_TURN_DEG = 15.0
 #: Plans kept per map (least recently used dropped first).
 CACHE_SIZE = 16
 
@@ -233,8 +236,32 @@ class Plan:
             j = int(self.source[int(cell_nodes[0])]) - self.n  # which target point
             pts = np.vstack([pts, self.target.points[j]])
             end_object = int(self.target.objects[j])
-        legs = self._straighten(start, pts, end_object, relax)
+        legs = self._merge_small_bends(
+            self._straighten(start, pts, end_object, relax), end_object, relax
+        )
         return Route(legs, _length(legs), end_object)
+
+    def _merge_small_bends(
+        self, points: NDArray[np.float64], end_object: int, relax_m: float
+    ) -> NDArray[np.float64]:
+        """Drop inner points where the path bends by less than ``MIN_TURN_DEG`` (no turn
+        worth a word), where the straight line past them stays walkable too."""
+        keep = [points[0]]
+        last = len(points) - 1
+        for k in range(1, last):
+            into = _heading_deg(keep[-1], points[k])
+            out = _heading_deg(points[k], points[k + 1])
+            if abs(wrap_deg(out - into)) < MIN_TURN_DEG:
+                relax = relax_m if len(keep) == 1 else 0.0
+                if k + 1 == last and self.target.kind != "region":
+                    clear = self._sees_end(keep[-1], points[k + 1], end_object, relax)
+                else:
+                    clear = self._clear(keep[-1], points[k + 1], relax)
+                if clear:
+                    continue
+            keep.append(points[k])
+        keep.append(points[-1])
+        return np.array(keep)
 
     def _straighten(
         self,
@@ -338,6 +365,10 @@ def warm_up() -> None:
     chain = np.zeros((2, 2))
     _reach(0.0, 0.0, chain, 0, 1, cells, cells, 0.0, 0.0, 1.0, 2, 2, 0.5, 0.0)
     _line_clear(0.0, 0.0, 1.0, 1.0, cells, cells, 0.0, 0.0, 1.0, 2, 2, 0.5, 0.0)
+
+
+def _heading_deg(a: NDArray[np.float64], b: NDArray[np.float64]) -> float:
+    return math.degrees(math.atan2(b[1] - a[1], b[0] - a[0]))
 
 
 def _length(points: NDArray[np.float64]) -> float:
