@@ -40,9 +40,11 @@ def create_app(settings: Settings | None = None, *, demo: bool = False) -> FastA
 
     @contextlib.asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
+        from app.guidance.planner import warm_up as warm_up_guidance
         from app.localization.filter import warm_up
 
         await asyncio.to_thread(warm_up)
+        await asyncio.to_thread(warm_up_guidance)
         manager = SessionManager(load_maps(settings), settings, metrics_)
         app.state.manager = manager
         tasks = [asyncio.create_task(manager.run_sweeper())]

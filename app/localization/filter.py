@@ -17,6 +17,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from app.localization import sensor_kernel
+from app.localization.compass import CompassReading, compass_log_likelihood
 from app.localization.config import FilterConfig
 from app.localization.estimate import (
     ConvergenceGate,
@@ -241,14 +242,24 @@ class ParticleFilter:
             self.x[slots], self.y[slots], self.theta[slots] = nx, ny, nt
         return True
 
-    def step(self, odometry: Odometry | None, detections: Sequence[Detection]) -> Estimate:
+    def step(
+        self,
+        odometry: Odometry | None,
+        detections: Sequence[Detection],
+        heading: CompassReading | None = None,
+    ) -> Estimate:
         """One full filter step: predict, correct, estimate, resample when due.
+
+        ``heading``, a compass reading, weights the particles' headings too
+        (:mod:`~app.localization.compass`).
 
         The estimate summarizes the weighted particles before resampling: resampling
         only adds noise to what they say (and to what the injected particles say).
         """
         self.predict(odometry)
         inject = self.correct(detections)
+        if heading is not None:
+            self.log_w = self.log_w + compass_log_likelihood(self.theta, heading)
         w = self.weights
         ess = effective_sample_size(w)
         raw = estimate_pose(self.x, self.y, self.theta, w, ess=ess, rng=self.rng)

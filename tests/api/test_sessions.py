@@ -49,7 +49,9 @@ def test_frame_result_matches_the_contract(client: TestClient, session_id: str) 
         "hypotheses",
         "feedback",
         "warnings",
+        "guidance",
     }
+    assert res["guidance"] is None  # no destination set
     assert res["seq"] == 1
     assert set(res["pose"]) == {"x", "y", "theta_deg"}
     assert set(res["uncertainty"]) == {"std_x_m", "std_y_m", "std_theta_deg"}
