@@ -5,7 +5,8 @@ from __future__ import annotations
 import asyncio
 
 from app.api.schemas import Frame, SessionCreate
-from app.localization.map import bundled_maps_dir, load_map_dir
+from app.localization.map import load_map_dir
+from app.resources import bundled_maps_dir
 from app.service.metrics import Metrics
 from app.service.sessions import SessionManager, SessionNotFound
 from tests.api.conftest import make_settings

@@ -10,7 +10,8 @@ import pytest
 import viser
 
 from app.api.schemas import Frame, SessionCreate
-from app.localization.map import bundled_maps_dir, load_map, load_map_dir
+from app.localization.map import load_map, load_map_dir
+from app.resources import bundled_maps_dir
 from app.service.metrics import Metrics
 from app.service.sessions import SessionManager
 from app.simulation.scenarios import paper_config
