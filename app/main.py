@@ -15,7 +15,7 @@ from app.api.errors import install_error_handlers
 from app.api.limits import BodySizeLimit
 from app.api.routes import health, maps, metrics, sessions, speech
 from app.config import Settings, get_settings
-from app.localization.map import SemanticMap, load_map_dir
+from app.maps.model import SemanticMap, load_map_dir
 from app.resources import bundled_maps_dir, static_dir
 from app.service.metrics import Metrics
 from app.service.sessions import SessionManager

@@ -18,9 +18,7 @@ from numpy.typing import NDArray
 from app.localization import sensor_kernel
 from app.localization.config import FilterConfig
 from app.localization.estimate import ConvergenceGate, estimate_pose
-from app.localization.geometry import wrap_angle
 from app.localization.kld import kld_sample_size
-from app.localization.map import SemanticMap
 from app.localization.motion import motion_log_penalty, sample_motion
 from app.localization.recovery import AugmentedMCL, sample_from_observation
 from app.localization.resampling import (
@@ -32,6 +30,8 @@ from app.localization.resampling import (
 from app.localization.sensor import Observation, normalized_residuals, prepare_observation
 from app.localization.types import Detection, Estimate, InitialPose, Odometry
 from app.localization.visibility import visibility_grid
+from app.maps.geometry import wrap_angle
+from app.maps.model import SemanticMap
 
 #: Share of a global start's particles drawn from the first observation.
 SEED_SHARE = 0.9
@@ -255,7 +255,7 @@ def warm_up() -> None:
     enough for the wall test), resampling, clustering, KLD-sampling and the residual
     check, and the grid-cell lookup.
     """
-    from app.localization.map import parse_map
+    from app.maps.model import parse_map
 
     tiny = parse_map(
         {

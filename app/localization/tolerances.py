@@ -22,9 +22,9 @@ from numpy.typing import ArrayLike, NDArray
 
 from app.localization.config import FilterConfig
 from app.localization.fastmath import SINCOS_MAX_ERROR, SOFTPLUS_MAX_ERROR
-from app.localization.map import SemanticMap
 from app.localization.sensor import Observation, candidate_mask
 from app.localization.visibility import visibility_grid
+from app.maps.model import SemanticMap
 
 #: Unit roundoff of float32 and float64 (round to nearest): |fl(a op b) - a op b| <= u |a op b|.
 U32 = 2.0**-24

@@ -17,7 +17,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from app.localization.fastmath import grid_cells
-from app.localization.map import SemanticMap
+from app.maps.model import SemanticMap
 
 #: Upper bound on grid cells x objects (bytes of the boolean table).
 MAX_TABLE_BYTES = 24_000_000

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from app.localization.map import SemanticMap, load_map, parse_map
+from app.maps.model import SemanticMap, load_map, parse_map
 from app.resources import bundled_maps_dir
 
 

@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 
 from app.localization.config import FilterConfig
-from app.localization.geometry import segments_cross_walls
 from app.localization.motion import NO_ODOMETRY_STD_M, motion_log_penalty, sample_motion
 from app.localization.tolerances import U64, motion_position_tolerance
 from app.localization.types import Odometry
+from app.maps.geometry import segments_cross_walls
 from tests.localization.conftest import room
 
 EXACT = FilterConfig(

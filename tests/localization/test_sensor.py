@@ -9,8 +9,6 @@ from hypothesis import strategies as st
 
 from app.bench import generated_map
 from app.localization.config import FilterConfig
-from app.localization.geometry import wrap_angle
-from app.localization.map import SemanticMap, parse_map
 from app.localization.sensor import (
     candidate_mask,
     log_likelihood_reference,
@@ -25,6 +23,8 @@ from app.localization.tolerances import (
 )
 from app.localization.types import Detection, Pose
 from app.localization.visibility import visibility_grid
+from app.maps.geometry import wrap_angle
+from app.maps.model import SemanticMap, parse_map
 from app.simulation.camera import CameraModel, visible_objects
 from tests.localization.conftest import room
 

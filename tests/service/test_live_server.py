@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 import websockets
 
-from app.localization.map import load_map
 from app.main import create_app
+from app.maps.model import load_map
 from app.resources import bundled_maps_dir
 from app.simulation.scenarios import paper_config
 from app.simulation.simulator import simulate

@@ -21,7 +21,7 @@ from numpy.typing import ArrayLike, NDArray
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from app.localization.fastmath import grid_cells
-from app.localization.geometry import (
+from app.maps.geometry import (
     point_segment_distance,
     points_in_polygon,
     segments_cross_walls,
