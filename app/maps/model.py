@@ -20,8 +20,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
-from app.localization.fastmath import grid_cells
 from app.maps.geometry import (
+    grid_cells,
     point_segment_distance,
     points_in_polygon,
     segments_cross_walls,
