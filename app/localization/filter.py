@@ -360,7 +360,7 @@ def warm_up() -> None:
     Runs each compiled path once on a tiny map, so no request waits for a compiler:
     both sensor configurations, motion with and without odometry (and a move long
     enough for the wall test), resampling, clustering, KLD-sampling and the residual
-    check, and the grid-cell lookup.
+    check.
     """
     from app.maps.model import parse_map
 
@@ -377,7 +377,6 @@ def warm_up() -> None:
         }
     )
     door = [Detection("door", 0.0, 1.0)]
-    tiny.free_space.is_free([1.0], [1.0])  # the array form of the grid-cell lookup
     for cfg in (FilterConfig(particles=50), FilterConfig.paper(particles=50)):
         pf = ParticleFilter(tiny, cfg, rng=np.random.default_rng(0))
         pf.step(Odometry(0.5, 0.0, 0.0), door)

@@ -79,7 +79,7 @@ def _kernel(
             st[i] = f32(s)
         if use_vis:
             for i in range(m):  # the particle's grid cell, clipped onto the grid
-                cell[i] = grid_cell(bx[i], by[i], gx, gy, g_inv, g_rows, g_cols)[0]
+                cell[i] = int(grid_cell(bx[i], by[i], gx, gy, g_inv, g_rows, g_cols)[0])
             for w in range(n_words):
                 b_bits = bits[w]
                 for i in range(m):

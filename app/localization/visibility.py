@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from app.localization.fastmath import grid_cells
+from app.maps.geometry import grid_cells
 from app.maps.model import SemanticMap
 
 #: Upper bound on grid cells x objects (bytes of the boolean table).

@@ -20,12 +20,13 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
-from app.localization.fastmath import grid_cells
 from app.maps.geometry import (
+    grid_cells,
     point_segment_distance,
     points_in_polygon,
     segments_cross_walls,
 )
+from app.resources import bundled_maps_dir as bundled_maps_dir  # re-exported for old imports
 
 #: An object class is a lower-case word: letters, digits, '_' or '-', starting with a letter.
 CLASS_PATTERN = re.compile(r"^[a-z][a-z0-9_-]*$")
@@ -153,11 +154,6 @@ def load_map_dir(directory: str | Path) -> dict[str, SemanticMap]:
     if not d.is_dir():
         raise MapError(f"{d}: not a directory of maps")
     return {m.name: m for m in (load_map(p) for p in sorted(d.glob("*.json")))}
-
-
-def bundled_maps_dir() -> Path:
-    """The repository's ``maps/`` folder shipped with Bearings."""
-    return Path(__file__).resolve().parents[2] / "maps"
 
 
 @dataclass(frozen=True)

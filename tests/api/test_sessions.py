@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 from fastapi.testclient import TestClient
 
-from app.maps.model import bundled_maps_dir, load_map
+from app.maps.model import load_map
+from app.resources import bundled_maps_dir
 from app.simulation.scenarios import paper_config
 from app.simulation.simulator import simulate
 
