@@ -6,7 +6,7 @@ import numpy as np
 from numba import njit
 
 from app.localization.fastmath import FAST, NORMAL_TAIL_SIGMA, fill_normal, sincos, softplus
-from app.localization.visibility import pack_bits
+from app.maps.visibility import pack_bits
 
 
 @njit(fastmath=FAST, error_model="numpy")
