@@ -16,7 +16,8 @@ from app.api.errors import install_error_handlers
 from app.api.limits import BodySizeLimit
 from app.api.routes import health, maps, metrics, sessions, speech
 from app.config import Settings, get_settings
-from app.maps.model import SemanticMap, bundled_maps_dir, load_map_dir
+from app.maps.check import load_map_dirs
+from app.maps.model import SemanticMap, bundled_maps_dir
 from app.service.metrics import Metrics
 from app.service.sessions import SessionManager
 
@@ -26,10 +27,12 @@ STATIC_DIR = Path(__file__).resolve().parents[1] / "static"
 
 
 def load_maps(settings: Settings) -> dict[str, SemanticMap]:
-    """Bundled maps plus every ``--maps`` directory (later directories win on a name clash)."""
-    maps = load_map_dir(bundled_maps_dir())
-    for directory in settings.maps:
-        maps.update(load_map_dir(directory))
+    """Bundled maps plus every ``--maps`` directory (later directories win on a name clash).
+
+    Each map is checked and prepared (grids built or read from the cache) here, at
+    start-up, never inside a request; a file with errors is skipped and logged.
+    """
+    maps, _ = load_map_dirs([bundled_maps_dir(), *settings.maps], cache_dir=settings.cache_dir)
     return maps
 
 
@@ -43,7 +46,7 @@ def create_app(settings: Settings | None = None, *, demo: bool = False) -> FastA
         from app.localization.filter import warm_up
 
         await asyncio.to_thread(warm_up)
-        manager = SessionManager(load_maps(settings), settings, metrics_)
+        manager = SessionManager(await asyncio.to_thread(load_maps, settings), settings, metrics_)
         app.state.manager = manager
         tasks = [asyncio.create_task(manager.run_sweeper())]
         view = None

@@ -10,7 +10,6 @@ structures the filter needs (free space and visibility grids, see
 
 from __future__ import annotations
 
-import json
 import re
 from dataclasses import dataclass, field
 from functools import cached_property
@@ -108,15 +107,22 @@ class MapFile(_Strict):
 
 
 class MapError(ValueError):
-    """A map file that cannot be used; the message says which field and why."""
+    """A map file that cannot be used; the message says which field and why.
+
+    ``fields`` holds each (field, reason) pair when there are several.
+    """
+
+    def __init__(self, message: str, fields: list[tuple[str, str]] | None = None) -> None:
+        super().__init__(message)
+        self.fields = fields or [("(file)", message)]
 
 
-def _format_validation_error(source: str, error: ValidationError) -> str:
-    parts = []
+def _validation_error(source: str, error: ValidationError) -> MapError:
+    fields = []
     for item in error.errors():
         where = ".".join(str(p) for p in item["loc"]) or "(file)"
-        parts.append(f"{where}: {item['msg']}")
-    return f"{source}: " + "; ".join(parts)
+        fields.append((where, str(item["msg"])))
+    return MapError(f"{source}: " + "; ".join(f"{f}: {m}" for f, m in fields), fields)
 
 
 def parse_map(
@@ -130,29 +136,33 @@ def parse_map(
     try:
         spec = MapFile.model_validate(data)
     except ValidationError as exc:
-        raise MapError(_format_validation_error(source, exc)) from None
+        raise _validation_error(source, exc) from None
     if expected_name is not None and spec.name != expected_name:
-        raise MapError(
-            f"{source}: name: {spec.name!r} must equal the file name without .json "
-            f"({expected_name!r})"
-        )
+        reason = f"{spec.name!r} must equal the file name without .json ({expected_name!r})"
+        raise MapError(f"{source}: name: {reason}", [("name", reason)])
     return SemanticMap(spec)
 
 
 def load_map(path: str | Path) -> SemanticMap:
-    """Load and validate one map file; its ``name`` must match the file name."""
-    p = Path(path)
-    try:
-        data = json.loads(p.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise MapError(f"{p}: no such map file") from None
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise MapError(f"{p}: not valid JSON ({exc})") from None
-    return parse_map(data, source=str(p), expected_name=p.stem)
+    """Load and check one map file (:func:`app.maps.check.check_file`).
+
+    Its ``name`` must match the file name. Warnings are dropped (their fixes, such as
+    an object snapped onto a wall, are applied).
+
+    Raises:
+        MapError: with every error found, each naming its field.
+    """
+    from app.maps.check import check_file
+
+    result = check_file(path)
+    if result.map is None:
+        errors = result.errors
+        raise MapError("; ".join(str(p) for p in errors), [(p.field, p.message) for p in errors])
+    return result.map
 
 
 def load_map_dir(directory: str | Path) -> dict[str, SemanticMap]:
-    """Load every ``*.json`` map in a directory, keyed by name (sorted)."""
+    """Load every ``*.json`` map in a directory, keyed by name (sorted); any error raises."""
     d = Path(directory)
     if not d.is_dir():
         raise MapError(f"{d}: not a directory of maps")
