@@ -27,8 +27,10 @@ from app.maps.geometry import point_segment_distance, segments_cross_walls
 from app.maps.model import (
     MOUNT_TOLERANCE_M,
     MapError,
+    MapFile,
     SemanticMap,
     parse_map,
+    validate_spec,
 )
 
 log = logging.getLogger("bearings.maps")
@@ -110,7 +112,7 @@ def _count_problems(source: str, data: object) -> list[Problem]:
     return out
 
 
-def _coordinate_problems(source: str, m: SemanticMap) -> list[Problem]:
+def _coordinate_problems(source: str, spec: MapFile) -> list[Problem]:
     """Coordinates beyond ``MAX_COORDINATE_M`` (reported per field, first few)."""
     out: list[Problem] = []
     limit = MAX_COORDINATE_M
@@ -126,15 +128,19 @@ def _coordinate_problems(source: str, m: SemanticMap) -> list[Problem]:
                     )
                 )
 
-    for i, w in enumerate(m.spec.walls):
+    for i, w in enumerate(spec.walls):
         far((f"walls[{i}].{k}", getattr(w, k)) for k in ("x1", "y1", "x2", "y2"))
-    for i, o in enumerate(m.spec.objects):
+    for i, o in enumerate(spec.objects):
         far((f"objects[{i}].{k}", getattr(o, k)) for k in ("x", "y"))
-    for i, r in enumerate(m.spec.regions):
+    for i, r in enumerate(spec.regions):
         for j, (x, y) in enumerate(r.polygon):
             far(((f"regions[{i}].polygon[{j}]", x), (f"regions[{i}].polygon[{j}]", y)))
-    if out:
-        return out
+    return out
+
+
+def _extent_problems(source: str, m: SemanticMap) -> list[Problem]:
+    """A bounding box wider than ``MAX_EXTENT_M`` (a grid over it would be useless)."""
+    out = []
     x0, y0, x1, y1 = m.bounds
     if max(x1 - x0, y1 - y0) > MAX_EXTENT_M:
         out.append(
@@ -299,12 +305,16 @@ def check_data(
     if problems:
         return CheckResult(source, None, problems)
     try:
-        m = parse_map(data, source=source, expected_name=expected_name)
+        spec = validate_spec(data, source=source, expected_name=expected_name)
     except MapError as exc:
         return CheckResult(
             source, None, [Problem(source, field, text) for field, text in exc.fields]
         )
-    problems = _coordinate_problems(source, m)
+    problems = _coordinate_problems(source, spec)
+    if problems:
+        return CheckResult(source, None, problems)
+    m = SemanticMap(spec)
+    problems = _extent_problems(source, m)
     if problems:
         return CheckResult(source, None, problems)
     problems += _overlapping_walls(source, m.walls)

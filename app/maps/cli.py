@@ -106,7 +106,7 @@ def import_map(args: argparse.Namespace) -> dict[str, object]:
         if args.regions is not None and args.regions.suffix.lower() not in (".json", ".geojson"):
             labels = read_region_image(args.regions, occ)
             regions = [
-                {"name": f"region {value}", "polygon": poly.round(4).tolist()}
+                {"name": f"region #{value:06x}", "polygon": poly.round(4).tolist()}
                 for value, poly in region_polygons(labels, occ)
             ]
         source = f"{args.occupancy.name} ({occ.occupied.shape[1]} x {occ.occupied.shape[0]} px)"

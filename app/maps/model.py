@@ -125,10 +125,10 @@ def _validation_error(source: str, error: ValidationError) -> MapError:
     return MapError(f"{source}: " + "; ".join(f"{f}: {m}" for f, m in fields), fields)
 
 
-def parse_map(
+def validate_spec(
     data: object, *, source: str = "map", expected_name: str | None = None
-) -> SemanticMap:
-    """Validate already-decoded JSON and build a :class:`SemanticMap`.
+) -> MapFile:
+    """Validate already-decoded JSON against the file schema.
 
     Raises:
         MapError: naming the offending field and the reason.
@@ -140,7 +140,18 @@ def parse_map(
     if expected_name is not None and spec.name != expected_name:
         reason = f"{spec.name!r} must equal the file name without .json ({expected_name!r})"
         raise MapError(f"{source}: name: {reason}", [("name", reason)])
-    return SemanticMap(spec)
+    return spec
+
+
+def parse_map(
+    data: object, *, source: str = "map", expected_name: str | None = None
+) -> SemanticMap:
+    """Validate already-decoded JSON and build a :class:`SemanticMap`.
+
+    Raises:
+        MapError: naming the offending field and the reason.
+    """
+    return SemanticMap(validate_spec(data, source=source, expected_name=expected_name))
 
 
 def load_map(path: str | Path) -> SemanticMap:

@@ -306,7 +306,8 @@ def region_polygons(
 def read_region_image(path: str | Path, occ: OccupancyMap) -> NDArray[np.int64]:
     """A room segmentation image as integer labels, same size as the map.
 
-    Each colour (or grey level) other than black and white is one room.
+    Each colour (or grey level) other than black and white is one room, named by its
+    colour (`region #c81e1e`).
     """
     from PIL import Image, UnidentifiedImageError
 
