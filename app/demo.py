@@ -15,10 +15,10 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from app.api.schemas import Frame, SessionCreate
 from app.localization.types import Odometry
 from app.maps.geometry import wrap_angle
 from app.service.sessions import SessionManager, SessionNotFound
+from app.service.types import FrameInput, SensorSpec, SessionSpec
 from app.simulation.simulator import SimFrame, simulate
 from app.simulation.walks import demo_config
 
@@ -34,6 +34,16 @@ class DemoSettings:
     particles: int = 10_000
     seed: int = 0
     speed: float = 1.0  # playback speed; 1.0 is real time
+
+
+def frame_input_of(frame: SimFrame) -> FrameInput:
+    """A simulated frame as the service takes it (the ground truth rides along for the view)."""
+    return FrameInput(
+        timestamp=frame.t,
+        odometry=frame.odometry,
+        detections=tuple(frame.detections),
+        truth=frame.truth,
+    )
 
 
 class DemoWalk:
@@ -81,8 +91,11 @@ class DemoWalk:
     async def run(self) -> None:
         s = self.settings
         session = await self.manager.create(
-            SessionCreate(
-                map=s.map_name, particles=s.particles, seed=s.seed, sensor={"fov_deg": s.fov_deg}
+            SessionSpec(
+                map_name=s.map_name,
+                particles=s.particles,
+                seed=s.seed,
+                sensor=SensorSpec(fov_deg=s.fov_deg),
             )
         )
         self.session_id = session.id
@@ -100,9 +113,8 @@ class DemoWalk:
                 frames, i = self._frames(), 0
                 turn = float(wrap_angle(frames[0].truth.theta_rad - last.theta_rad))
                 frames[0] = replace(frames[0], odometry=Odometry(0.0, 0.0, turn))
-            frame = Frame.model_validate(frames[i].to_contract())
             try:
-                await self.manager.process(session.id, frame)
+                await self.manager.process(session.id, frame_input_of(frames[i]))
             except SessionNotFound:
                 log.info("demo session ended; demo walk stops")
                 return

@@ -8,7 +8,26 @@ from fastapi.responses import JSONResponse
 from pydantic import ValidationError
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
-from app.service.sessions import LimitReached, SessionNotFound, UnknownMap
+from app.service.sessions import (
+    CapacityReached,
+    InvalidSessionSpec,
+    LimitReached,
+    RequestTooLarge,
+    SessionNotFound,
+    UnknownMap,
+)
+
+#: The HTTP status of each service limit: the service says what was hit, the API
+#: decides how HTTP says it.
+LIMIT_STATUS: dict[type[LimitReached], int] = {CapacityReached: 429, RequestTooLarge: 422}
+
+
+def limit_status(exc: LimitReached) -> int:
+    """The status for a service limit (429 for capacity, 422 for an oversized request)."""
+    for kind, status in LIMIT_STATUS.items():
+        if isinstance(exc, kind):
+            return status
+    return 429
 
 
 def describe_validation(errors: list[dict]) -> str:
@@ -57,9 +76,13 @@ def install_error_handlers(app: FastAPI) -> None:
     async def _unknown_map(_: Request, exc: UnknownMap) -> JSONResponse:
         return JSONResponse(status_code=404, content={"detail": str(exc), "message": str(exc)})
 
+    @app.exception_handler(InvalidSessionSpec)
+    async def _invalid_spec(_: Request, exc: InvalidSessionSpec) -> JSONResponse:
+        return JSONResponse(status_code=422, content={"detail": str(exc), "message": str(exc)})
+
     @app.exception_handler(LimitReached)
     async def _limit(_: Request, exc: LimitReached) -> JSONResponse:
         return JSONResponse(
-            status_code=exc.status,
+            status_code=limit_status(exc),
             content={"detail": str(exc), "message": str(exc), "code": exc.code},
         )

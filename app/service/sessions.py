@@ -21,15 +21,14 @@ from datetime import UTC, datetime
 
 import numpy as np
 
-from app.api.schemas import Frame, FrameResult, SessionCreate, SessionOut
 from app.config import Settings
-from app.feedback import FeedbackOptions, Narrator
+from app.feedback import Narrator
 from app.localization.config import FilterConfig
 from app.localization.filter import ParticleFilter
-from app.localization.types import Detection, Estimate, InitialPose, Pose
+from app.localization.types import Detection, Estimate, Pose
 from app.maps.model import SemanticMap
-from app.service.convert import detections_of, frame_result, odometry_of, truth_of
 from app.service.metrics import Metrics
+from app.service.types import FrameInput, FrameOutcome, SessionSpec
 
 log = logging.getLogger("bearings.sessions")
 
@@ -46,17 +45,39 @@ class SessionNotFound(KeyError):
 
 
 class LimitReached(RuntimeError):
-    """A service limit was hit; ``status`` is the HTTP status to answer with."""
+    """A service limit was hit; ``code`` names the limit in a machine-readable word."""
 
-    def __init__(self, message: str, status: int = 429, code: str = "limit") -> None:
+    def __init__(self, message: str, code: str = "limit") -> None:
         super().__init__(message)
-        self.status = status
         self.code = code
+
+
+class CapacityReached(LimitReached):
+    """The service (or a client's share of it) is full now; it may have room later."""
+
+
+class RequestTooLarge(LimitReached):
+    """One request asks for more than the service ever allows (particles, detections)."""
+
+
+class InvalidSessionSpec(ValueError):
+    """A session cannot be built as asked (e.g. a start pose outside the free space)."""
 
 
 class UnknownMap(LookupError):
     def __init__(self, name: str, known: list[str]) -> None:
         super().__init__(f"no map {name!r}; known maps: {', '.join(known) or 'none'}")
+
+
+def unknown_class_warnings(
+    detections: tuple[Detection, ...], semantic_map: SemanticMap
+) -> list[str]:
+    """A warning for each detected class the map lacks (those detections are ignored)."""
+    unknown = sorted({d.cls for d in detections} - set(semantic_map.classes))
+    return [
+        f"class {c!r} is not on map {semantic_map.name!r}; its detections were ignored"
+        for c in unknown
+    ]
 
 
 def log_event(event: str, **fields: object) -> None:
@@ -93,7 +114,7 @@ class Session:
     created_at: datetime
     last_active: float = field(default_factory=time.monotonic)
     frames: int = 0
-    last_result: FrameResult | None = None
+    last_outcome: FrameOutcome | None = None
     last_detections: list[Detection] = field(default_factory=list)
     truth: Pose | None = None
     version: int = 0
@@ -101,19 +122,10 @@ class Session:
     order: asyncio.Lock = field(default_factory=asyncio.Lock)
     state_lock: threading.Lock = field(default_factory=threading.Lock)
 
-    def public(self) -> SessionOut:
-        return SessionOut(
-            id=self.id,
-            map=self.map.name,
-            particles=self.particles,
-            created_at=self.created_at,
-            frames=self.frames,
-            last_result=self.last_result,
-        )
-
-    def process_sync(self, frame: Frame) -> FrameResult:
+    def process_sync(self, frame: FrameInput) -> FrameOutcome:
         """Run one frame through the filter and the narrator (worker thread)."""
-        detections, warnings = detections_of(frame, self.map)
+        detections = list(frame.detections)
+        warnings = unknown_class_warnings(frame.detections, self.map)
         if (
             frame.timestamp is not None
             and self.last_timestamp is not None
@@ -124,7 +136,7 @@ class Session:
                 f"{self.last_timestamp}; frames are processed in the order received"
             )
         with self.state_lock:
-            estimate = self.filter.step(odometry_of(frame), detections)
+            estimate = self.filter.step(frame.odometry, detections)
             feedback = self.narrator.update(
                 estimate,
                 detections,
@@ -133,10 +145,16 @@ class Session:
                 fov_deg=self.filter.config.fov_deg,
             )
             self.frames += 1
-            result = frame_result(self.frames, estimate, feedback, self.map, warnings)
-            self.last_result = result
+            result = FrameOutcome(
+                seq=self.frames,
+                estimate=estimate,
+                feedback=feedback,
+                warnings=tuple(warnings),
+                regions=tuple(self.map.region_at(h.x, h.y) for h in estimate.hypotheses),
+            )
+            self.last_outcome = result
             self.last_detections = detections
-            self.truth = truth_of(frame)
+            self.truth = frame.truth
             if frame.timestamp is not None:
                 self.last_timestamp = frame.timestamp
             self.version += 1
@@ -188,16 +206,15 @@ class SessionManager:
         except KeyError:
             raise SessionNotFound(session_id) from None
 
-    def _build(self, request: SessionCreate) -> Session:
-        if request.map not in self.maps:
-            raise UnknownMap(request.map, sorted(self.maps))
-        semantic_map = self.maps[request.map]
+    def _build(self, request: SessionSpec) -> Session:
+        if request.map_name not in self.maps:
+            raise UnknownMap(request.map_name, sorted(self.maps))
+        semantic_map = self.maps[request.map_name]
         particles = request.particles or self.settings.default_particles
         if particles > self.settings.max_particles:
-            raise LimitReached(
+            raise RequestTooLarge(
                 f"particles: {particles} is more than this service allows "
                 f"({self.settings.max_particles})",
-                status=422,
                 code="too_many_particles",
             )
         sensor = request.sensor
@@ -208,21 +225,17 @@ class SessionManager:
             fov_deg=sensor.fov_deg,
         )
         seed = request.seed if request.seed is not None else secrets.randbits(63)
-        initial = None
-        if request.initial_pose is not None:
-            p = request.initial_pose
-            initial = InitialPose(
-                p.x,
-                p.y,
-                float(np.radians(p.theta_deg)),
-                p.std_xy_m,
-                float(np.radians(p.std_theta_deg)),
+        initial = request.initial_pose
+        if initial is not None and not bool(semantic_map.free_space.is_free(initial.x, initial.y)):
+            raise InvalidSessionSpec(
+                f"initial_pose: ({initial.x:g}, {initial.y:g}) is not in the free space of map "
+                f"{semantic_map.name!r} (inside a wall, outside the building or off the map); "
+                "give a pose where a person can stand, or null for a global start"
             )
         pf = ParticleFilter(
             semantic_map, config, rng=np.random.default_rng(seed), initial_pose=initial
         )
-        fb = request.feedback
-        narrator = Narrator(semantic_map, FeedbackOptions(fb.style, fb.units, fb.max_items))
+        narrator = Narrator(semantic_map, request.feedback)
         return Session(
             id=secrets.token_urlsafe(24),  # 192 random bits
             map=semantic_map,
@@ -232,20 +245,18 @@ class SessionManager:
             created_at=datetime.now(UTC),
         )
 
-    async def create(self, request: SessionCreate) -> Session:
+    async def create(self, request: SessionSpec) -> Session:
         """A new session; the filter is built off the event loop."""
         if len(self._sessions) >= self.settings.max_sessions:
-            raise LimitReached(
+            raise CapacityReached(
                 f"the service already runs its maximum of {self.settings.max_sessions} sessions; "
                 "delete one or try again later",
-                status=429,
                 code="too_many_sessions",
             )
         session = await asyncio.to_thread(self._build, request)
         if len(self._sessions) >= self.settings.max_sessions:  # raced with another create
-            raise LimitReached(
+            raise CapacityReached(
                 f"the service already runs its maximum of {self.settings.max_sessions} sessions",
-                status=429,
                 code="too_many_sessions",
             )
         self._sessions[session.id] = session
@@ -260,14 +271,13 @@ class SessionManager:
         )
         return session
 
-    async def process(self, session_id: str, frame: Frame) -> FrameResult:
+    async def process(self, session_id: str, frame: FrameInput) -> FrameOutcome:
         """Run one frame, strictly after the session's previous ones."""
         session = self.get(session_id)
         if len(frame.detections) > self.settings.max_detections:
-            raise LimitReached(
+            raise RequestTooLarge(
                 f"detections: {len(frame.detections)} detections in one frame; the limit is "
                 f"{self.settings.max_detections}",
-                status=422,
                 code="too_many_detections",
             )
         async with session.order:

@@ -108,8 +108,8 @@ class ViewControls:
         if watched is not None:
             with contextlib.suppress(Exception):
                 s = self.view.manager.get(watched)
-                r = s.last_result
-                state = "converged" if r is not None and r.converged else "searching"
+                r = s.last_outcome
+                state = "converged" if r is not None and r.estimate.converged else "searching"
                 text = f"**{s.map.name}**, {s.frames} frames, {state}"
                 if r is not None and r.feedback.text:
                     text += f"\n\n_{r.feedback.text}_"

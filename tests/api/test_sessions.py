@@ -152,6 +152,16 @@ def test_raw_nan_in_json_is_refused(client: TestClient, session_id: str) -> None
         ({"map": "paper_office", "feedback": {"style": "poetry"}}, 422, "style"),
         ({"map": "paper_office", "feedback": {"units": "cubits"}}, 422, "units"),
         ({"map": "paper_office", "initial_pose": {"x": 1}}, 422, "initial_pose"),
+        (
+            {"map": "paper_office", "initial_pose": {"x": 500, "y": 500, "theta_deg": 0}},
+            422,
+            "not in the free space",
+        ),
+        (
+            {"map": "paper_office", "initial_pose": {"x": -0.5, "y": 3, "theta_deg": 0}},
+            422,
+            "initial_pose",
+        ),
     ],
 )
 def test_bad_session_requests(client: TestClient, body, status, words) -> None:

@@ -9,10 +9,11 @@ import numpy as np
 import pytest
 import viser
 
-from app.api.schemas import Frame, SessionCreate
+from app.demo import frame_input_of
 from app.maps.model import bundled_maps_dir, load_map, load_map_dir
 from app.service.metrics import Metrics
 from app.service.sessions import SessionManager
+from app.service.types import FrameInput, SessionSpec
 from app.simulation.scenarios import paper_config
 from app.simulation.simulator import simulate
 from app.viz.particles import MAX_DRAWN, detection_rays, sample_particles
@@ -60,10 +61,10 @@ def make_manager() -> SessionManager:
 def test_particles_are_sampled_by_weight_and_capped() -> None:
     async def main():
         manager = make_manager()
-        s = await manager.create(SessionCreate(map="paper_office", particles=8000, seed=1))
+        s = await manager.create(SessionSpec(map_name="paper_office", particles=8000, seed=1))
         frames = simulate(OFFICE, paper_config("nominal", 360), np.random.default_rng(1))[:3]
         for f in frames:
-            await manager.process(s.id, Frame.model_validate(f.to_contract()))
+            await manager.process(s.id, frame_input_of(f))
         return s.snapshot()
 
     snap = asyncio.run(main())
@@ -82,10 +83,10 @@ def test_live_view_draws_the_watched_session() -> None:
         view = LiveView(manager, port=free_port(), host="127.0.0.1")
         view.start()
         try:
-            s = await manager.create(SessionCreate(map="paper_office", particles=2000, seed=2))
+            s = await manager.create(SessionSpec(map_name="paper_office", particles=2000, seed=2))
             frames = simulate(OFFICE, paper_config("nominal", 360), np.random.default_rng(2))[:5]
             for f in frames:
-                await manager.process(s.id, Frame.model_validate(f.to_contract()))
+                await manager.process(s.id, frame_input_of(f))
             deadline = time.time() + 10
             while view._last_version != s.version and time.time() < deadline:
                 await asyncio.sleep(0.05)
@@ -93,7 +94,7 @@ def test_live_view_draws_the_watched_session() -> None:
             assert view.controls is not None
             assert s.id in view.controls.session.options
             assert view.refresh() is False  # nothing new: nothing redrawn
-            await manager.process(s.id, Frame())
+            await manager.process(s.id, FrameInput())
             assert view.refresh() is True
             # The GUI's demo button starts a simulated walk and watches it.
             sid = await view.controls.start_walk()

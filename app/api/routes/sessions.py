@@ -7,6 +7,7 @@ import json
 from fastapi import APIRouter, Response, WebSocket, WebSocketDisconnect, status
 from pydantic import ValidationError
 
+from app.api.convert import frame_input, frame_result, session_out, session_spec
 from app.api.deps import ManagerDep
 from app.api.errors import describe_validation
 from app.api.schemas import Frame, FrameResult, SessionCreate, SessionOut
@@ -18,19 +19,19 @@ router = APIRouter(prefix="/sessions", tags=["sessions"])
 @router.post("", status_code=status.HTTP_201_CREATED, response_model=SessionOut)
 async def create_session(body: SessionCreate, manager: ManagerDep) -> SessionOut:
     """Start localizing one person on a map."""
-    return (await manager.create(body)).public()
+    return session_out(await manager.create(session_spec(body)))
 
 
 @router.get("/{session_id}", response_model=SessionOut)
 async def get_session(session_id: str, manager: ManagerDep) -> SessionOut:
     """The session with its latest result (or null)."""
-    return manager.get(session_id).public()
+    return session_out(manager.get(session_id))
 
 
 @router.post("/{session_id}/frames", response_model=FrameResult)
 async def post_frame(session_id: str, frame: Frame, manager: ManagerDep) -> FrameResult:
     """Process one frame; frames of a session are processed strictly in order."""
-    return await manager.process(session_id, frame)
+    return frame_result(await manager.process(session_id, frame_input(frame)))
 
 
 @router.delete("/{session_id}", status_code=status.HTTP_204_NO_CONTENT)
@@ -78,7 +79,7 @@ async def stream(ws: WebSocket, session_id: str) -> None:
                 await _send_error(ws, code, describe_validation(list(exc.errors())))
                 continue
             try:
-                result = await manager.process(session_id, frame)
+                outcome = await manager.process(session_id, frame_input(frame))
             except SessionNotFound as exc:
                 await _send_error(ws, "session_not_found", exc.message)
                 await ws.close(code=status.WS_1008_POLICY_VIOLATION, reason="session ended")
@@ -86,6 +87,6 @@ async def stream(ws: WebSocket, session_id: str) -> None:
             except LimitReached as exc:
                 await _send_error(ws, exc.code, str(exc))
                 continue
-            await ws.send_text(result.model_dump_json(by_alias=True))
+            await ws.send_text(frame_result(outcome).model_dump_json(by_alias=True))
     except WebSocketDisconnect:
         return
