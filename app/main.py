@@ -45,8 +45,12 @@ def create_app(settings: Settings | None = None, *, demo: bool = False) -> FastA
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
         from app.localization.filter import warm_up
 
-        await asyncio.to_thread(warm_up)
-        manager = SessionManager(await asyncio.to_thread(load_maps, settings), settings, metrics_)
+        # Kernels compile (or load from numba's cache) while the maps are checked and
+        # prepared: both release the GIL for most of their work.
+        _, maps_ = await asyncio.gather(
+            asyncio.to_thread(warm_up), asyncio.to_thread(load_maps, settings)
+        )
+        manager = SessionManager(maps_, settings, metrics_)
         app.state.manager = manager
         tasks = [asyncio.create_task(manager.run_sweeper())]
         view = None
