@@ -32,7 +32,6 @@ from app.feedback.phrasing import (
     distance_phrase,
 )
 from app.localization.types import Detection, Estimate
-from app.localization.visibility import visibility_grid
 from app.maps.geometry import wrap_angle
 from app.maps.model import SemanticMap
 
@@ -224,7 +223,7 @@ class Narrator:
         """Objects matched to this frame's detections first, then the nearest visible others."""
         pose_xy = np.array([[estimate.x, estimate.y]])
         # Line of sight from the map's precomputed grid (the cell around the pose).
-        visible = visibility_grid(self.map).visible(estimate.x, estimate.y)[0]
+        visible = self.map.visibility.visible(estimate.x, estimate.y)[0]
         rel = self.map.object_xy - pose_xy
         dist = np.hypot(rel[:, 0], rel[:, 1])
         bearing = wrap_angle(np.arctan2(rel[:, 1], rel[:, 0]) - estimate.theta_rad)

@@ -56,9 +56,9 @@ from app.localization.recovery import sample_from_observation
 from app.localization.resampling import systematic_resample
 from app.localization.sensor import Observation
 from app.localization.types import Hypothesis, Odometry
-from app.localization.visibility import VisibilityGrid
 from app.maps.geometry import wrap_angle
 from app.maps.model import SemanticMap
+from app.maps.visibility import VisibilityGrid
 
 
 @dataclass(frozen=True)

@@ -38,7 +38,6 @@ from app.localization.resampling import (
 )
 from app.localization.sensor import Observation, normalized_residuals, prepare_observation
 from app.localization.types import Detection, Estimate, InitialPose, Odometry
-from app.localization.visibility import visibility_grid
 from app.maps.geometry import wrap_angle
 from app.maps.model import SemanticMap
 
@@ -78,7 +77,7 @@ class ParticleFilter:
         self.map = semantic_map
         self.config = config or FilterConfig()
         self.rng = rng
-        self._vis = visibility_grid(semantic_map) if self.config.visibility else None
+        self._vis = semantic_map.visibility if self.config.visibility else None
         self._recovery = AugmentedMCL(self.config.alpha_slow, self.config.alpha_fast)
         self._gate = ConvergenceGate()
         #: Alternative places and their evidence (None with ``config.evidence`` off).
