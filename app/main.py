@@ -10,11 +10,15 @@ from collections.abc import AsyncIterator
 from pathlib import Path
 
 from fastapi import FastAPI
+from fastapi.middleware.cors import CORSMiddleware
 from fastapi.staticfiles import StaticFiles
 
+from app.api.access import AccessControl, startup_keys
 from app.api.errors import install_error_handlers
 from app.api.limits import BodySizeLimit
+from app.api.redact import install_redaction
 from app.api.routes import health, maps, metrics, sessions, speech
+from app.api.streams import StreamRegistry
 from app.config import Settings, get_settings
 from app.localization.map import SemanticMap, bundled_maps_dir, load_map_dir
 from app.service.metrics import Metrics
@@ -33,9 +37,26 @@ def load_maps(settings: Settings) -> dict[str, SemanticMap]:
     return maps
 
 
+async def drain(app: FastAPI) -> None:
+    """Before the server closes its connections: take no new frames, answer every frame
+    accepted, then close each WebSocket with 1012 and a reason to reconnect."""
+    streams: StreamRegistry = app.state.streams
+    streams.stop_reading()
+    manager = getattr(app.state, "manager", None)
+    if manager is not None:
+        await manager.shutdown()
+    await streams.close_all()
+
+
 def create_app(settings: Settings | None = None, *, demo: bool = False) -> FastAPI:
-    """The service: REST + WebSocket API, metrics, the demo page and (optionally) the view."""
+    """The service: REST + WebSocket API, metrics, the demo page and (optionally) the view.
+
+    Raises :class:`~app.api.access.StartupRefused` when the access settings are unsafe
+    or the key file is bad (docs/SECURITY.md).
+    """
     settings = settings or get_settings()
+    keys = startup_keys(settings)
+    install_redaction()
     metrics_ = Metrics()
 
     @contextlib.asynccontextmanager
@@ -50,13 +71,13 @@ def create_app(settings: Settings | None = None, *, demo: bool = False) -> FastA
         if settings.viser:
             from app.viz import LiveView
 
-            view = LiveView(manager, port=settings.viser_port, host=settings.host)
+            view = LiveView(manager, port=settings.viser_port, host=settings.viser_host)
             view.start()
             app.state.view = view
         if demo:
             from app.demo import run_demo_walk
 
-            tasks.append(asyncio.create_task(run_demo_walk(manager)))
+            tasks.append(asyncio.create_task(run_demo_walk(manager, share_view=True)))
         try:
             yield
         finally:
@@ -78,7 +99,19 @@ def create_app(settings: Settings | None = None, *, demo: bool = False) -> FastA
     app.state.settings = settings
     app.state.metrics = metrics_
     app.state.view = None
+    app.state.keys = keys
+    app.state.streams = StreamRegistry()
     app.add_middleware(BodySizeLimit, max_bytes=settings.max_message_bytes)
+    app.add_middleware(AccessControl, keys=keys, allowed_origins=settings.allowed_origins)
+    if settings.allowed_origins:  # outermost: answers CORS preflights without a key
+        app.add_middleware(
+            CORSMiddleware,
+            allow_origins=settings.allowed_origins,
+            allow_methods=["GET", "POST", "PUT", "DELETE"],
+            allow_headers=["authorization", "content-type"],
+            expose_headers=["retry-after"],
+            max_age=600,
+        )
     install_error_handlers(app)
     for module in (health, metrics, maps, sessions, speech):
         app.include_router(module.router)

@@ -48,6 +48,7 @@ def session_spec(body: SessionCreate) -> SessionSpec:
             class_bearing_std_deg=dict(s.class_bearing_std_deg),
         ),
         feedback=FeedbackOptions(fb.style, fb.units, fb.max_items),
+        share_view=body.share_view,
     )
 
 

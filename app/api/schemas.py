@@ -112,6 +112,11 @@ class SessionCreate(_In):
     )
     sensor: SensorSettings = Field(default_factory=SensorSettings)
     feedback: FeedbackSettings = Field(default_factory=FeedbackSettings)
+    share_view: bool = Field(
+        False,
+        description="addition: list this session in the live view (private by default); "
+        "see docs/SECURITY.md",
+    )
 
 
 # ----------------------------------------------------------------------------- output

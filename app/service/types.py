@@ -31,6 +31,7 @@ class SessionSpec:
 
     ``particles`` and ``seed`` of None take the service's default and a fresh random
     seed; ``initial_pose`` of None starts with no knowledge (global localization).
+    ``share_view`` lists the session in the live view (private by default).
     """
 
     map_name: str
@@ -39,6 +40,7 @@ class SessionSpec:
     initial_pose: InitialPose | None = None
     sensor: SensorSpec = field(default_factory=SensorSpec)
     feedback: FeedbackOptions = field(default_factory=FeedbackOptions)
+    share_view: bool = False
 
 
 @dataclass(frozen=True)

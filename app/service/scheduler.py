@@ -1,0 +1,108 @@
+"""Filter steps on a few threads, shared fairly between clients.
+
+A plain thread pool runs jobs in arrival order, so a client that keeps many heavy
+sessions busy makes everyone else wait behind all of its steps. Here every client
+(API key) has its own queue and the threads take one job from each waiting client in
+turn (round-robin): a light client waits at most for the steps already running, one per
+thread, whatever a heavy client has queued.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections import OrderedDict, deque
+from collections.abc import Callable, Hashable
+from concurrent.futures import Future
+from typing import Any
+
+
+class FairExecutor:
+    """``workers`` threads running submitted callables, round-robin between ``owner`` queues."""
+
+    def __init__(self, workers: int, *, name: str = "step") -> None:
+        self._queues: OrderedDict[Hashable, deque[tuple[Future[Any], Callable[[], Any], float]]]
+        self._queues = OrderedDict()
+        self._cv = threading.Condition()
+        self._stopping = False
+        self._waiting = 0
+        self._running = 0
+        #: Seconds the last started job waited for a thread.
+        self.last_wait_s = 0.0
+        self._threads = [
+            threading.Thread(target=self._work, name=f"{name}-{i}", daemon=True)
+            for i in range(max(1, workers))
+        ]
+        for t in self._threads:
+            t.start()
+
+    @property
+    def waiting(self) -> int:
+        """Jobs submitted and not yet started."""
+        return self._waiting
+
+    @property
+    def running(self) -> int:
+        return self._running
+
+    def submit(self, owner: Hashable, fn: Callable[..., Any], *args: Any) -> Future[Any]:
+        """Queue ``fn(*args)`` behind ``owner``'s earlier jobs; a future of its result."""
+        future: Future[Any] = Future()
+        with self._cv:
+            if self._stopping:
+                raise RuntimeError("the step executor is shut down")
+            queue = self._queues.get(owner)
+            if queue is None:
+                queue = self._queues[owner] = deque()
+            queue.append((future, lambda: fn(*args), time.monotonic()))
+            self._waiting += 1
+            self._cv.notify()
+        return future
+
+    def _next(self) -> tuple[Future[Any], Callable[[], Any], float] | None:
+        with self._cv:
+            while not self._queues and not self._stopping:
+                self._cv.wait()
+            if not self._queues:
+                return None
+            owner, queue = self._queues.popitem(last=False)  # the owner served longest ago
+            job = queue.popleft()
+            if queue:
+                self._queues[owner] = queue  # back of the line
+            self._waiting -= 1
+            self._running += 1
+            return job
+
+    def _work(self) -> None:
+        while True:
+            job = self._next()
+            if job is None:
+                return
+            future, call, queued_at = job
+            self.last_wait_s = time.monotonic() - queued_at
+            try:
+                if future.set_running_or_notify_cancel():
+                    try:
+                        result = call()
+                    except BaseException as exc:
+                        future.set_exception(exc)
+                    else:
+                        future.set_result(result)
+            finally:
+                with self._cv:
+                    self._running -= 1
+
+    def shutdown(self, *, wait: bool = True, cancel_futures: bool = False) -> None:
+        """Stop taking jobs; run (or cancel) the queued ones; with ``wait``, join the threads."""
+        with self._cv:
+            self._stopping = True
+            if cancel_futures:
+                for queue in self._queues.values():
+                    for future, _, _ in queue:
+                        future.cancel()
+                self._queues.clear()
+                self._waiting = 0
+            self._cv.notify_all()
+        if wait:
+            for t in self._threads:
+                t.join()
