@@ -20,7 +20,11 @@ from typing import Any
 class FairExecutor:
     """``workers`` threads running submitted callables, round-robin between ``owner`` queues."""
 
-    def __init__(self, workers: int, *, name: str = "step") -> None:
+    def __init__(
+        self, workers: int, *, max_per_owner: int | None = None, name: str = "step"
+    ) -> None:
+        self.max_per_owner = max(1, max_per_owner or workers)
+        self._running_of: dict[Hashable, int] = {}
         self._queues: OrderedDict[Hashable, deque[tuple[Future[Any], Callable[[], Any], float]]]
         self._queues = OrderedDict()
         self._cv = threading.Condition()
@@ -59,26 +63,35 @@ class FairExecutor:
             self._cv.notify()
         return future
 
-    def _next(self) -> tuple[Future[Any], Callable[[], Any], float] | None:
+    def _next(self) -> tuple[Hashable, tuple[Future[Any], Callable[[], Any], float]] | None:
         with self._cv:
-            while not self._queues and not self._stopping:
+            while True:
+                # The owner served longest ago that is not already using its share of
+                # the threads.
+                owner = next(
+                    (o for o in self._queues if self._running_of.get(o, 0) < self.max_per_owner),
+                    None,
+                )
+                if owner is not None:
+                    break
+                if self._stopping and not self._queues:
+                    return None
                 self._cv.wait()
-            if not self._queues:
-                return None
-            owner, queue = self._queues.popitem(last=False)  # the owner served longest ago
+            queue = self._queues.pop(owner)
             job = queue.popleft()
             if queue:
                 self._queues[owner] = queue  # back of the line
             self._waiting -= 1
             self._running += 1
-            return job
+            self._running_of[owner] = self._running_of.get(owner, 0) + 1
+            return owner, job
 
     def _work(self) -> None:
         while True:
-            job = self._next()
-            if job is None:
+            taken = self._next()
+            if taken is None:
                 return
-            future, call, queued_at = job
+            owner, (future, call, queued_at) = taken
             self.last_wait_s = time.monotonic() - queued_at
             try:
                 if future.set_running_or_notify_cancel():
@@ -91,6 +104,12 @@ class FairExecutor:
             finally:
                 with self._cv:
                     self._running -= 1
+                    left = self._running_of[owner] - 1
+                    if left:
+                        self._running_of[owner] = left
+                    else:
+                        del self._running_of[owner]
+                    self._cv.notify_all()  # an owner at its share may go again
 
     def shutdown(self, *, wait: bool = True, cancel_futures: bool = False) -> None:
         """Stop taking jobs; run (or cancel) the queued ones; with ``wait``, join the threads."""

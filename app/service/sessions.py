@@ -243,8 +243,13 @@ class SessionManager:
         # Filter steps are CPU-bound and release the GIL inside their kernels: one
         # thread per core runs them, so they never crowd out the event loop's thread
         # (a larger pool measured higher latency under load, same throughput), taking
-        # turns between clients so that no client's backlog delays the others.
-        self._steps = FairExecutor(os.cpu_count() or 1, name="step")
+        # turns between clients, and one key uses at most all threads but one, so that
+        # another key's step finds a thread at once (benchmarks/abuse.py).
+        workers = os.cpu_count() or 1
+        per_key = settings.steps_per_key or max(1, workers - 1)
+        self._steps = FairExecutor(
+            workers, max_per_owner=per_key if settings.fair_steps else None, name="step"
+        )
 
     def close(self) -> None:
         """Stop the step threads (at shutdown); steps not started are dropped."""
@@ -435,6 +440,12 @@ class SessionManager:
         """Run one frame, strictly after the session's previous ones (maybe merged with others)."""
         return await self.submit(session_id, frame, owner)
 
+    def _turn_of(self, session: Session) -> str | None:
+        """Whose turn a step counts for: its key, or (open service) the session itself."""
+        if not self.settings.fair_steps:
+            return None  # one queue: arrival order
+        return session.owner if session.owner is not None else session.id
+
     async def _pump(self, session: Session) -> None:
         """Feed the session's waiting frames to the step threads, one step at a time."""
         try:
@@ -446,7 +457,7 @@ class SessionManager:
                     continue
                 started = time.perf_counter()
                 job = self._steps.submit(
-                    session.owner if session.owner is not None else session.id,
+                    self._turn_of(session),
                     session.process_sync,
                     item.frame,
                     item.count,

@@ -89,3 +89,24 @@ def test_fair_executor_passes_exceptions_and_drains_at_shutdown() -> None:
     assert all(f.done() and f.exception() is None for f in slow)
     with pytest.raises(RuntimeError, match="shut down"):
         pool.submit("a", print)
+
+
+def test_one_owner_uses_at_most_its_share_of_the_threads() -> None:
+    pool = FairExecutor(2, max_per_owner=1)
+    gate = threading.Event()
+    running = threading.Semaphore(0)
+
+    def hold() -> None:
+        running.release()
+        gate.wait()
+
+    heavy = [pool.submit("heavy", hold) for _ in range(3)]
+    assert running.acquire(timeout=5)
+    light = pool.submit("light", time.sleep, 0)
+    # The second thread stays free for another owner: the light job runs while heavy waits.
+    assert light.result(timeout=5) is None
+    assert not running.acquire(timeout=0.2)  # still only one heavy job running
+    gate.set()
+    for f in heavy:
+        f.result(timeout=5)
+    pool.shutdown()
