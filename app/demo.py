@@ -15,8 +15,8 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from app.localization.geometry import wrap_angle
 from app.localization.types import Odometry
+from app.maps.geometry import wrap_angle
 from app.service.sessions import LimitReached, SessionManager, SessionNotFound
 from app.service.types import FrameInput, SensorSpec, SessionSpec
 from app.simulation.simulator import SimFrame, simulate

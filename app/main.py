@@ -20,7 +20,7 @@ from app.api.redact import install_redaction
 from app.api.routes import health, maps, metrics, sessions, speech
 from app.api.streams import StreamRegistry
 from app.config import Settings, get_settings
-from app.localization.map import SemanticMap, bundled_maps_dir, load_map_dir
+from app.maps.model import SemanticMap, bundled_maps_dir, load_map_dir
 from app.service.metrics import Metrics
 from app.service.sessions import SessionManager
 

@@ -21,8 +21,8 @@ from app.api.schemas import (
     Uncertainty,
 )
 from app.feedback import FeedbackOptions
-from app.localization.geometry import wrap_deg
 from app.localization.types import Detection, InitialPose, Odometry, Pose
+from app.maps.geometry import wrap_deg
 from app.service.sessions import Session
 from app.service.types import FrameInput, FrameOutcome, SensorSpec, SessionSpec
 

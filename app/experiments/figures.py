@@ -18,8 +18,8 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from app.experiments.runner import Run
-from app.localization.map import SemanticMap
 from app.localization.types import Pose
+from app.maps.model import SemanticMap
 from app.simulation.camera import CameraModel, visible_objects
 
 COLOURS = {180.0: "tab:blue", 270.0: "tab:red", 360.0: "tab:green"}

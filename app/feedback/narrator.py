@@ -31,10 +31,10 @@ from app.feedback.phrasing import (
     direction_phrase,
     distance_phrase,
 )
-from app.localization.geometry import wrap_angle
-from app.localization.map import SemanticMap
 from app.localization.types import Detection, Estimate
 from app.localization.visibility import visibility_grid
+from app.maps.geometry import wrap_angle
+from app.maps.model import SemanticMap
 
 #: Repeat an unchanged announcement after this long (seconds).
 REPEAT_AFTER_S = 60.0

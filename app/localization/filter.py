@@ -18,9 +18,7 @@ from numpy.typing import NDArray
 from app.localization import sensor_kernel
 from app.localization.config import FilterConfig
 from app.localization.estimate import ConvergenceGate, estimate_pose
-from app.localization.geometry import wrap_angle
 from app.localization.kld import kld_sample_size
-from app.localization.map import SemanticMap
 from app.localization.motion import motion_log_penalty, sample_motion
 from app.localization.recovery import AugmentedMCL, sample_from_observation
 from app.localization.resampling import (
@@ -32,6 +30,8 @@ from app.localization.resampling import (
 from app.localization.sensor import Observation, normalized_residuals, prepare_observation
 from app.localization.types import Detection, Estimate, InitialPose, Odometry
 from app.localization.visibility import visibility_grid
+from app.maps.geometry import wrap_angle
+from app.maps.model import SemanticMap
 
 #: Share of a global start's particles drawn from the first observation.
 SEED_SHARE = 0.9
@@ -253,9 +253,9 @@ def warm_up() -> None:
     Runs each compiled path once on a tiny map, so no request waits for a compiler:
     both sensor configurations, motion with and without odometry (and a move long
     enough for the wall test), resampling, clustering, KLD-sampling and the residual
-    check.
+    check, and the grid-cell lookup.
     """
-    from app.localization.map import parse_map
+    from app.maps.model import parse_map
 
     tiny = parse_map(
         {
@@ -270,6 +270,7 @@ def warm_up() -> None:
         }
     )
     door = [Detection("door", 0.0, 1.0)]
+    tiny.free_space.is_free([1.0], [1.0])  # the array form of the grid-cell lookup
     for cfg in (FilterConfig(particles=50), FilterConfig.paper(particles=50)):
         pf = ParticleFilter(tiny, cfg, rng=np.random.default_rng(0))
         pf.step(Odometry(0.5, 0.0, 0.0), door)

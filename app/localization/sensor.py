@@ -40,8 +40,8 @@ from numba import njit
 from numpy.typing import NDArray
 
 from app.localization.config import FilterConfig
-from app.localization.map import SemanticMap
 from app.localization.types import Detection
+from app.maps.model import SemanticMap
 
 
 def scaled_bessel_i0(kappa: float) -> float:

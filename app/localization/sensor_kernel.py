@@ -8,10 +8,11 @@ bearing geometry needs no more) with an offset that pushes an invisible object o
 reach; every detection of the object's class keeps its best match (eq. 3, the cosine
 of the bearing error is a dot product); then the class-weighted, score-tempered
 log-likelihoods are summed (eq. 2). Inner loops run over particles and are branch-free
-so that they vectorize. The result matches the float64 reference within 1e-3 in
-log-likelihood wherever weights matter (float32 leaves a relative error near 1e-6 on
-hopeless particles). Compiled code is cached on disk; :func:`warm_up` compiles it at
-start-up so no request waits.
+so that they vectorize. The result differs from the float64 reference by float32
+rounding only, within the bound that
+:func:`app.localization.tolerances.log_likelihood_tolerance` derives (a few 1e-3 in
+log-likelihood where weights matter). Compiled code is cached on disk;
+:func:`warm_up` compiles it at start-up so no request waits.
 """
 
 from __future__ import annotations
@@ -22,9 +23,9 @@ from numpy.typing import NDArray
 
 from app.localization.config import FilterConfig
 from app.localization.fastmath import FAST, grid_cell, sincos, softplus
-from app.localization.map import SemanticMap
 from app.localization.sensor import Observation
 from app.localization.visibility import VisibilityGrid
+from app.maps.model import SemanticMap
 
 #: Particles per block: the block's working set (unit vectors, best matches of up to
 #: ~20 detections) stays within a 32 KB first-level cache.

@@ -29,8 +29,8 @@ from app.config import Settings
 from app.feedback import Narrator
 from app.localization.config import FilterConfig
 from app.localization.filter import ParticleFilter
-from app.localization.map import SemanticMap
 from app.localization.types import Detection, Estimate, Pose
+from app.maps.model import SemanticMap
 from app.service.access import OPEN, Principal, TokenBucket
 from app.service.metrics import Metrics
 from app.service.queueing import FrameQueue, merged_warning

@@ -12,9 +12,9 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from app.localization.geometry import wrap_angle
-from app.localization.map import SemanticMap
 from app.localization.types import Pose
+from app.maps.geometry import wrap_angle
+from app.maps.model import SemanticMap
 
 
 @dataclass(frozen=True)

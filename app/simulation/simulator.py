@@ -12,9 +12,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from app.localization.geometry import wrap_angle
-from app.localization.map import SemanticMap
 from app.localization.types import Detection, Odometry, Pose
+from app.maps.geometry import wrap_angle
+from app.maps.model import SemanticMap
 from app.simulation.camera import CameraModel, visible_objects
 
 

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from fastapi.testclient import TestClient
 
-from app.localization.map import bundled_maps_dir, load_map
+from app.maps.model import bundled_maps_dir, load_map
 from app.simulation.scenarios import paper_config
 from app.simulation.simulator import simulate
 

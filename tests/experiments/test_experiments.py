@@ -12,8 +12,8 @@ import pytest
 from app.experiments import cli
 from app.experiments.figures import single_frame_crlb_m
 from app.experiments.protocol import PAPER_RESULTS, cells
-from app.localization.map import parse_map
 from app.localization.types import Pose
+from app.maps.model import parse_map
 
 ROW_KEYS = {
     "table", "scenario", "fov_deg", "config", "mean_m", "std_m", "mean_deg", "std_deg",

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from app.localization.map import SemanticMap, bundled_maps_dir, load_map, parse_map
+from app.maps.model import SemanticMap, bundled_maps_dir, load_map, parse_map
 
 
 def room(objects: list[dict], walls: list[dict] | None = None, name: str = "room") -> SemanticMap:

@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 import websockets
 
-from app.localization.map import bundled_maps_dir, load_map
 from app.main import create_app
+from app.maps.model import bundled_maps_dir, load_map
 from app.simulation.scenarios import paper_config
 from app.simulation.simulator import simulate
 from tests.api.conftest import make_settings

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import asyncio
 
-from app.localization.map import bundled_maps_dir, load_map_dir
 from app.localization.types import Detection
+from app.maps.model import bundled_maps_dir, load_map_dir
 from app.service.metrics import Metrics
 from app.service.sessions import SessionManager, SessionNotFound
 from app.service.types import FrameInput, SessionSpec

@@ -20,7 +20,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
-from app.localization.geometry import (
+from app.localization.fastmath import grid_cells
+from app.maps.geometry import (
     point_segment_distance,
     points_in_polygon,
     segments_cross_walls,
@@ -174,13 +175,11 @@ class FreeSpaceGrid:
     free_cells: NDArray[np.int64] = field(repr=False)  # flat indices of free cells
 
     def cell_index(self, x: ArrayLike, y: ArrayLike) -> tuple[NDArray[np.int64], NDArray[np.bool_]]:
-        """Row-major flat cell index for each point and whether it is on the grid."""
-        rows, cols = self.mask.shape
-        c = np.floor((np.asarray(x) - self.origin_x) / self.resolution_m).astype(np.int64)
-        r = np.floor((np.asarray(y) - self.origin_y) / self.resolution_m).astype(np.int64)
-        inside = (c >= 0) & (c < cols) & (r >= 0) & (r < rows)
-        flat = np.where(inside, np.clip(r, 0, rows - 1) * cols + np.clip(c, 0, cols - 1), 0)
-        return flat, inside
+        """Row-major flat cell index for each point and whether it is on the grid.
+
+        Points off the grid get the nearest edge cell (see :func:`grid_cells`).
+        """
+        return grid_cells(x, y, self.origin_x, self.origin_y, self.resolution_m, self.mask.shape)
 
     def is_free(self, x: ArrayLike, y: ArrayLike) -> NDArray[np.bool_]:
         """Whether each point lies in a free cell (False off the grid)."""
