@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import asyncio
 import math
+import threading
 
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -14,6 +16,7 @@ from app.localization.motion import compose_odometry, sample_motion
 from app.localization.tolerances import motion_position_tolerance
 from app.localization.types import Detection, Odometry, Pose
 from app.service.queueing import FrameQueue, merge_frames
+from app.service.sessions import CapacityReached
 from app.service.types import FrameInput, SessionSpec
 from tests.service.test_sessions_expiry import make_manager
 
@@ -121,5 +124,28 @@ def test_a_burst_is_answered_frame_by_frame_with_merge_warnings() -> None:
         assert merged and all(f"{seqs.count(o.seq)} frames" in o.warnings[-1] for o in merged)
         assert session.frames == seqs[-1]
         assert manager.metrics.frames_merged._value.get() == 40 - len(set(seqs))
+
+    asyncio.run(main())
+
+
+def test_new_sessions_are_refused_while_steps_pile_up() -> None:
+    async def main() -> None:
+        manager = make_manager(max_waiting_steps=2)
+        gate = threading.Event()
+        try:
+            # Every step thread busy, and two more steps waiting for one.
+            held = [manager._steps.submit(f"k{i}", gate.wait) for i in range(8)]
+            await asyncio.sleep(0.1)
+            assert manager._steps.waiting >= 2
+            with pytest.raises(CapacityReached) as info:
+                await manager.create(SessionSpec(map_name="paper_office", particles=200))
+            assert info.value.code == "busy" and info.value.retry_after_s == 1.0
+            gate.set()
+            for f in held:
+                f.result(timeout=5)
+            await manager.create(SessionSpec(map_name="paper_office", particles=200))
+        finally:
+            gate.set()
+            manager.close()
 
     asyncio.run(main())
