@@ -37,14 +37,18 @@ def load_maps(settings: Settings) -> dict[str, SemanticMap]:
     return maps
 
 
-async def drain(app: FastAPI) -> None:
+async def drain(app: FastAPI, timeout_s: float = 30.0) -> None:
     """Before the server closes its connections: take no new frames, answer every frame
-    accepted, then close each WebSocket with 1012 and a reason to reconnect."""
+    accepted (waiting at most ``timeout_s``), then close each WebSocket with 1012 and a
+    reason to reconnect."""
     streams: StreamRegistry = app.state.streams
     streams.stop_reading()
     manager = getattr(app.state, "manager", None)
     if manager is not None:
-        await manager.shutdown()
+        try:
+            await asyncio.wait_for(manager.shutdown(), timeout_s)
+        except TimeoutError:
+            log.error("frames still unanswered after %.0f s of shutdown; closing anyway", timeout_s)
     await streams.close_all()
 
 

@@ -16,6 +16,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import json
+import logging
 from typing import Any
 
 from fastapi import WebSocket, WebSocketDisconnect
@@ -28,7 +29,10 @@ from app.service.access import Principal
 from app.service.sessions import LimitReached, SessionManager, SessionNotFound
 from app.service.types import FrameOutcome
 
+log = logging.getLogger("bearings.streams")
+
 MAX_UNANSWERED = 64
+WRITER_GRACE_S = 10.0
 RESTART_CODE = 1012
 RESTART_REASON = "service restarting: reconnect and resend any frame not answered"
 _END = object()
@@ -80,8 +84,10 @@ class Stream:
         self.stop_reading()
         if self._writer is not None:
             self._answers.put_nowait(_END)
-            with contextlib.suppress(asyncio.CancelledError, Exception):
-                await self._writer
+            # The answers normally went out while the service drained; never wait forever.
+            _, pending = await asyncio.wait({self._writer}, timeout=WRITER_GRACE_S)
+            for task in pending:
+                task.cancel()
         try:
             with contextlib.suppress(Exception):
                 await self.ws.close(code=code, reason=reason)
@@ -158,6 +164,9 @@ class Stream:
                     body = limit_body(exc)
                     code, message = str(body.pop("code")), str(body.pop("message"))
                     text = error_message(code, message, **body)
+                except Exception:  # a bug must not end the stream or lose later answers
+                    log.exception("a frame of a stream could not be processed")
+                    text = error_message("internal_error", "this frame could not be processed")
                 else:
                     if cache is None or cache[0] is not outcome:
                         cache = (outcome, frame_result(outcome).model_dump_json(by_alias=True))

@@ -68,11 +68,11 @@ class FairExecutor:
             while True:
                 # The owner served longest ago that is not already using its share of
                 # the threads.
-                owner = next(
-                    (o for o in self._queues if self._running_of.get(o, 0) < self.max_per_owner),
-                    None,
-                )
-                if owner is not None:
+                eligible = [
+                    o for o in self._queues if self._running_of.get(o, 0) < self.max_per_owner
+                ]
+                if eligible:
+                    owner = eligible[0]
                     break
                 if self._stopping and not self._queues:
                     return None

@@ -110,3 +110,9 @@ def test_one_owner_uses_at_most_its_share_of_the_threads() -> None:
     for f in heavy:
         f.result(timeout=5)
     pool.shutdown()
+
+
+def test_any_hashable_owner_even_none() -> None:
+    pool = FairExecutor(2)
+    assert [pool.submit(None, pow, 2, i).result(timeout=5) for i in range(3)] == [1, 2, 4]
+    pool.shutdown()
