@@ -5,8 +5,8 @@ Checkpoints of a session (:mod:`app.service.checkpoint`) carry value types such 
 Rather than one hand-written converter per type, :func:`to_plain` walks a dataclass's
 fields and :func:`from_plain` rebuilds it from its type hints, so a field added to one
 of those types later is carried without touching this module. Only what the types use
-is supported: dataclasses, tuples, lists, dicts with string keys, ``X | None``, and
-numbers, strings and booleans. Non-finite floats pass through as ``NaN``/``Infinity``
+is supported: dataclasses, tuples, lists, dicts with string keys, ``X | None``, numpy
+arrays, and numbers, strings and booleans. Non-finite floats pass through as ``NaN``/``Infinity``
 (Python's JSON reads and writes them).
 """
 
@@ -19,11 +19,16 @@ import typing
 from collections.abc import Mapping
 from typing import Any, TypeVar, Union
 
+import numpy as np
+
 T = TypeVar("T")
 
 
 def to_plain(value: Any) -> Any:
-    """``value`` as nested dicts, lists, numbers and strings."""
+    """``value`` as nested dicts, lists, numbers and strings (numpy arrays stay arrays:
+    :func:`app.service.checkpoint.pack` stores them as raw bytes)."""
+    if isinstance(value, np.ndarray):
+        return value
     if dataclasses.is_dataclass(value) and not isinstance(value, type):
         return {f.name: to_plain(getattr(value, f.name)) for f in dataclasses.fields(value)}
     if isinstance(value, tuple | list):
@@ -53,6 +58,8 @@ def from_plain(kind: Any, data: Any) -> Any:
             except (TypeError, ValueError, KeyError):
                 continue
         raise ValueError(f"{data!r} fits none of {options}")
+    if kind is np.ndarray or origin is np.ndarray:
+        return np.array(data)  # a writable copy
     if dataclasses.is_dataclass(kind):
         if not isinstance(data, Mapping):
             raise TypeError(f"{kind.__name__}: expected an object, got {type(data).__name__}")

@@ -26,6 +26,9 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from app.feedback.guidance import GuidanceSpeaker
+from app.guidance.planner import Plan
+from app.guidance.targets import Target
 from app.localization.types import Detection, Pose
 from app.service.types import FrameInput, FrameOutcome, SessionSpec
 from app.state import from_plain, to_plain
@@ -104,6 +107,7 @@ def capture(session: Session) -> dict[str, Any]:
     creation) builds, so its filter and narrator are left out.
     """
     fresh = session.frames == 0
+    plan = session.destination
     return {
         "format": FORMAT_VERSION,
         "id": session.id,
@@ -111,6 +115,10 @@ def capture(session: Session) -> dict[str, Any]:
         "created_at": session.created_at.isoformat(),
         "particles": session.particles,
         "frames": session.frames,
+        "owner": session.owner,
+        "shared": session.shared,
+        "speaker": to_plain(session.speaker),
+        "destination": None if plan is None else to_plain(plan.target),
         "last_timestamp": session.last_timestamp,
         "last_outcome": to_plain(session.last_outcome),
         "last_detections": to_plain(session.last_detections),
@@ -137,6 +145,11 @@ def apply(session: Session, state: Mapping[str, Any]) -> None:
     if state["narrator"] is not None:
         session.narrator.restore(state["narrator"])
     session.frames = int(state["frames"])
+    session.owner = state["owner"]
+    session.shared = bool(state["shared"])
+    session.speaker = from_plain(GuidanceSpeaker, state["speaker"])
+    if state["destination"] is not None:
+        session.destination = Plan(session.map, from_plain(Target, state["destination"]))
     session.last_timestamp = state["last_timestamp"]
     session.last_outcome = from_plain(FrameOutcome | None, state["last_outcome"])
     session.last_detections = from_plain(list[Detection], state["last_detections"])
@@ -144,11 +157,14 @@ def apply(session: Session, state: Mapping[str, Any]) -> None:
     session.version += 1
 
 
-def encode_frame(seq: int, frame: FrameInput) -> bytes:
-    """One journal entry: the frame's sequence number, then the frame as JSON."""
-    return b"%d|" % seq + json.dumps(to_plain(frame), separators=(",", ":")).encode()
+def encode_frame(seq: int, frame: FrameInput, merged: int = 1) -> bytes:
+    """One journal entry: the step's sequence number, then the frame (``merged`` frames
+    merged into one) as JSON."""
+    body = {"frame": to_plain(frame), "merged": merged}
+    return b"%d|" % seq + json.dumps(body, separators=(",", ":")).encode()
 
 
-def decode_frame(entry: bytes) -> tuple[int, FrameInput]:
-    seq, _, body = entry.partition(b"|")
-    return int(seq), from_plain(FrameInput, json.loads(body))
+def decode_frame(entry: bytes) -> tuple[int, FrameInput, int]:
+    seq, _, raw = entry.partition(b"|")
+    body = json.loads(raw)
+    return int(seq), from_plain(FrameInput, body["frame"]), int(body["merged"])

@@ -166,10 +166,7 @@ class SessionSharing:
             data, journal = await self._run(self.store.load, sid)
             if data is None:
                 raise not_found(sid)
-            loop = asyncio.get_running_loop()
-            session, replayed = await loop.run_in_executor(
-                self.manager._steps, self._restore, sid, data, journal
-            )
+            session, replayed = await self._run(self._restore, sid, data, journal)
         except BaseException:
             await self._run(self.store.release, [sid], self.owner)
             raise
@@ -180,7 +177,7 @@ class SessionSharing:
 
         log_event(
             "session_resumed",
-            session=sid[:8],
+            tag=session.tag,
             frames=session.frames,
             replayed=replayed,
             lease_wait_s=round(leased - started, 3),
@@ -199,26 +196,25 @@ class SessionSharing:
         checkpoint.apply(session, state)
         replayed = 0
         for entry in journal:
-            seq, frame = checkpoint.decode_frame(entry)
+            seq, frame, merged = checkpoint.decode_frame(entry)
             if seq <= session.frames:
                 continue
             if seq != session.frames + 1:
                 log.warning("journal gap after frame %d; replay stops there", session.frames)
                 break
-            session.process_sync(frame)
+            session.process_sync(frame, merged)
             replayed += 1
         return session, replayed
 
     # ------------------------------------------------------------------- frames
     @staticmethod
-    def entry(seq: int, frame: FrameInput) -> bytes:
-        return checkpoint.encode_frame(seq, frame)
+    def entry(seq: int, frame: FrameInput, merged: int = 1) -> bytes:
+        return checkpoint.encode_frame(seq, frame, merged)
 
     async def journal(self, session: Session, entry: bytes) -> bool:
-        """Store one answered frame's entry; False if this worker no longer holds the
-        session (its lease ran out while it stalled, or another worker has it): the
-        step is then not kept, and the caller runs the frame again on the stored state."""
-        done = self.store.append(session.id, entry, self.owner, self.idle_timeout_s)
+        """Store one answered frame's entry; False if another worker has the session
+        now (then this copy is dropped, and the step with it)."""
+        done = self.store.append(session.id, entry, self.owner, self.idle_timeout_s, self.lease_s)
         if await asyncio.wrap_future(done):
             return True
         self._drop(session, "lease_lost")
@@ -239,7 +235,7 @@ class SessionSharing:
         """Checkpoint a session and release it now (its WebSocket closed: the client may
         come back through another worker, which then need not wait)."""
         session = self.manager._sessions.get(session_id)
-        if session is None or session.order.locked() or self.stopping:
+        if session is None or session.busy or self.stopping:
             return
         self._releasing.add(session_id)
         try:
@@ -302,14 +298,12 @@ class SessionSharing:
         for sid in lost:
             session = manager._sessions.get(sid)
             # A step in flight finds out itself, as it journals.
-            if session is not None and not session.order.locked():
+            if session is not None and not session.busy:
                 self._drop(session, "lease_lost")
         sessions = manager.sessions()
         now = time.monotonic()
         live = sessions
-        idle = [
-            s for s in live if now - s.last_active > self.handoff_idle_s and not s.order.locked()
-        ]
+        idle = [s for s in live if now - s.last_active > self.handoff_idle_s and not s.busy]
         due = now - self._saved_at >= self.checkpoint_interval_s
         changed = [s for s in live if self._saved.get(s.id) != s.version and (due or s in idle)]
         if due:
@@ -318,7 +312,7 @@ class SessionSharing:
             self._drop(session, "lease_lost")
         # Let idle sessions go, unless a frame arrived while they were being saved.
         gone = [s for s in idle if now - s.last_active > self.handoff_idle_s]
-        gone = [s for s in gone if self._saved.get(s.id) == s.version and not s.order.locked()]
+        gone = [s for s in gone if self._saved.get(s.id) == s.version and not s.busy]
         ids = [s.id for s in gone]
         self._releasing.update(ids)
         try:
@@ -334,18 +328,21 @@ class SessionSharing:
         if reason is not None:
             from app.service.sessions import log_event
 
-            log_event(f"session_{reason}", session=session.id[:8], frames=session.frames)
+            log_event(f"session_{reason}", tag=session.tag, frames=session.frames)
 
     async def shutdown(self) -> None:
-        """Checkpoint every session and release its lease (SIGTERM, clean stop)."""
+        """Checkpoint every session and release its lease (SIGTERM, clean stop).
+
+        Runs after the manager answered every frame it accepted (no step in flight).
+        """
         self.stopping = True
         sessions = self.manager.sessions()
-        for session in sessions:  # let a step in flight finish first
-            async with session.order:
-                self.manager.forget(session)
+        for session in sessions:
+            self.manager.forget(session)
         await self.save(sessions)
         await self._run(self.store.release, [s.id for s in sessions], self.owner)
-        log.info("checkpointed %d sessions and released their leases", len(sessions))
+        if sessions:
+            log.info("checkpointed %d sessions and released their leases", len(sessions))
 
     def close(self) -> None:
         self._io.shutdown(wait=True)

@@ -71,8 +71,14 @@ class SessionStore(Protocol):
         lease, drop the journal entries they cover; False where the lease was lost."""
         ...
 
-    def append(self, session_id: str, entry: bytes, owner: str, ttl_s: float) -> Future[bool]:
-        """Add a journal entry; the future says True once it is stored (False: lease lost)."""
+    def append(
+        self, session_id: str, entry: bytes, owner: str, ttl_s: float, lease_s: float
+    ) -> Future[bool]:
+        """Add a journal entry; the future says True once it is stored.
+
+        A lease that ran out (the owner stalled) is taken back first when nobody went on
+        with the session meanwhile: the stored frames end right before this entry's.
+        False: another owner has the session."""
         ...
 
     def delete(self, session_id: str) -> None:
@@ -163,10 +169,22 @@ class MemoryStore:
                 self._put(f"{sid}:journal", kept, ttl_s)
         return out
 
-    def append(self, session_id: str, entry: bytes, owner: str, ttl_s: float) -> Future[bool]:
+    def _last_frame(self, session_id: str) -> int:
+        journal = self._get(f"{session_id}:journal") or []
+        stored = self._get(f"{session_id}:ckpt:frames")
+        last = -1 if stored is None else int(stored)  # type: ignore[call-overload]
+        return max([last, *(_seq(e) for e in journal)])  # type: ignore[attr-defined]
+
+    def append(
+        self, session_id: str, entry: bytes, owner: str, ttl_s: float, lease_s: float
+    ) -> Future[bool]:
         done: Future[bool] = Future()
         with self._lock:
-            ok = self._get(f"{session_id}:lease") == owner
+            holder = self._get(f"{session_id}:lease")
+            ok = holder == owner
+            if holder is None and self._last_frame(session_id) == _seq(entry) - 1:
+                self._put(f"{session_id}:lease", owner, lease_s)  # taken back
+                ok = True
             if ok:
                 journal = self._get(f"{session_id}:journal") or []
                 self._put(f"{session_id}:journal", [*journal, entry], ttl_s)  # type: ignore[misc]
@@ -233,13 +251,25 @@ for i = 1, #KEYS / 3 do
 end
 return out
 """
-# KEYS: lease, ckpt, journal per entry; ARGV: token, ttl_ms, then one entry each.
+# KEYS: lease, ckpt, journal per entry; ARGV: token, ttl_ms, lease_ms, then one entry
+# each. A lapsed lease is taken back if the stored frames end right before the entry.
 _APPEND = """
 local out = {}
 for i = 1, #KEYS / 3 do
   local lease, ckpt, journal = KEYS[3*i-2], KEYS[3*i-1], KEYS[3*i]
-  if redis.call('GET', lease) == ARGV[1] then
-    redis.call('RPUSH', journal, ARGV[i+2])
+  local entry = ARGV[i+3]
+  local holder = redis.call('GET', lease)
+  if not holder then
+    local last = tonumber(redis.call('GET', ckpt .. ':frames') or '-1')
+    local tail = redis.call('LINDEX', journal, -1)
+    if tail then last = math.max(last, tonumber(string.match(tail, '^(%d+)|'))) end
+    if last == tonumber(string.match(entry, '^(%d+)|')) - 1 then
+      redis.call('SET', lease, ARGV[1], 'PX', ARGV[3])
+      holder = ARGV[1]
+    end
+  end
+  if holder == ARGV[1] then
+    redis.call('RPUSH', journal, entry)
     redis.call('PEXPIRE', journal, ARGV[2])
     redis.call('PEXPIRE', ckpt, ARGV[2])
     redis.call('PEXPIRE', ckpt .. ':frames', ARGV[2])
@@ -274,14 +304,16 @@ def redacted(url: str) -> str:
 class _GroupCommit:
     """One thread writes the journal entries of all sessions, many per round trip."""
 
-    def __init__(self, write: Callable[[list[tuple[str, bytes, str, int]]], list[bool]]) -> None:
+    def __init__(
+        self, write: Callable[[list[tuple[str, bytes, str, int, int]]], list[bool]]
+    ) -> None:
         self._write = write
-        self._queue: queue.SimpleQueue[tuple[tuple[str, bytes, str, int], Future[bool]] | None]
+        self._queue: queue.SimpleQueue[tuple[tuple[str, bytes, str, int, int], Future[bool]] | None]
         self._queue = queue.SimpleQueue()
         self._thread = threading.Thread(target=self._run, name="store-journal", daemon=True)
         self._thread.start()
 
-    def submit(self, item: tuple[str, bytes, str, int]) -> Future[bool]:
+    def submit(self, item: tuple[str, bytes, str, int, int]) -> Future[bool]:
         done: Future[bool] = Future()
         self._queue.put((item, done))
         return done
@@ -375,18 +407,20 @@ class RedisStore:
             out += [bool(v) for v in self._save(keys=keys, args=args)]
         return out
 
-    def append(self, session_id: str, entry: bytes, owner: str, ttl_s: float) -> Future[bool]:
-        return self._journal.submit((session_id, entry, owner, _ms(ttl_s)))
+    def append(
+        self, session_id: str, entry: bytes, owner: str, ttl_s: float, lease_s: float
+    ) -> Future[bool]:
+        return self._journal.submit((session_id, entry, owner, _ms(ttl_s), _ms(lease_s)))
 
-    def _write_entries(self, batch: list[tuple[str, bytes, str, int]]) -> list[bool]:
-        # One script call per (owner, ttl): in practice one per batch.
+    def _write_entries(self, batch: list[tuple[str, bytes, str, int, int]]) -> list[bool]:
+        # One script call per (owner, ttl, lease): in practice one per batch.
         results: dict[int, bool] = {}
-        groups: dict[tuple[str, int], list[int]] = {}
-        for i, (_, _, owner, ttl) in enumerate(batch):
-            groups.setdefault((owner, ttl), []).append(i)
-        for (owner, ttl), rows in groups.items():
+        groups: dict[tuple[str, int, int], list[int]] = {}
+        for i, (_, _, owner, ttl, lease) in enumerate(batch):
+            groups.setdefault((owner, ttl, lease), []).append(i)
+        for (owner, ttl, lease), rows in groups.items():
             keys = [k for i in rows for k in _keys(batch[i][0])]
-            args: list[object] = [owner, ttl, *(batch[i][1] for i in rows)]
+            args: list[object] = [owner, ttl, lease, *(batch[i][1] for i in rows)]
             for i, v in zip(rows, self._append(keys=keys, args=args), strict=True):
                 results[i] = bool(v)
         return [results[i] for i in range(len(batch))]

@@ -15,8 +15,9 @@ import pytest
 from app.feedback import FeedbackOptions, Narrator
 from app.localization.config import FilterConfig
 from app.localization.filter import CHECKPOINT_PARTICLES, ParticleFilter
-from app.localization.map import bundled_maps_dir, load_map
 from app.localization.types import InitialPose
+from app.maps.model import load_map
+from app.resources import bundled_maps_dir
 from app.service import checkpoint
 from app.service.metrics import Metrics
 from app.service.sessions import SessionManager, SessionNotFound, SessionUnavailable
@@ -69,7 +70,7 @@ def test_filter_restored_from_its_checkpoint_goes_on_the_same_way() -> None:
         a.step(WALK[i].odometry, WALK[i].detections)
     assert a.estimate.converged and a.n <= CHECKPOINT_PARTICLES
     data = checkpoint.pack({"format": 1, "filter": a.checkpoint()})
-    assert len(data) < 40_000
+    assert len(data) < 64_000  # "a few tens of KB" (docs/SCALE.md sizes Redis with it)
     b = ParticleFilter(OFFICE, config, rng=np.random.default_rng(99))
     b.restore(checkpoint.unpack(data)["filter"])
     assert b.estimate == a.estimate and b.n == a.n
@@ -174,8 +175,11 @@ def test_a_worker_that_lost_its_lease_never_forks_the_session() -> None:
         await asyncio.sleep(0.35)  # A stalls past its lease; B takes the session on
         assert (await b.process(sid, frame(3))).seq == 4
         await asyncio.sleep(0.35)  # ... and goes quiet (its lease runs out too)
-        # A's copy (3 frames) is stale: its step is refused by the store, A drops the
-        # copy and runs the frame again on the stored state, after B's frame.
+        # A's copy (3 frames) is stale: its step is refused by the store (no fork), A
+        # drops the copy; sent again, the frame runs on the stored state, after B's.
+        with pytest.raises(SessionUnavailable, match="another worker"):
+            await a.process(sid, frame(4))
+        assert sid not in {s.id for s in a.sessions()}
         out = await a.process(sid, frame(4))
         assert out.seq == 5 and a.get(sid) is not stale
         assert a.metrics.sessions_resumed._value.get() == 2

@@ -36,7 +36,8 @@ import numpy as np
 import pytest
 import websockets
 
-from app.localization.map import bundled_maps_dir, load_map
+from app.maps.model import load_map
+from app.resources import bundled_maps_dir
 from app.simulation.scenarios import PAPER_PATH, paper_config
 from app.simulation.simulator import simulate
 from tests.support import free_port, need_binary, redis_server, wait_for_port

@@ -57,11 +57,12 @@ def test_one_lease_at_a_time_and_it_runs_out(store: SessionStore) -> None:
 
 def test_writes_need_the_lease(store: SessionStore) -> None:
     assert store.save([("s1", b"ckpt", 0)], "w1", 60) == [False]
-    assert not store.append("s1", b"1|{}", "w1", 60).result(5)
+    assert not store.append("s1", b"1|{}", "w1", 60, 5).result(5)
     assert store.load("s1") == (None, [])
     assert store.acquire("s1", "w1", 5)
     assert store.save([("s1", b"ckpt-0", 0)], "w1", 60) == [True]
-    assert [store.append("s1", b"%d|{}" % i, "w1", 60).result(5) for i in (1, 2, 3)] == [True] * 3
+    stored = [store.append("s1", b"%d|{}" % i, "w1", 60, 5).result(5) for i in (1, 2, 3)]
+    assert stored == [True] * 3
     assert store.load("s1") == (b"ckpt-0", [b"1|{}", b"2|{}", b"3|{}"])
     # A checkpoint covering frame 2 drops the entries it covers, keeps the rest.
     assert store.save([("s1", b"ckpt-2", 2)], "w1", 60) == [True]
@@ -69,17 +70,33 @@ def test_writes_need_the_lease(store: SessionStore) -> None:
     assert store.save([("s1", b"other", 9)], "w2", 60) == [False]
     assert store.load("s1")[0] == b"ckpt-2"
     # Two writes overtaking each other: the older checkpoint does not replace the newer.
-    assert store.append("s1", b"4|{}", "w1", 60).result(5)
+    assert store.append("s1", b"4|{}", "w1", 60, 5).result(5)
     assert store.save([("s1", b"ckpt-4", 4)], "w1", 60) == [True]
     assert store.save([("s1", b"ckpt-3", 3)], "w1", 60) == [True]
     assert store.load("s1") == (b"ckpt-4", [])
+
+
+def test_a_lapsed_lease_is_taken_back_only_if_nobody_went_on(store: SessionStore) -> None:
+    assert store.acquire("s1", "w1", 0.2)
+    assert store.save([("s1", b"ckpt-2", 2)], "w1", 60) == [True]
+    assert store.append("s1", b"3|{}", "w1", 60, 0.2).result(5)
+    time.sleep(0.3)  # w1 stalled: its lease ran out, nobody took the session
+    assert store.append("s1", b"4|{}", "w1", 60, 5).result(5)  # frames end at 3: ok
+    assert not store.acquire("s1", "w2", 5)  # and w1 holds the lease again
+    store.release(["s1"], "w1")
+    assert store.acquire("s1", "w2", 5)
+    assert store.append("s1", b"5|{}", "w2", 60, 5).result(5)
+    store.release(["s1"], "w2")
+    # w1 comes back with a copy that missed frame 5: refused, no fork.
+    assert not store.append("s1", b"5|{}", "w1", 60, 5).result(5)
+    assert store.load("s1")[1] == [b"3|{}", b"4|{}", b"5|{}"]
 
 
 def test_journal_entries_from_many_sessions_in_one_round_trip(store: SessionStore) -> None:
     ids = [f"s{i}" for i in range(50)]
     for sid in ids:
         assert store.acquire(sid, "w1", 5)
-    done = [store.append(sid, b"1|x", "w1", 60) for sid in ids for _ in range(3)]
+    done = [store.append(sid, b"1|x", "w1", 60, 5) for sid in ids for _ in range(3)]
     assert all(f.result(5) for f in done)
     assert all(len(store.load(sid)[1]) == 3 for sid in ids)
 
@@ -87,7 +104,7 @@ def test_journal_entries_from_many_sessions_in_one_round_trip(store: SessionStor
 def test_checkpoints_expire_after_the_idle_timeout(store: SessionStore) -> None:
     assert store.acquire("s1", "w1", 5)
     assert store.save([("s1", b"ckpt", 0)], "w1", 0.3) == [True]
-    assert store.append("s1", b"1|{}", "w1", 0.3).result(5)
+    assert store.append("s1", b"1|{}", "w1", 0.3, 5).result(5)
     time.sleep(0.45)
     assert store.load("s1") == (None, [])
 
