@@ -25,6 +25,7 @@ from pydantic import ValidationError
 from app.api.convert import frame_input, frame_result
 from app.api.errors import describe_validation, limit_body
 from app.api.schemas import Frame
+from app.localization.camera import BoxError
 from app.service.access import Principal
 from app.service.sessions import LimitReached, SessionManager, SessionNotFound
 from app.service.types import FrameOutcome
@@ -129,7 +130,13 @@ class Stream:
                 self._answer_now(error_message(code, describe_validation(list(exc.errors()))))
                 continue
             try:
-                future = self.manager.submit(self.session_id, frame_input(frame), self.owner)
+                camera = self.manager.get(self.session_id, self.owner).camera
+                future = self.manager.submit(
+                    self.session_id, frame_input(frame, camera), self.owner
+                )
+            except BoxError as exc:
+                self._answer_now(error_message("invalid_frame", str(exc)))
+                continue
             except SessionNotFound as exc:
                 self._answer_now(error_message("session_not_found", exc.message))
                 self._answers.put_nowait(("close", 1008, "session ended"))

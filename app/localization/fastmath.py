@@ -20,7 +20,9 @@ from statistics import NormalDist
 
 import numpy as np
 from numba import njit
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import NDArray
+
+from app.maps.geometry import grid_cell as _grid_cell_arithmetic
 
 #: Compiler liberties every kernel takes: no signed zeros, reciprocals, fused
 #: multiply-add, fast approximate functions and reassociation (which vectorizes
@@ -54,51 +56,9 @@ def sincos(t: float) -> tuple[float, float]:  # pragma: no cover - compiled
     return sin_t, cos_t
 
 
-@njit(cache=True, inline="always", error_model="numpy")
-def grid_cell(x, y, origin_x, origin_y, inv_res, rows, cols):  # fmt: skip  # pragma: no cover
-    """(row-major flat index of the cell holding (x, y), clipped onto the grid; inside?).
-
-    The one grid-cell lookup: the compiled kernels call it per point and
-    :func:`grid_cells` (behind :meth:`VisibilityGrid.cells` and
-    :meth:`FreeSpaceGrid.cell_index`) per array, so every caller puts a point on a cell
-    boundary into the same cell. Branch-free so that the loops calling it vectorize.
-    """
-    fc = np.floor((x - origin_x) * inv_res)
-    fr = np.floor((y - origin_y) * inv_res)
-    inside = (fc >= 0.0) & (fc < cols) & (fr >= 0.0) & (fr < rows)
-    c = min(max(fc, 0.0), cols - 1.0)
-    r = min(max(fr, 0.0), rows - 1.0)
-    return int(r * cols + c), inside
-
-
-@njit(cache=True, nogil=True, error_model="numpy")
-def _grid_cells(x, y, origin_x, origin_y, inv_res, rows, cols, cells, inside):  # fmt: skip
-    for i in range(x.shape[0]):
-        cells[i], inside[i] = grid_cell(x[i], y[i], origin_x, origin_y, inv_res, rows, cols)
-
-
-def grid_cells(
-    x: ArrayLike,
-    y: ArrayLike,
-    origin_x: float,
-    origin_y: float,
-    resolution_m: float,
-    shape: tuple[int, int],
-) -> tuple[NDArray[np.int64], NDArray[np.bool_]]:
-    """:func:`grid_cell` for arrays of points: (flat cell index, on the grid?), each (M,).
-
-    Points off the grid get the nearest edge cell (the flag says they are off it).
-    """
-    xs = np.ascontiguousarray(np.atleast_1d(x), dtype=np.float64).reshape(-1)
-    ys = np.ascontiguousarray(np.atleast_1d(y), dtype=np.float64).reshape(-1)
-    cells = np.empty(xs.shape[0], dtype=np.int64)
-    inside = np.empty(xs.shape[0], dtype=np.bool_)
-    rows, cols = shape
-    _grid_cells(
-        xs, ys, float(origin_x), float(origin_y), 1.0 / resolution_m, float(rows), float(cols),
-        cells, inside,
-    )  # fmt: skip
-    return cells, inside
+#: The compiled form of :func:`app.maps.geometry.grid_cell` (the same function, so
+#: kernels and numpy callers agree on every cell). Branch-free: loops calling it vectorize.
+grid_cell = njit(cache=True, inline="always", error_model="numpy")(_grid_cell_arithmetic)
 
 
 #: Intervals of the tabulated inverse normal CDF (a power of two).

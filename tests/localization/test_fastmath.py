@@ -11,11 +11,12 @@ from app.localization.fastmath import (
     SINCOS_MAX_ERROR,
     SOFTPLUS_MAX_ERROR,
     fill_normal,
-    grid_cells,
+    grid_cell,
     sincos,
     softplus,
 )
-from app.localization.visibility import pack_bits
+from app.maps.geometry import grid_cells
+from app.maps.visibility import pack_bits
 
 
 @njit(fastmath=FAST, error_model="numpy")
@@ -79,10 +80,28 @@ def test_packed_visibility_bits_hold_the_table() -> None:
     assert np.array_equal(unpacked.astype(bool), table)
 
 
+@njit(error_model="numpy")
+def _grid_cell_all(x, y, res, rows, cols, cells, inside):  # fmt: skip
+    for i in range(x.shape[0]):
+        c, ok = grid_cell(x[i], y[i], 0.0, 0.0, 1.0 / res, rows, cols)
+        cells[i], inside[i] = int(c), ok
+
+
 def test_grid_cells_put_points_on_their_cell_and_clip_the_rest() -> None:
-    """The one cell lookup: row-major, lower-left corners inclusive, off-grid flagged."""
+    """The one cell lookup: row-major, lower-left corners inclusive, off-grid flagged;
+    compiled and numpy callers put every point (boundaries too) in the same cell."""
     x = np.array([0.0, 0.49, 0.5, 1.99, -0.1, 2.5, 1.2])
     y = np.array([0.0, 0.0, 0.7, 1.4, 0.2, 0.2, -3.0])
     cells, inside = grid_cells(x, y, 0.0, 0.0, 0.5, (3, 4))
     assert cells.tolist() == [0, 0, 5, 11, 0, 3, 2]
     assert inside.tolist() == [True, True, True, True, False, False, False]
+    res = 0.1  # not a binary fraction: boundaries are where rounding could disagree
+    edges = np.arange(-3, 40) * res
+    bx, by = np.meshgrid(np.concatenate([edges, np.nextafter(edges, -1)]), edges)
+    bx, by = bx.ravel(), by.ravel()
+    numpy_cells, numpy_inside = grid_cells(bx, by, 0.0, 0.0, res, (30, 35))
+    compiled_cells = np.empty(bx.size, dtype=np.int64)
+    compiled_inside = np.empty(bx.size, dtype=np.bool_)
+    _grid_cell_all(bx, by, res, 30.0, 35.0, compiled_cells, compiled_inside)
+    assert np.array_equal(numpy_cells, compiled_cells)
+    assert np.array_equal(numpy_inside, compiled_inside)

@@ -9,9 +9,24 @@ from __future__ import annotations
 from fastapi import APIRouter, Response, WebSocket, status
 
 from app.api.access import PrincipalDep
-from app.api.convert import frame_input, frame_result, session_out, session_spec
+from app.api.convert import (
+    destination_out,
+    destination_spec,
+    frame_input,
+    frame_result,
+    session_out,
+    session_spec,
+)
 from app.api.deps import ManagerDep
-from app.api.schemas import Frame, FrameResult, SessionCreate, SessionOut
+from app.api.schemas import (
+    DestinationIn,
+    DestinationOut,
+    ErrorBody,
+    Frame,
+    FrameResult,
+    SessionCreate,
+    SessionOut,
+)
 from app.api.streams import Stream
 from app.service.sessions import SessionManager, SessionNotFound
 
@@ -38,7 +53,31 @@ async def post_frame(
 ) -> FrameResult:
     """Process one frame; frames of a session are processed strictly in order (merged when
     they come faster than the filter runs)."""
-    return frame_result(await manager.process(session_id, frame_input(frame), principal))
+    camera = manager.get(session_id, principal).camera
+    return frame_result(await manager.process(session_id, frame_input(frame, camera), principal))
+
+
+@router.put(
+    "/{session_id}/destination",
+    response_model=DestinationOut,
+    responses={422: {"model": ErrorBody, "description": "unknown or unreachable destination"}},
+)
+async def put_destination(
+    session_id: str, body: DestinationIn, manager: ManagerDep, principal: PrincipalDep
+) -> DestinationOut:
+    """Guide the person to an object's label, the nearest object of a class, a region or a
+    point; every later ``FrameResult`` carries ``guidance`` and the feedback speaks it."""
+    target = await manager.set_destination(session_id, destination_spec(body), principal)
+    return destination_out(target)
+
+
+@router.delete("/{session_id}/destination", status_code=status.HTTP_204_NO_CONTENT)
+async def delete_destination(
+    session_id: str, manager: ManagerDep, principal: PrincipalDep
+) -> Response:
+    """Stop guiding; results carry ``guidance: null`` again."""
+    manager.clear_destination(session_id, principal)
+    return Response(status_code=status.HTTP_204_NO_CONTENT)
 
 
 @router.delete("/{session_id}", status_code=status.HTTP_204_NO_CONTENT)
