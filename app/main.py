@@ -7,7 +7,6 @@ import contextlib
 import importlib.util
 import logging
 from collections.abc import AsyncIterator
-from pathlib import Path
 
 from fastapi import FastAPI
 from fastapi.staticfiles import StaticFiles
@@ -16,13 +15,12 @@ from app.api.errors import install_error_handlers
 from app.api.limits import BodySizeLimit
 from app.api.routes import health, maps, metrics, sessions, speech
 from app.config import Settings, get_settings
-from app.maps.model import SemanticMap, bundled_maps_dir, load_map_dir
+from app.maps.model import SemanticMap, load_map_dir
+from app.resources import bundled_maps_dir, static_dir
 from app.service.metrics import Metrics
 from app.service.sessions import SessionManager
 
 log = logging.getLogger("bearings")
-
-STATIC_DIR = Path(__file__).resolve().parents[1] / "static"
 
 
 def load_maps(settings: Settings) -> dict[str, SemanticMap]:
@@ -88,6 +86,5 @@ def create_app(settings: Settings | None = None, *, demo: bool = False) -> FastA
         from app.api.routes import demo as demo_routes
 
         app.include_router(demo_routes.router)
-    if STATIC_DIR.is_dir():
-        app.mount("/", StaticFiles(directory=STATIC_DIR, html=True), name="static")
+    app.mount("/", StaticFiles(directory=static_dir(), html=True), name="static")
     return app

@@ -187,6 +187,7 @@ def frame_result(outcome: FrameOutcome) -> FrameResult:
             std_theta_deg=round(math.degrees(estimate.std_theta_rad), 3),
         ),
         converged=estimate.converged,
+        protection_m=None if estimate.protection_m is None else round(estimate.protection_m, 3),
         hypotheses=[
             HypothesisOut(
                 x=round(h.x, 4),

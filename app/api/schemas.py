@@ -280,6 +280,12 @@ class FrameResult(_Out):
     pose: PoseOut
     uncertainty: Uncertainty
     converged: bool = Field(description="true only when the belief is a single tight mode")
+    protection_m: float | None = Field(
+        default=None,
+        description="metres: radius around pose holding the true position with at least "
+        "99 % probability under the whole belief, far modes included; null while not "
+        "converged",
+    )
     hypotheses: list[HypothesisOut]
     feedback: FeedbackOut
     warnings: list[str]

@@ -8,10 +8,11 @@ bearing geometry needs no more) with an offset that pushes an invisible object o
 reach; every detection of the object's class keeps its best match (eq. 3, the cosine
 of the bearing error is a dot product); then the class-weighted, score-tempered
 log-likelihoods are summed (eq. 2). Inner loops run over particles and are branch-free
-so that they vectorize. The result matches the float64 reference within 1e-3 in
-log-likelihood wherever weights matter (float32 leaves a relative error near 1e-6 on
-hopeless particles). Compiled code is cached on disk; :func:`warm_up` compiles it at
-start-up so no request waits.
+so that they vectorize. The result differs from the float64 reference by float32
+rounding only, within the bound that
+:func:`app.localization.tolerances.log_likelihood_tolerance` derives (a few 1e-3 in
+log-likelihood where weights matter). Compiled code is cached on disk;
+:func:`warm_up` compiles it at start-up so no request waits.
 """
 
 from __future__ import annotations
@@ -78,7 +79,7 @@ def _kernel(
             st[i] = f32(s)
         if use_vis:
             for i in range(m):  # the particle's grid cell, clipped onto the grid
-                cell[i] = grid_cell(bx[i], by[i], gx, gy, g_inv, g_rows, g_cols)[0]
+                cell[i] = int(grid_cell(bx[i], by[i], gx, gy, g_inv, g_rows, g_cols)[0])
             for w in range(n_words):
                 b_bits = bits[w]
                 for i in range(m):

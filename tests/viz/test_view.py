@@ -10,7 +10,8 @@ import pytest
 import viser
 
 from app.demo import frame_input_of
-from app.maps.model import bundled_maps_dir, load_map, load_map_dir
+from app.maps.model import load_map, load_map_dir
+from app.resources import bundled_maps_dir
 from app.service.metrics import Metrics
 from app.service.sessions import SessionManager
 from app.service.types import FrameInput, SessionSpec
