@@ -7,7 +7,6 @@ import contextlib
 import importlib.util
 import logging
 from collections.abc import AsyncIterator
-from pathlib import Path
 
 from fastapi import FastAPI
 from fastapi.staticfiles import StaticFiles
@@ -17,13 +16,12 @@ from app.api.limits import BodySizeLimit
 from app.api.routes import health, maps, metrics, sessions, speech
 from app.config import Settings, get_settings
 from app.maps.check import load_map_dirs
-from app.maps.model import SemanticMap, bundled_maps_dir
+from app.maps.model import SemanticMap
+from app.resources import bundled_maps_dir, static_dir
 from app.service.metrics import Metrics
 from app.service.sessions import SessionManager
 
 log = logging.getLogger("bearings")
-
-STATIC_DIR = Path(__file__).resolve().parents[1] / "static"
 
 
 def load_maps(settings: Settings) -> dict[str, SemanticMap]:
@@ -43,12 +41,17 @@ def create_app(settings: Settings | None = None, *, demo: bool = False) -> FastA
 
     @contextlib.asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
+        from app.guidance.planner import warm_up as warm_up_guidance
         from app.localization.filter import warm_up
+
+        def warm_up_all() -> None:
+            warm_up()
+            warm_up_guidance()
 
         # Kernels compile (or load from numba's cache) while the maps are checked and
         # prepared: both release the GIL for most of their work.
         _, maps_ = await asyncio.gather(
-            asyncio.to_thread(warm_up), asyncio.to_thread(load_maps, settings)
+            asyncio.to_thread(warm_up_all), asyncio.to_thread(load_maps, settings)
         )
         manager = SessionManager(maps_, settings, metrics_)
         app.state.manager = manager
@@ -93,6 +96,5 @@ def create_app(settings: Settings | None = None, *, demo: bool = False) -> FastA
         from app.api.routes import demo as demo_routes
 
         app.include_router(demo_routes.router)
-    if STATIC_DIR.is_dir():
-        app.mount("/", StaticFiles(directory=STATIC_DIR, html=True), name="static")
+    app.mount("/", StaticFiles(directory=static_dir(), html=True), name="static")
     return app

@@ -8,6 +8,8 @@ from fastapi.responses import JSONResponse
 from pydantic import ValidationError
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
+from app.guidance import UnknownDestination, Unreachable
+from app.localization.camera import BoxError
 from app.service.sessions import (
     CapacityReached,
     InvalidSessionSpec,
@@ -78,6 +80,13 @@ def install_error_handlers(app: FastAPI) -> None:
 
     @app.exception_handler(InvalidSessionSpec)
     async def _invalid_spec(_: Request, exc: InvalidSessionSpec) -> JSONResponse:
+        return JSONResponse(status_code=422, content={"detail": str(exc), "message": str(exc)})
+
+    @app.exception_handler(BoxError)
+    @app.exception_handler(UnknownDestination)
+    @app.exception_handler(Unreachable)
+    async def _unusable(_: Request, exc: Exception) -> JSONResponse:
+        """A box the session's camera cannot read, or a destination it cannot guide to."""
         return JSONResponse(status_code=422, content={"detail": str(exc), "message": str(exc)})
 
     @app.exception_handler(LimitReached)

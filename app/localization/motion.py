@@ -102,7 +102,7 @@ def _free_check(x0, y0, x1, y1, mask, ox, oy, res, long_sq, walls, eps, penalty)
     inv = 1.0 / res
     for i in range(x1.shape[0]):
         cell, inside = grid_cell(x1[i], y1[i], ox, oy, inv, rows, cols)
-        free = inside and flat[cell]
+        free = inside and flat[int(cell)]
         dx = x1[i] - x0[i]
         dy = y1[i] - y0[i]
         if free and dx * dx + dy * dy > long_sq:

@@ -21,10 +21,12 @@ from numpy.typing import ArrayLike, NDArray
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from app.maps.geometry import (
+    grid_cells,
     points_in_polygon,
     segments_cross_walls,
 )
 from app.maps.prepare import nearest_walls
+from app.resources import bundled_maps_dir as bundled_maps_dir  # re-exported for old imports
 
 if TYPE_CHECKING:
     from app.maps.prepare import PreparedMap
@@ -180,11 +182,6 @@ def load_map_dir(directory: str | Path) -> dict[str, SemanticMap]:
     return {m.name: m for m in (load_map(p) for p in sorted(d.glob("*.json")))}
 
 
-def bundled_maps_dir() -> Path:
-    """The repository's ``maps/`` folder shipped with Bearings."""
-    return Path(__file__).resolve().parents[2] / "maps"
-
-
 @dataclass(frozen=True)
 class FreeSpaceGrid:
     """Cells where a person can stand: enclosed by walls and clear of them.
@@ -200,13 +197,11 @@ class FreeSpaceGrid:
     free_cells: NDArray[np.int64] = field(repr=False)  # flat indices of free cells
 
     def cell_index(self, x: ArrayLike, y: ArrayLike) -> tuple[NDArray[np.int64], NDArray[np.bool_]]:
-        """Row-major flat cell index for each point and whether it is on the grid."""
-        rows, cols = self.mask.shape
-        c = np.floor((np.asarray(x) - self.origin_x) / self.resolution_m).astype(np.int64)
-        r = np.floor((np.asarray(y) - self.origin_y) / self.resolution_m).astype(np.int64)
-        inside = (c >= 0) & (c < cols) & (r >= 0) & (r < rows)
-        flat = np.where(inside, np.clip(r, 0, rows - 1) * cols + np.clip(c, 0, cols - 1), 0)
-        return flat, inside
+        """Row-major flat cell index for each point and whether it is on the grid.
+
+        Points off the grid get the nearest edge cell (see :func:`grid_cells`).
+        """
+        return grid_cells(x, y, self.origin_x, self.origin_y, self.resolution_m, self.mask.shape)
 
     def is_free(self, x: ArrayLike, y: ArrayLike) -> NDArray[np.bool_]:
         """Whether each point lies in a free cell (False off the grid)."""

@@ -15,6 +15,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from app.maps.geometry import grid_cells
+
 
 @dataclass(frozen=True)
 class VisibilityGrid:
@@ -39,13 +41,7 @@ class VisibilityGrid:
 
     def cells(self, x: ArrayLike, y: ArrayLike) -> NDArray[np.int64]:
         """Flat cell index per point, clipped onto the grid, shape (M,)."""
-        rows, cols = self.shape
-        c = np.floor((np.atleast_1d(x) - self.origin_x) / self.resolution_m).astype(np.int64)
-        r = np.floor((np.atleast_1d(y) - self.origin_y) / self.resolution_m).astype(np.int64)
-        # maximum/minimum rather than clip: clip's checks cost more than the work here.
-        c = np.minimum(np.maximum(c, 0), cols - 1)
-        r = np.minimum(np.maximum(r, 0), rows - 1)
-        return r * cols + c
+        return grid_cells(x, y, self.origin_x, self.origin_y, self.resolution_m, self.shape)[0]
 
     def visible(self, x: ArrayLike, y: ArrayLike) -> NDArray[np.bool_]:
         """Visibility rows for each point, shape (M, N)."""

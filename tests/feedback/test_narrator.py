@@ -170,7 +170,8 @@ def test_hedging_when_less_certain() -> None:
 
 
 def paper_map() -> SemanticMap:
-    from app.maps.model import bundled_maps_dir, load_map
+    from app.maps.model import load_map
+    from app.resources import bundled_maps_dir
 
     return load_map(bundled_maps_dir() / "paper_office.json")
 

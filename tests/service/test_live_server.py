@@ -13,7 +13,8 @@ import pytest
 import websockets
 
 from app.main import create_app
-from app.maps.model import bundled_maps_dir, load_map
+from app.maps.model import load_map
+from app.resources import bundled_maps_dir
 from app.simulation.scenarios import paper_config
 from app.simulation.simulator import simulate
 from tests.api.conftest import make_settings

@@ -11,7 +11,8 @@ import pytest
 
 from app.localization.types import Pose
 from app.maps.geometry import wrap_angle
-from app.maps.model import bundled_maps_dir, load_map, parse_map
+from app.maps.model import load_map, parse_map
+from app.resources import bundled_maps_dir
 from app.simulation import CameraModel, paper_config, simulate, visible_objects
 from app.simulation.scenarios import PAPER_PATH
 from app.simulation.simulator import CornerVisit, SimulationConfig
