@@ -72,12 +72,15 @@ def create_app(settings: Settings | None = None, *, demo: bool = False) -> FastA
         from app.guidance.planner import warm_up as warm_up_guidance
         from app.localization.filter import warm_up
 
+        def warm_up_all() -> None:
+            warm_up()
+            warm_up_guidance()
+
         # Kernels compile (or load from numba's cache) while the maps are checked and
         # prepared: both release the GIL for most of their work.
         _, maps_ = await asyncio.gather(
-            asyncio.to_thread(warm_up), asyncio.to_thread(load_maps, settings)
+            asyncio.to_thread(warm_up_all), asyncio.to_thread(load_maps, settings)
         )
-        await asyncio.to_thread(warm_up_guidance)
         store = await asyncio.to_thread(open_store, settings.store)
         manager = SessionManager(maps_, settings, metrics_, store)
         app.state.manager = manager
