@@ -13,6 +13,7 @@ from fastapi.staticfiles import StaticFiles
 
 from app.api.errors import install_error_handlers
 from app.api.limits import BodySizeLimit
+from app.api.methods import AllowedMethods
 from app.api.routes import health, maps, metrics, sessions, speech
 from app.config import Settings, get_settings
 from app.maps.model import SemanticMap, load_map_dir
@@ -77,6 +78,7 @@ def create_app(settings: Settings | None = None, *, demo: bool = False) -> FastA
     app.state.metrics = metrics_
     app.state.view = None
     app.add_middleware(BodySizeLimit, max_bytes=settings.max_message_bytes)
+    app.add_middleware(AllowedMethods, api=app)
     install_error_handlers(app)
     for module in (health, metrics, maps, sessions, speech):
         app.include_router(module.router)

@@ -2,12 +2,15 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 from fastapi import FastAPI, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 from pydantic import ValidationError
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
+from app.api.schemas import ErrorBody
 from app.service.sessions import (
     CapacityReached,
     InvalidSessionSpec,
@@ -28,6 +31,25 @@ def limit_status(exc: LimitReached) -> int:
         if isinstance(exc, kind):
             return status
     return 429
+
+
+#: What each error status means on this API (docs/API.md, "Errors"); every one of them
+#: answers with an :class:`~app.api.schemas.ErrorBody`.
+ERROR_MEANING: dict[int, str] = {
+    400: "the request cannot be read (e.g. a body that is not UTF-8)",
+    404: "no such session or map (the message lists the known maps)",
+    413: "the request body is larger than the service's limit",
+    422: "the body fails validation (the message says which field and why), asks for "
+    "more than a limit allows (code too_many_particles, too_many_detections), or puts "
+    "the initial pose outside the map's free space",
+    429: "the service is at capacity (code too_many_sessions): try again later",
+    503: "the feature needs something the machine lacks (no speech engine)",
+}
+
+
+def error_responses(*statuses: int) -> dict[int | str, dict[str, Any]]:
+    """OpenAPI ``responses`` entries for a route's error statuses, all with ErrorBody."""
+    return {s: {"model": ErrorBody, "description": ERROR_MEANING[s]} for s in statuses}
 
 
 def describe_validation(errors: list[dict]) -> str:

@@ -1,7 +1,8 @@
-"""Request and response bodies of the HTTP and WebSocket API, exactly as CONTRACT.md says.
+"""Request and response bodies of the HTTP and WebSocket API, as docs/API.md describes them.
 
 Units are in the names: ``*_deg`` degrees, ``*_m`` metres, map coordinates ``x, y``
-in metres. Every float must be finite; unknown fields are refused so typos surface.
+in metres. Every number must be a finite JSON number (booleans and numeric strings are
+refused); unknown fields are refused so typos surface.
 """
 
 from __future__ import annotations
@@ -9,13 +10,9 @@ from __future__ import annotations
 from datetime import datetime
 from typing import Annotated, Literal
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, StrictBool
 
-Finite = Annotated[float, Field(allow_inf_nan=False)]
-
-
-class _In(BaseModel):
-    model_config = ConfigDict(extra="forbid", populate_by_name=True)
+from app.validation import NUMBER_ONLY, Finite, Integer, StrictInput
 
 
 class _Out(BaseModel):
@@ -23,7 +20,7 @@ class _Out(BaseModel):
 
 
 # ----------------------------------------------------------------------------- input
-class OdometryIn(_In):
+class OdometryIn(StrictInput):
     """Motion since the previous frame, in the previous body frame (+x forward, +y left)."""
 
     forward_m: Finite = Field(0.0, ge=-10, le=10, description="forward motion, metres")
@@ -33,7 +30,7 @@ class OdometryIn(_In):
     )
 
 
-class DetectionIn(_In):
+class DetectionIn(StrictInput):
     """One detection from the 360-degree camera's object detector."""
 
     cls: str = Field(
@@ -51,7 +48,7 @@ class DetectionIn(_In):
     score: Finite = Field(1.0, ge=0.0, le=1.0, description="detection confidence in [0, 1]")
 
 
-class TruthIn(_In):
+class TruthIn(StrictInput):
     """Ground truth sent by simulations (an addition to the contract; never used by the filter)."""
 
     x: Finite = Field(description="metres")
@@ -59,7 +56,7 @@ class TruthIn(_In):
     theta_deg: Finite = Field(description="heading, degrees CCW from +x")
 
 
-class Frame(_In):
+class Frame(StrictInput):
     """One camera frame with the motion since the previous one."""
 
     timestamp: Finite | None = Field(None, description="client time of the frame, seconds")
@@ -67,33 +64,35 @@ class Frame(_In):
         None, description="motion since the previous frame; null means unknown motion"
     )
     detections: list[DetectionIn] = Field(default_factory=list, description="what the camera sees")
-    describe: bool = Field(False, description="ask for a full description now ('Where am I?')")
+    describe: StrictBool = Field(
+        False, description="ask for a full description now ('Where am I?')"
+    )
     truth: TruthIn | None = Field(
         None, description="addition: a simulation's ground truth, shown in the view only"
     )
 
 
-class SensorSettings(_In):
+class SensorSettings(StrictInput):
     """The camera and detector: bearing noise and field of view."""
 
     bearing_std_deg: Finite = Field(
         2.0, gt=0.0, le=90.0, description="bearing noise standard deviation, degrees"
     )
     fov_deg: Finite = Field(360.0, gt=0.0, le=360.0, description="camera field of view, degrees")
-    class_bearing_std_deg: dict[str, Annotated[float, Field(gt=0, le=90, allow_inf_nan=False)]] = (
-        Field(default_factory=dict, description="addition: per-class bearing std, degrees")
-    )
+    class_bearing_std_deg: dict[
+        str, Annotated[float, Field(gt=0, le=90, allow_inf_nan=False), NUMBER_ONLY]
+    ] = Field(default_factory=dict, description="addition: per-class bearing std, degrees")
 
 
-class FeedbackSettings(_In):
+class FeedbackSettings(StrictInput):
     style: Literal["clock", "left_right", "degrees"] = Field(
         "clock", description="how directions are spoken"
     )
     units: Literal["metric", "imperial"] = Field("metric", description="metres or feet")
-    max_items: int = Field(3, ge=1, le=10, description="most objects per feedback")
+    max_items: Integer = Field(3, ge=1, le=10, description="most objects per feedback")
 
 
-class InitialPoseIn(_In):
+class InitialPoseIn(StrictInput):
     x: Finite = Field(description="metres")
     y: Finite = Field(description="metres")
     theta_deg: Finite = Field(description="heading, degrees CCW from +x")
@@ -101,12 +100,17 @@ class InitialPoseIn(_In):
     std_theta_deg: Finite = Field(10.0, gt=0.0, le=360.0, description="heading std, degrees")
 
 
-class SessionCreate(_In):
+class SessionCreate(StrictInput):
     map: str = Field(min_length=1, max_length=200, description="name of a map from GET /maps")
-    particles: int | None = Field(
-        None, ge=100, description="particle count (default and maximum: service settings)"
+    # Bounds inside the annotation, before the number check: on an optional field
+    # pydantic would otherwise leave them out of the JSON schema.
+    particles: Annotated[int, Field(ge=100), NUMBER_ONLY] | None = Field(
+        None, description="particle count (default and maximum: service settings)"
     )
-    seed: int | None = Field(None, ge=0, le=2**63 - 1, description="random seed, for replays")
+    seed: Annotated[int, Field(ge=0, le=2**53 - 1), NUMBER_ONLY] | None = Field(
+        None,
+        description="random seed, for replays (at most 2^53 - 1: exact in every JSON parser)",
+    )
     initial_pose: InitialPoseIn | None = Field(
         None, description="known start; null starts with no knowledge (global localization)"
     )
@@ -182,10 +186,34 @@ class MapSummary(_Out):
     bounds: Bounds = Field(description="extent of walls and objects, metres")
 
 
+class ValidationIssue(_Out):
+    """One problem pydantic found in a request body."""
+
+    type: str = Field(description="machine-readable kind, e.g. missing, float_type")
+    loc: list[str | int] = Field(description="where: body, field names and list indices")
+    msg: str = Field(description="what was wrong, in words")
+
+
 class ErrorBody(_Out):
-    detail: object
-    message: str
+    """Every error answer (4xx, 5xx): what was wrong, for programs and for people."""
+
+    detail: str | list[ValidationIssue] = Field(
+        description="the problem in words, or for a body that fails validation the list of problems"
+    )
+    message: str = Field(description="one readable sentence covering every problem")
+    code: str | None = Field(
+        None, description="for a service limit: which one, e.g. too_many_sessions"
+    )
 
 
-class SpeechRequest(_In):
-    text: str = Field(min_length=1, max_length=2000, description="text to speak")
+class SpeechRequest(StrictInput):
+    # Python's regular expressions, so that "white space" means what str.strip() and
+    # the speech module mean by it.
+    model_config = ConfigDict(regex_engine="python-re")
+
+    text: str = Field(
+        min_length=1,
+        max_length=2000,
+        pattern=r"\S",
+        description="text to speak: 1 to 2000 characters, not only white space",
+    )

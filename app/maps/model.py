@@ -1,6 +1,6 @@
 """The annotated 2D floor map: file schema, validation, and array form for the filter.
 
-A map file (see CONTRACT.md) holds walls, semantic objects (class, position, optional
+A map file (see docs/API.md) holds walls, semantic objects (class, position, optional
 label) and optional named regions. :func:`load_map` validates a file with pydantic and
 refuses anything invalid with a message that names the field and the reason;
 :class:`SemanticMap` is the validated map as numpy arrays plus the derived, cached
@@ -14,11 +14,10 @@ import re
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
-from typing import Annotated
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+from pydantic import Field, ValidationError, field_validator, model_validator
 
 from app.maps.geometry import (
     grid_cells,
@@ -27,6 +26,7 @@ from app.maps.geometry import (
     segments_cross_walls,
 )
 from app.resources import bundled_maps_dir as bundled_maps_dir  # re-exported for old imports
+from app.validation import Finite, StrictInput
 
 #: An object class is a lower-case word: letters, digits, '_' or '-', starting with a letter.
 CLASS_PATTERN = re.compile(r"^[a-z][a-z0-9_-]*$")
@@ -37,14 +37,8 @@ WALL_CLEARANCE_M = 0.1
 #: An object closer than this to a wall is mounted in it (doors, windows), in metres.
 MOUNT_TOLERANCE_M = 0.05
 
-Finite = Annotated[float, Field(allow_inf_nan=False)]
 
-
-class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", populate_by_name=True)
-
-
-class WallSpec(_Strict):
+class WallSpec(StrictInput):
     """A wall segment from (x1, y1) to (x2, y2), metres."""
 
     x1: Finite
@@ -59,7 +53,7 @@ class WallSpec(_Strict):
         return self
 
 
-class ObjectSpec(_Strict):
+class ObjectSpec(StrictInput):
     """A semantic landmark: its class, its position (metres) and an optional label."""
 
     cls: str = Field(alias="class", description="lower-case class word, e.g. door")
@@ -77,15 +71,15 @@ class ObjectSpec(_Strict):
         return value
 
 
-class RegionSpec(_Strict):
+class RegionSpec(StrictInput):
     """A named polygon (room, corridor) used for spoken feedback."""
 
     name: str = Field(min_length=1, max_length=200)
     polygon: list[tuple[Finite, Finite]] = Field(min_length=3)
 
 
-class MapFile(_Strict):
-    """The JSON map file exactly as CONTRACT.md specifies it."""
+class MapFile(StrictInput):
+    """The JSON map file as docs/API.md describes it."""
 
     name: str
     description: str = ""

@@ -9,32 +9,59 @@ from pydantic import ValidationError
 
 from app.api.convert import frame_input, frame_result, session_out, session_spec
 from app.api.deps import ManagerDep
-from app.api.errors import describe_validation
+from app.api.errors import describe_validation, error_responses
 from app.api.schemas import Frame, FrameResult, SessionCreate, SessionOut
 from app.service.sessions import LimitReached, SessionManager, SessionNotFound
 
 router = APIRouter(prefix="/sessions", tags=["sessions"])
 
+#: OpenAPI links: the ``id`` of a new session is the ``session_id`` of the others.
+_SESSION_LINKS = {
+    name: {
+        "operationRef": f"#/paths/~1sessions~1{{session_id}}{suffix}/{method}",
+        "parameters": {"session_id": "$response.body#/id"},
+    }
+    for name, suffix, method in (
+        ("GetSession", "", "get"),
+        ("PostFrame", "~1frames", "post"),
+        ("DeleteSession", "", "delete"),
+    )
+}
 
-@router.post("", status_code=status.HTTP_201_CREATED, response_model=SessionOut)
+
+@router.post(
+    "",
+    status_code=status.HTTP_201_CREATED,
+    response_model=SessionOut,
+    responses={
+        201: {"links": _SESSION_LINKS, "description": "the new session"},
+        **error_responses(400, 404, 413, 422, 429),
+    },
+)
 async def create_session(body: SessionCreate, manager: ManagerDep) -> SessionOut:
     """Start localizing one person on a map."""
     return session_out(await manager.create(session_spec(body)))
 
 
-@router.get("/{session_id}", response_model=SessionOut)
+@router.get("/{session_id}", response_model=SessionOut, responses=error_responses(404))
 async def get_session(session_id: str, manager: ManagerDep) -> SessionOut:
     """The session with its latest result (or null)."""
     return session_out(manager.get(session_id))
 
 
-@router.post("/{session_id}/frames", response_model=FrameResult)
+@router.post(
+    "/{session_id}/frames",
+    response_model=FrameResult,
+    responses=error_responses(400, 404, 413, 422),
+)
 async def post_frame(session_id: str, frame: Frame, manager: ManagerDep) -> FrameResult:
     """Process one frame; frames of a session are processed strictly in order."""
     return frame_result(await manager.process(session_id, frame_input(frame)))
 
 
-@router.delete("/{session_id}", status_code=status.HTTP_204_NO_CONTENT)
+@router.delete(
+    "/{session_id}", status_code=status.HTTP_204_NO_CONTENT, responses=error_responses(404)
+)
 async def delete_session(session_id: str, manager: ManagerDep) -> Response:
     await manager.delete(session_id)
     return Response(status_code=status.HTTP_204_NO_CONTENT)
