@@ -71,7 +71,7 @@ class SimFrame:
     blocked: bool = False
 
     def to_contract(self) -> dict[str, object]:
-        """CONTRACT.md's ``Frame`` JSON, with the ground truth as the extra ``truth``."""
+        """The ``Frame`` JSON of docs/API.md, with the ground truth in ``truth``."""
         odo = None
         if self.odometry is not None:
             odo = {
