@@ -12,6 +12,7 @@ import asyncio
 import contextlib
 import logging
 from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 
@@ -44,6 +45,16 @@ def frame_input_of(frame: SimFrame) -> FrameInput:
         detections=tuple(frame.detections),
         truth=frame.truth,
     )
+
+
+def new_walk(manager: SessionManager, **settings: Any) -> DemoWalk:
+    """A walk with the given :class:`DemoSettings` fields, started on the running loop.
+
+    What the live view's demo button calls (as ``functools.partial(new_walk, manager)``).
+    """
+    walk = DemoWalk(manager, DemoSettings(**settings))
+    walk.start()
+    return walk
 
 
 class DemoWalk:

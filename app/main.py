@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import functools
 import importlib.util
 import logging
 from collections.abc import AsyncIterator
@@ -47,9 +48,15 @@ def create_app(settings: Settings | None = None, *, demo: bool = False) -> FastA
         tasks = [asyncio.create_task(manager.run_sweeper())]
         view = None
         if settings.viser:
+            from app.demo import new_walk
             from app.viz import LiveView
 
-            view = LiveView(manager, port=settings.viser_port, host=settings.host)
+            view = LiveView(
+                manager,
+                port=settings.viser_port,
+                host=settings.host,
+                start_walk=functools.partial(new_walk, manager),
+            )
             view.start()
             app.state.view = view
         if demo:

@@ -2,6 +2,11 @@
 
 viser runs GUI callbacks on its own threads; anything that touches sessions is sent
 to the service's event loop with ``asyncio.run_coroutine_threadsafe``.
+
+The panel knows the view only through :class:`ViewHost` and starts simulated walks
+only through the :class:`StartWalk` it is given (the application passes
+:func:`app.demo.new_walk`), so the view imports neither this module's user nor the
+demo.
 """
 
 from __future__ import annotations
@@ -9,32 +14,63 @@ from __future__ import annotations
 import asyncio
 import contextlib
 from concurrent.futures import Future
-from typing import TYPE_CHECKING, Any
+from typing import Any, Protocol
 
-from app.demo import DemoSettings, DemoWalk
+import viser
 
-if TYPE_CHECKING:
-    from app.viz.view import LiveView
+from app.service.sessions import SessionManager
 
 NONE = "(none)"
 FOVS = ("360", "270", "180")
 
 
-class ViewControls:
-    """GUI handles and what they do."""
+class Walk(Protocol):
+    """A running simulated walk, as the panel drives it."""
 
-    def __init__(self, view: LiveView) -> None:
+    session_id: str | None
+
+    def kidnap(self) -> None: ...
+
+    async def stop(self) -> None: ...
+
+
+class StartWalk(Protocol):
+    """Create a walk with the panel's settings and start it (on the event loop)."""
+
+    def __call__(
+        self, *, map_name: str, fov_deg: float, occlusion: bool, missing: bool, particles: int
+    ) -> Walk: ...
+
+
+class ViewHost(Protocol):
+    """What the panel needs of the view that holds it."""
+
+    server: viser.ViserServer | None
+    manager: SessionManager
+    loop: asyncio.AbstractEventLoop | None
+    watched: str | None
+
+    def watch(self, session_id: str | None) -> None: ...
+
+
+class ViewControls:
+    """GUI handles and what they do; the demo folder only when walks can be started."""
+
+    def __init__(self, view: ViewHost, start_walk: StartWalk | None = None) -> None:
         self.view = view
+        self.new_walk = start_walk
         server = view.server
         assert server is not None
         gui = server.gui
-        self.walks: dict[str, DemoWalk] = {}
+        self.walks: dict[str, Walk] = {}
         self._known: tuple[str, ...] = ()
         self.session = gui.add_dropdown("Watch session", (NONE,), initial_value=NONE)
         self.session.on_update(
             lambda _: view.watch(None if self.session.value == NONE else self.session.value)
         )
         self.status = gui.add_markdown("No session yet.")
+        if start_walk is None:
+            return
         with gui.add_folder("Demo: simulated walk"):
             maps = tuple(sorted(view.manager.maps))
             self.map = gui.add_dropdown(
@@ -60,19 +96,16 @@ class ViewControls:
             return None
         return asyncio.run_coroutine_threadsafe(coro, loop)
 
-    def settings(self) -> DemoSettings:
-        return DemoSettings(
+    async def start_walk(self) -> str:
+        """Start a simulated walk with the panel's settings and watch it."""
+        assert self.new_walk is not None, "this view was given no way to start walks"
+        walk = self.new_walk(
             map_name=self.map.value,
             fov_deg=float(self.fov.value),
             occlusion=bool(self.occlusion.value),
             missing=bool(self.missing.value),
             particles=int(self.particles.value),
         )
-
-    async def start_walk(self) -> str:
-        """Start a simulated walk with the panel's settings and watch it."""
-        walk = DemoWalk(self.view.manager, self.settings())
-        walk.start()
         for _ in range(200):  # the session exists once the walk created it
             if walk.session_id is not None:
                 break

@@ -3,13 +3,14 @@
 from __future__ import annotations
 
 import asyncio
+import functools
 import time
 
 import numpy as np
 import pytest
 import viser
 
-from app.demo import frame_input_of
+from app.demo import frame_input_of, new_walk
 from app.maps.model import load_map, load_map_dir
 from app.resources import bundled_maps_dir
 from app.service.metrics import Metrics
@@ -81,7 +82,12 @@ def test_particles_are_sampled_by_weight_and_capped() -> None:
 def test_live_view_draws_the_watched_session() -> None:
     async def main() -> LiveView:
         manager = make_manager()
-        view = LiveView(manager, port=free_port(), host="127.0.0.1")
+        view = LiveView(
+            manager,
+            port=free_port(),
+            host="127.0.0.1",
+            start_walk=functools.partial(new_walk, manager),
+        )
         view.start()
         try:
             s = await manager.create(SessionSpec(map_name="paper_office", particles=2000, seed=2))
