@@ -134,7 +134,7 @@ class DemoWalk:
             await asyncio.sleep(max(0.0, next_at - loop.time()))
 
 
-async def run_demo_walk(manager: SessionManager, **settings: object) -> None:
+async def run_demo_walk(manager: SessionManager, **settings: Any) -> None:
     """The walk `bearings demo` starts: the paper office, 360 degree camera, real time."""
-    walk = DemoWalk(manager, DemoSettings(**settings))  # type: ignore[arg-type]
+    walk = DemoWalk(manager, DemoSettings(**settings))
     await walk.run()

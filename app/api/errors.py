@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 from fastapi import FastAPI, Request
@@ -52,7 +53,7 @@ def error_responses(*statuses: int) -> dict[int | str, dict[str, Any]]:
     return {s: {"model": ErrorBody, "description": ERROR_MEANING[s]} for s in statuses}
 
 
-def describe_validation(errors: list[dict]) -> str:
+def describe_validation(errors: Sequence[Mapping[str, Any]]) -> str:
     """One readable sentence per problem: 'detections.0.score: must be <= 1'."""
     parts = []
     for e in errors:
@@ -69,7 +70,8 @@ def _plain(errors: list[dict]) -> list[dict]:
 
 async def _validation(_: Request, exc: Exception) -> JSONResponse:
     """422 for a request body (or a model built from it) that fails validation."""
-    errors = list(exc.errors())  # type: ignore[attr-defined]
+    assert isinstance(exc, RequestValidationError | ValidationError)
+    errors = list(exc.errors())
     return JSONResponse(
         status_code=422,
         content={"detail": _plain(errors), "message": describe_validation(errors)},

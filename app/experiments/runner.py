@@ -74,7 +74,7 @@ def _job(args: tuple[Cell, int, int]) -> Run:
 def run_all(
     jobs: list[tuple[Cell, int, int]],
     workers: int,
-    progress: Callable[[], None] | None = None,
+    progress: Callable[[], object] | None = None,
 ) -> list[Run]:
     """Run every (cell, seed, particles) job; results in the jobs' order."""
     results: list[Run] = []

@@ -32,7 +32,7 @@ def main() -> None:
     pf = ParticleFilter(
         office, FilterConfig(fov_deg=args.fov), rng=np.random.default_rng(args.seed)
     )
-    narrator = Narrator(office, FeedbackOptions(style=args.style))  # type: ignore[arg-type]
+    narrator = Narrator(office, FeedbackOptions(style=args.style))
     for f in frames:
         if f.t > args.until:
             break

@@ -103,5 +103,6 @@ def visibility_grid(semantic_map: SemanticMap) -> VisibilityGrid:
             grid = getattr(semantic_map, "_visibility_grid", None)
             if grid is None:
                 grid = build_visibility_grid(semantic_map)
+                # Cached on the map object itself (SemanticMap declares no such field).
                 semantic_map._visibility_grid = grid  # type: ignore[attr-defined]
     return grid

@@ -85,9 +85,13 @@ class ViewControls:
             self.start_button = gui.add_button("Start walk")
             self.kidnap_button = gui.add_button("Kidnap now")
             self.reset_button = gui.add_button("Reset walk")
-        self.start_button.on_click(lambda _: self._submit(self.start_walk()))
+        self.start_button.on_click(lambda _: self._run(self.start_walk()))
         self.kidnap_button.on_click(lambda _: self.kidnap())
-        self.reset_button.on_click(lambda _: self._submit(self.reset_walk()))
+        self.reset_button.on_click(lambda _: self._run(self.reset_walk()))
+
+    def _run(self, coro: Any) -> None:
+        """Start ``coro`` on the event loop from a GUI callback (which must return None)."""
+        self._submit(coro)
 
     def _submit(self, coro: Any) -> Future[Any] | None:
         loop = self.view.loop
@@ -137,7 +141,8 @@ class ViewControls:
         watched = self.view.watched
         value = watched if watched in ids else NONE
         if self.session.value != value:
-            self.session.value = value
+            # viser types the dropdown's value as read-only; it has a setter at run time.
+            self.session.value = value  # type: ignore[misc]
         if watched is not None:
             with contextlib.suppress(Exception):
                 s = self.view.manager.get(watched)
