@@ -20,8 +20,7 @@ import pytest
 from fastapi.testclient import TestClient
 
 from app.main import create_app
-from tests.api.conftest import make_settings
-from tests.support import free_port, serving
+from tests.helpers import free_port, make_settings, serving
 
 FUZZ_SECONDS = int(os.environ.get("BEARINGS_FUZZ_SECONDS", "60"))
 FUZZ_SEED = int(os.environ.get("BEARINGS_FUZZ_SEED", "20261126"))

@@ -10,7 +10,7 @@ from app.resources import bundled_maps_dir
 from app.service.metrics import Metrics
 from app.service.sessions import SessionManager, SessionNotFound
 from app.service.types import FrameInput, SessionSpec
-from tests.api.conftest import make_settings
+from tests.helpers import make_settings
 
 
 def test_idle_sessions_expire() -> None:

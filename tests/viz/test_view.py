@@ -11,7 +11,7 @@ import pytest
 import viser
 
 from app.demo import frame_input_of, new_walk
-from app.maps.model import load_map, load_map_dir
+from app.maps.model import load_map_dir
 from app.resources import bundled_maps_dir
 from app.service.metrics import Metrics
 from app.service.sessions import SessionManager
@@ -21,10 +21,9 @@ from app.simulation.simulator import simulate
 from app.viz.particles import MAX_DRAWN, detection_rays, sample_particles
 from app.viz.scene import build_map_scene, top_down_camera
 from app.viz.view import LiveView
-from tests.api.conftest import make_settings
-from tests.support import free_port
+from tests.helpers import free_port, make_settings, paper_office
 
-OFFICE = load_map(bundled_maps_dir() / "paper_office.json")
+OFFICE = paper_office()
 
 
 @pytest.fixture
