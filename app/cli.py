@@ -1,4 +1,4 @@
-"""The ``bearings`` command: serve, demo, experiments, bench.
+"""The ``bearings`` command: serve, demo, experiments, bench, map.
 
 Each subcommand's flags default to the matching ``BEARINGS_*`` setting (see
 :mod:`app.config`), so a flag and its environment variable always agree.
@@ -80,6 +80,11 @@ def build_parser() -> argparse.ArgumentParser:
     from app.bench import add_arguments as add_bench_arguments
 
     add_bench_arguments(bench)
+
+    maps = sub.add_parser("map", help="check map files; import ROS occupancy grids and GeoJSON")
+    from app.maps.cli import add_arguments as add_map_arguments
+
+    add_map_arguments(maps)
     return parser
 
 
@@ -98,6 +103,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         from app.bench import run as run_bench
 
         return run_bench(args)
+    if args.command == "map":
+        from app.maps.cli import run as run_map
+
+        return run_map(args)
     parser.error(f"unknown command {args.command!r}")
     return 2
 

@@ -19,6 +19,10 @@ class Settings(BaseSettings):
     maps: list[Path] = Field(
         default_factory=list, description="extra map directories, besides the bundled maps/"
     )
+    cache_dir: Path | None = Field(
+        default_factory=lambda: Path.home() / ".cache" / "bearings",
+        description="where prepared map grids are cached by content hash (none: no cache)",
+    )
     viser: bool = Field(True, description="run the viser view in the same process")
     viser_port: int = Field(8080, ge=0, le=65535, description="viser view port")
     log_level: str = Field("info", description="log level: debug, info, warning, error")

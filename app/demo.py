@@ -11,11 +11,13 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
+import math
 from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
 
+from app.localization.compass import CompassReading
 from app.localization.types import Odometry
 from app.maps.geometry import wrap_angle
 from app.service.sessions import SessionManager, SessionNotFound
@@ -44,6 +46,9 @@ def frame_input_of(frame: SimFrame) -> FrameInput:
         odometry=frame.odometry,
         detections=tuple(frame.detections),
         truth=frame.truth,
+        heading=None
+        if frame.compass_rad is None
+        else CompassReading(frame.compass_rad, math.radians(frame.compass_std_deg or 20.0)),
     )
 
 

@@ -17,7 +17,8 @@ from app.api.limits import BodySizeLimit
 from app.api.methods import AllowedMethods
 from app.api.routes import health, maps, metrics, sessions, speech
 from app.config import Settings, get_settings
-from app.maps.model import SemanticMap, load_map_dir
+from app.maps.check import load_map_dirs
+from app.maps.model import SemanticMap
 from app.resources import bundled_maps_dir, static_dir
 from app.service.metrics import Metrics
 from app.service.sessions import SessionManager
@@ -26,10 +27,12 @@ log = logging.getLogger("bearings")
 
 
 def load_maps(settings: Settings) -> dict[str, SemanticMap]:
-    """Bundled maps plus every ``--maps`` directory (later directories win on a name clash)."""
-    maps = load_map_dir(bundled_maps_dir())
-    for directory in settings.maps:
-        maps.update(load_map_dir(directory))
+    """Bundled maps plus every ``--maps`` directory (later directories win on a name clash).
+
+    Each map is checked and prepared (grids built or read from the cache) here, at
+    start-up, never inside a request; a file with errors is skipped and logged.
+    """
+    maps, _ = load_map_dirs([bundled_maps_dir(), *settings.maps], cache_dir=settings.cache_dir)
     return maps
 
 
@@ -40,10 +43,16 @@ def create_app(settings: Settings | None = None, *, demo: bool = False) -> FastA
 
     @contextlib.asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
+        from app.guidance.planner import warm_up as warm_up_guidance
         from app.localization.filter import warm_up
 
-        await asyncio.to_thread(warm_up)
-        manager = SessionManager(load_maps(settings), settings, metrics_)
+        # Kernels compile (or load from numba's cache) while the maps are checked and
+        # prepared: both release the GIL for most of their work.
+        _, maps_ = await asyncio.gather(
+            asyncio.to_thread(warm_up), asyncio.to_thread(load_maps, settings)
+        )
+        await asyncio.to_thread(warm_up_guidance)
+        manager = SessionManager(maps_, settings, metrics_)
         app.state.manager = manager
         tasks = [asyncio.create_task(manager.run_sweeper())]
         view = None

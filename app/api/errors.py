@@ -12,6 +12,8 @@ from pydantic import ValidationError
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from app.api.schemas import ErrorBody
+from app.guidance import UnknownDestination, Unreachable
+from app.localization.camera import BoxError
 from app.service.sessions import (
     CapacityReached,
     InvalidSessionSpec,
@@ -41,8 +43,9 @@ ERROR_MEANING: dict[int, str] = {
     404: "no such session or map (the message lists the known maps)",
     413: "the request body is larger than the service's limit",
     422: "the body fails validation (the message says which field and why), asks for "
-    "more than a limit allows (code too_many_particles, too_many_detections), or puts "
-    "the initial pose outside the map's free space",
+    "more than a limit allows (code too_many_particles, too_many_detections), puts "
+    "the initial pose outside the map's free space, gives a pixel box the session has "
+    "no camera for, or names a destination that is unknown or cannot be reached",
     429: "the service is at capacity (code too_many_sessions): try again later",
     503: "the feature needs something the machine lacks (no speech engine)",
 }
@@ -102,6 +105,13 @@ def install_error_handlers(app: FastAPI) -> None:
 
     @app.exception_handler(InvalidSessionSpec)
     async def _invalid_spec(_: Request, exc: InvalidSessionSpec) -> JSONResponse:
+        return JSONResponse(status_code=422, content={"detail": str(exc), "message": str(exc)})
+
+    @app.exception_handler(BoxError)
+    @app.exception_handler(UnknownDestination)
+    @app.exception_handler(Unreachable)
+    async def _unusable(_: Request, exc: Exception) -> JSONResponse:
+        """A box the session's camera cannot read, or a destination it cannot guide to."""
         return JSONResponse(status_code=422, content={"detail": str(exc), "message": str(exc)})
 
     @app.exception_handler(LimitReached)

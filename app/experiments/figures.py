@@ -1,10 +1,10 @@
 """Figures like the paper's: trajectories (Figs. 5, 7, 9) and errors over time (6, 8, 10).
 
-The error figures also draw the Cramér-Rao lower bound of a single frame's position
-error along the true path: with known correspondences and bearing noise sigma, the
-Fisher information of one frame about (x, y, theta) is J^T J / sigma^2, where row m
-of J is the gradient of the bearing to visible object m; the bound on the position
-error is sqrt of the trace of the (x, y) block of its inverse.
+The error figures also draw the posterior Cramér-Rao bound of the filtering problem
+along the true path (:mod:`app.experiments.pcrb`, same bearing and odometry noise as
+the simulator): no estimator using the detections and odometry so far can do better
+on average. :func:`single_frame_crlb_m` (one frame alone, no odometry) is kept for
+comparison.
 """
 
 from __future__ import annotations
@@ -17,10 +17,12 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
+from app.experiments.pcrb import pcrb_position_m
 from app.experiments.runner import Run
 from app.localization.types import Pose
 from app.maps.model import SemanticMap
 from app.simulation.camera import CameraModel, visible_objects
+from app.simulation.simulator import simulate
 
 COLOURS = {180.0: "tab:blue", 270.0: "tab:red", 360.0: "tab:green"}
 FIGURE_NUMBERS = {"I": (5, 6), "II": (7, 8), "III": (9, 10)}
@@ -42,6 +44,21 @@ def single_frame_crlb_m(
     except np.linalg.LinAlgError:
         return float("nan")
     return float(np.sqrt(max(cov[0, 0] + cov[1, 1], 0.0)))
+
+
+def _pcrb_of(run: Run, semantic_map: SemanticMap) -> np.ndarray:
+    """The PCRB along the run's true path, with the simulator's noise levels."""
+    sim = run.cell.simulation()
+    frames = simulate(semantic_map, sim, np.random.default_rng(0))
+    return pcrb_position_m(
+        semantic_map,
+        [f.truth for f in frames],
+        run.cell.fov_deg,
+        sim.bearing_noise_deg,
+        sim.odometry_noise_m,
+        sim.odometry_noise_deg,
+        sim.max_range_m,
+    )
 
 
 def _draw_map(ax: plt.Axes, semantic_map: SemanticMap) -> None:
@@ -102,12 +119,8 @@ def figures(runs: list[Run], semantic_map: SemanticMap, out: Path) -> list[Path]
                 axes[0, col].plot(t, pos, color=COLOURS[fov], lw=1, label=f"{fov:.0f} deg")
                 axes[1, col].plot(t, head, color=COLOURS[fov], lw=1)
                 if fov == 360.0:
-                    r0 = rs[0]
-                    crlb = [
-                        single_frame_crlb_m(semantic_map, Pose(x, y, 0.0), 360.0, 2.0)
-                        for x, y in r0.truth_xy[:n]
-                    ]
-                    axes[0, col].plot(t, crlb, "k:", lw=1, label="CRLB, one frame, 360 deg")
+                    bound = _pcrb_of(rs[0], semantic_map)[:n]
+                    axes[0, col].plot(t, bound, "k:", lw=1, label="PCRB, 360 deg")
             axes[0, col].set_title(f"{cfg} configuration, mean over seeds")
             axes[0, col].set_yscale("log")
             axes[1, col].set_yscale("log")

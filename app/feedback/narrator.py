@@ -34,7 +34,6 @@ from app.feedback.phrasing import (
 from app.localization.config import FilterConfig
 from app.localization.sensor import match_detections, prepare_observation
 from app.localization.types import Detection, Estimate
-from app.localization.visibility import visibility_grid
 from app.maps.geometry import wrap_angle
 from app.maps.model import SemanticMap
 
@@ -101,12 +100,17 @@ class Narrator:
         timestamp_s: float | None,
         describe: bool = False,
         fov_deg: float = 360.0,
+        fov_centre_deg: float = 0.0,
     ) -> Feedback:
-        """Feedback for one frame (see the module docstring for the rules)."""
+        """Feedback for one frame (see the module docstring for the rules).
+
+        ``fov_deg`` and ``fov_centre_deg``: the camera's field of view and the direction
+        of its middle relative to the body (a yawed phone camera).
+        """
         now = time.monotonic() if timestamp_s is None else float(timestamp_s)
         dets = [d for d in detections if d.score > 0 and d.cls in self.map.class_members]
         if estimate.converged:
-            return self._located(estimate, dets, now, describe, fov_deg)
+            return self._located(estimate, dets, now, describe, (fov_deg, fov_centre_deg))
         return self._uncertain(estimate, dets, now, describe)
 
     # ------------------------------------------------------------- not located
@@ -170,11 +174,11 @@ class Narrator:
         dets: list[Detection],
         now: float,
         describe: bool,
-        fov_deg: float,
+        fov: tuple[float, float],
     ) -> Feedback:
         opts = self.options
         certain = max(estimate.std_x_m, estimate.std_y_m) <= CERTAIN_STD_M
-        ordered = self._ordered_objects(estimate, dets, fov_deg)
+        ordered = self._ordered_objects(estimate, dets, fov)
         pose_xy = np.array([estimate.x, estimate.y])
         items: list[FeedbackItem] = []
         for n in ordered[: opts.max_items]:
@@ -216,24 +220,30 @@ class Narrator:
         return Feedback(" ".join(parts), items)
 
     def _ordered_objects(
-        self, estimate: Estimate, dets: list[Detection], fov_deg: float
+        self, estimate: Estimate, dets: list[Detection], fov: tuple[float, float]
     ) -> list[int]:
         """Objects matched to this frame's detections first, then the nearest visible others."""
         pose_xy = np.array([[estimate.x, estimate.y]])
         # Line of sight from the map's precomputed grid (the cell around the pose).
-        visible = visibility_grid(self.map).visible(estimate.x, estimate.y)[0]
+        visible = self.map.visibility.visible(estimate.x, estimate.y)[0]
         rel = self.map.object_xy - pose_xy
         dist = np.hypot(rel[:, 0], rel[:, 1])
+        fov_deg, centre_deg = fov
         matched: list[int] = []
         if dets:
             # Each detection's best visible object of its class: the sensor model's own
-            # correspondence (eq. 3) at the estimated pose, within the camera's view.
+            # correspondence (eq. 3) at the estimated pose, within the camera's view. The
+            # camera may look off the body's forward by centre_deg: the pose turns by it
+            # and the bearings (relative to the body) by the opposite, so each detection
+            # still points the same way while the field of view is centred on the camera.
             config = FilterConfig(fov_deg=fov_deg, visibility=True, max_range_m=None)
-            obs = prepare_observation(dets, self.map, config)
+            centre = math.radians(centre_deg)
+            camera_dets = [Detection(d.cls, d.bearing_rad - centre, d.score) for d in dets]
+            obs = prepare_observation(camera_dets, self.map, config)
             _, index = match_detections(
                 np.array([estimate.x]),
                 np.array([estimate.y]),
-                np.array([estimate.theta_rad]),
+                np.array([estimate.theta_rad + centre]),
                 obs,
                 self.map,
                 config,

@@ -24,6 +24,9 @@ class FilterConfig:
     class_bearing_std_deg: dict[str, float] = field(default_factory=dict)
     #: Camera field of view centred on the heading (degrees, 0 < fov <= 360).
     fov_deg: float = 360.0
+    #: Direction of the middle of the field of view relative to the body's forward
+    #: (degrees, CCW positive): a yawed or off-centre camera (app.localization.camera).
+    fov_centre_deg: float = 0.0
     #: Maximum detection range in metres (None: unlimited).
     max_range_m: float | None = None
 
@@ -38,6 +41,10 @@ class FilterConfig:
     recovery: bool = True
     alpha_slow: float = 0.02
     alpha_fast: float = 0.3
+    #: Alternative places kept alive and weighed by their evidence over the walk, so
+    #: that ``converged`` means no other place explains the walk nearly as well
+    #: (:mod:`~app.localization.evidence`).
+    evidence: bool = True
     #: Adaptive particle count: all ``particles`` while lost, KLD-sampling (at least
     #: ``min_particles``) once converged. 2,000 rather than fewer: on the paper's walks
     #: 500 cost 1.0 mm of mean error against a fixed 10,000, 2,000 cost none measurable
@@ -64,5 +71,5 @@ class FilterConfig:
     @classmethod
     def paper(cls, **overrides: Any) -> FilterConfig:
         """The paper's model only: no visibility, no clutter floor, no recovery."""
-        base = cls(visibility=False, clutter=False, recovery=False, adaptive=False)
+        base = cls(visibility=False, clutter=False, recovery=False, adaptive=False, evidence=False)
         return replace(base, **overrides)

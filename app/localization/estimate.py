@@ -261,25 +261,60 @@ def estimate_pose(
     return Estimate(mx, my, mt, sx, sy, st, bool(converged), hypotheses, n, ess)
 
 
-class ConvergenceGate:
-    """Confirms ``converged`` only after the belief has held steady for a while.
+@dataclass(frozen=True)
+class FitQuality:
+    """How well the estimated pose explains the recent detections (see the filter).
 
-    Right after a global start a single update can collapse the cloud onto one wrong
-    spot that looks tight; telling a blind person that position with confidence is
-    the worst failure. So a tight, heavy cluster counts as converged only after it
-    has stayed put (moving no more than the odometry allows plus ``tolerance_m``, and
-    turning no more than ``tolerance_rad``) for ``frames`` consecutive frames, and
-    while the estimate explains what the camera sees: the smoothed mean of the
-    squared bearing residuals (in standard deviations) must stay below ``max_fit``
-    (below 1 when the pose is right and the noise is as configured; residuals are
-    clipped at 3 standard deviations so a false detection costs at most 9), and only
-    while detections keep coming: dead reckoning alone is not a confirmed position.
+    ``fit``: smoothed mean squared bearing residual (in stds) of the detections that an
+    object explains better than the clutter floor does; ``unexplained``: smoothed share
+    of detections the clutter floor explains better (false ones, or a wrong pose);
+    ``bad_frame``: this frame alone says the pose is wrong (most of at least three
+    detections unexplained).
     """
 
-    max_fit: float = 2.0
-    #: Dead reckoning alone (frames without usable detections) for longer than this
-    #: is not a confirmed position: 10 frames is 2 s at 5 frames/s.
-    max_frames_without_evidence: int = 10
+    fit: float
+    unexplained: float
+    bad_frame: bool = False
+
+
+class ConvergenceGate:
+    """``converged`` with hysteresis: hard to gain, lost only for a real reason.
+
+    **Gained** when the heaviest cluster is tight and heavy (:func:`estimate_pose`) and
+    has stayed put (moving no more than the odometry allows plus ``tolerance_m``,
+    turning no more than ``tolerance_rad``) for ``frames`` consecutive frames, explains
+    what the camera sees (``fit`` at most ``gain_fit``, at most ``gain_unexplained`` of
+    the detections left to clutter), detections arrived in the last
+    ``gain_without_evidence`` frames, a global consistency search has run since the
+    cluster formed, and the alternatives it found hold at most ``gain_alternatives``
+    of the probability (:mod:`~app.localization.evidence`).
+
+    **Held** while the cluster stays reasonably heavy and tight (``hold_*``), does not
+    jump, still explains the detections (looser ``hold_fit`` and ``hold_unexplained``,
+    no frame that most detections contradict), dead reckoning has not lasted longer
+    than ``hold_without_evidence`` frames, the odometry has not broken off (a frame
+    without it after frames with it: the person may have been carried anywhere), and
+    the alternatives stay below ``hold_alternatives``. A false detection explained by
+    clutter does not count against the estimate; a kidnap, a pose drifting away from
+    the evidence, or an alternative place gaining probability does.
+    """
+
+    gain_fit: float = 2.0
+    hold_fit: float = 4.0
+    gain_unexplained: float = 0.35
+    hold_unexplained: float = 0.6
+    gain_alternatives: float = 0.01
+    hold_alternatives: float = 0.05
+    #: 10 frames is 2 s at 5 frames/s; 75 frames is 15 s.
+    gain_without_evidence: int = 10
+    hold_without_evidence: int = 75
+    hold_mass: float = 0.6
+    hold_std_xy_m: float = 0.5
+    hold_std_theta_rad: float = float(np.radians(20.0))
+    hold_jump_m: float = 0.5
+    #: Frames in a row the cluster may stay lighter than ``hold_mass`` (a frame with a
+    #: single detection can lend freshly injected particles a passing share).
+    hold_light_frames: int = 3
 
     def __init__(
         self, frames: int = 5, tolerance_m: float = 0.3, tolerance_rad: float = np.radians(15.0)
@@ -287,38 +322,124 @@ class ConvergenceGate:
         self.frames = frames
         self.tolerance_m = tolerance_m
         self.tolerance_rad = tolerance_rad
-        self._streak = 0
-        self._last: Estimate | None = None
+        self.reset()
 
     def reset(self) -> None:
         self._streak = 0
-        self._last = None
+        self._last: Estimate | None = None
+        self._held = False
+        self._light = 0
 
     def confirm(
         self,
         raw: Estimate,
         moved_m: float = 0.0,
         turned_rad: float = 0.0,
-        fit: float | None = None,
+        quality: FitQuality | None = None,
         frames_without_evidence: int = 0,
+        alternatives: float = 0.0,
+        searched_ago: int | None = 0,
+        motion_lost: bool = False,
     ) -> Estimate:
-        """``raw`` with ``converged`` true only if it held for ``frames`` frames and fits."""
+        """``raw`` with ``converged`` decided by the rules above."""
         last = self._last
+        self._last = raw
+        step = float(np.hypot(raw.x - last.x, raw.y - last.y)) if last is not None else np.inf
+        turn = abs(float(wrap_angle(raw.theta_rad - last.theta_rad))) if last else np.pi
+        if self._held:
+            top = raw.hypotheses[0] if raw.hypotheses else None
+            light = top is None or top.weight < self.hold_mass
+            self._light = self._light + 1 if light else 0
+            self._held = (
+                top is not None
+                and self._light < self.hold_light_frames
+                and max(raw.std_x_m, raw.std_y_m) <= self.hold_std_xy_m
+                and raw.std_theta_rad <= self.hold_std_theta_rad
+                and step <= moved_m + self.hold_jump_m
+                and quality is not None
+                and quality.fit <= self.hold_fit
+                and quality.unexplained <= self.hold_unexplained
+                and not quality.bad_frame
+                and frames_without_evidence <= self.hold_without_evidence
+                and alternatives <= self.hold_alternatives
+                and not motion_lost
+            )
+            if not self._held:
+                self._streak = 0
+            return replace(raw, converged=self._held)
         fits = (
-            fit is not None
-            and fit <= self.max_fit
-            and frames_without_evidence <= self.max_frames_without_evidence
+            quality is not None
+            and quality.fit <= self.gain_fit
+            and quality.unexplained <= self.gain_unexplained
+            and not quality.bad_frame
+            and frames_without_evidence <= self.gain_without_evidence
         )
         steady = (
             raw.converged
             and fits
-            and last is not None
-            and np.hypot(raw.x - last.x, raw.y - last.y) <= moved_m + self.tolerance_m
-            and abs(float(wrap_angle(raw.theta_rad - last.theta_rad)))
-            <= abs(turned_rad) + self.tolerance_rad
+            and step <= moved_m + self.tolerance_m
+            and turn <= abs(turned_rad) + self.tolerance_rad
         )
         self._streak = self._streak + 1 if steady else (1 if raw.converged and fits else 0)
-        self._last = raw
-        if raw.converged and (self._streak < self.frames or not fits):
-            return replace(raw, converged=False)
-        return raw
+        self._held = (
+            self._streak >= self.frames
+            and searched_ago is not None
+            and searched_ago < self._streak
+            and alternatives <= self.gain_alternatives
+        )
+        return replace(raw, converged=self._held)
+
+
+#: Probability the protection radius must hold (CONTRACT.md, FrameResult.protection_m).
+PROTECTION_PROBABILITY = 0.99
+#: Particles (a systematic resample) whose distances give the radius's quantile.
+PROTECTION_SAMPLE = 1_000
+#: Calibration of the radius on the integrity suite (docs/results/integrity.md): the
+#: cloud's own 99 % radius, scaled by this factor, plus this floor (m).
+PROTECTION_SCALE = 1.5
+PROTECTION_FLOOR_M = 0.05
+
+
+def protection_radius(
+    x: NDArray[np.float64],
+    y: NDArray[np.float64],
+    weights: NDArray[np.float64],
+    estimate: Estimate,
+    rng: np.random.Generator,
+    alternative_share: float = 0.0,
+    alternatives_reach_m: float = 0.0,
+) -> float:
+    """Radius (m) around the estimate holding the truth with 99 % probability.
+
+    The whole belief counts: the filter's particles (far clusters included) hold
+    ``1 - alternative_share`` of the probability, the alternatives of
+    :mod:`~app.localization.evidence` the rest, all within ``alternatives_reach_m``.
+    Within the particles, the radius is the larger of their weighted quantile and the
+    Gaussian radius of the heaviest cluster's spread (sqrt(-2 ln(1 - q)) times its
+    largest standard deviation), scaled by ``PROTECTION_SCALE`` plus
+    ``PROTECTION_FLOOR_M`` (calibrated on the integrity suite).
+    """
+    q = PROTECTION_PROBABILITY
+    need = 1.0 if alternative_share >= 1.0 - q else q / (1.0 - alternative_share)
+    idx = systematic_resample(weights, PROTECTION_SAMPLE, rng)
+    d = np.hypot(x[idx] - estimate.x, y[idx] - estimate.y)
+    r_particles = float(np.quantile(d, min(need, 1.0)))
+    sigma = max(estimate.std_x_m, estimate.std_y_m)
+    r_gauss = float(np.sqrt(-2.0 * np.log(1.0 - min(need, 0.9999)))) * sigma
+    r = PROTECTION_SCALE * max(r_particles, r_gauss) + PROTECTION_FLOOR_M
+    if alternative_share >= 1.0 - q:
+        r = max(r, alternatives_reach_m)
+    return r
+
+
+def with_alternatives(
+    estimate: Estimate, alternatives: list[Hypothesis], alternative_share: float
+) -> Estimate:
+    """The estimate's hypotheses joined with the alternatives (their weights the
+    probabilities under the whole belief), heaviest first, at most three."""
+    if not alternatives:
+        return estimate
+    scale = 1.0 - alternative_share
+    own = [replace(h, weight=h.weight * scale) for h in estimate.hypotheses]
+    merged = sorted(own + alternatives, key=lambda h: -h.weight)[:3]
+    return replace(estimate, hypotheses=tuple(merged))

@@ -11,13 +11,22 @@ structure of arrays (x, y, theta, log-weight); nothing loops over particles in P
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import replace
 
 import numpy as np
 from numpy.typing import NDArray
 
 from app.localization import sensor_kernel
+from app.localization.compass import CompassReading, compass_log_likelihood
 from app.localization.config import FilterConfig
-from app.localization.estimate import ConvergenceGate, estimate_pose
+from app.localization.estimate import (
+    ConvergenceGate,
+    FitQuality,
+    estimate_pose,
+    protection_radius,
+    with_alternatives,
+)
+from app.localization.evidence import EvidenceTracker
 from app.localization.kld import kld_sample_size
 from app.localization.motion import motion_log_penalty, sample_motion
 from app.localization.recovery import AugmentedMCL, sample_from_observation
@@ -29,7 +38,6 @@ from app.localization.resampling import (
 )
 from app.localization.sensor import Observation, normalized_residuals, prepare_observation
 from app.localization.types import Detection, Estimate, InitialPose, Odometry
-from app.localization.visibility import visibility_grid
 from app.maps.geometry import wrap_angle
 from app.maps.model import SemanticMap
 
@@ -37,6 +45,14 @@ from app.maps.model import SemanticMap
 SEED_SHARE = 0.9
 #: Weight of the newest frame in the smoothed fit that gates ``converged``.
 FIT_SMOOTHING = 0.3
+#: The fit is measured while the heaviest cluster is at most this wide (m).
+FIT_MAX_SPREAD_M = 0.7
+#: Without a clutter floor, residuals beyond this many stds count as unexplained.
+PAPER_RESIDUAL_CUTOFF = 3.0
+#: Score-weighted mean of the clipped squared residuals that makes one frame veto.
+BAD_FRAME_FIT = 8.0
+#: Alternatives are searched for while the heaviest cluster is at most this wide (m).
+SEARCH_MAX_SPREAD_M = 0.5
 
 
 class ParticleFilter:
@@ -61,9 +77,15 @@ class ParticleFilter:
         self.map = semantic_map
         self.config = config or FilterConfig()
         self.rng = rng
-        self._vis = visibility_grid(semantic_map) if self.config.visibility else None
+        self._vis = semantic_map.visibility if self.config.visibility else None
         self._recovery = AugmentedMCL(self.config.alpha_slow, self.config.alpha_fast)
         self._gate = ConvergenceGate()
+        #: Alternative places and their evidence (None with ``config.evidence`` off).
+        self.evidence = (
+            EvidenceTracker(semantic_map, self.config, self._vis, rng)
+            if self.config.evidence
+            else None
+        )
         self.last_observation: Observation | None = None
         self.reset(initial_pose)
 
@@ -84,8 +106,14 @@ class ParticleFilter:
         self._seed_from_observation = initial_pose is None and self.config.recovery
         self._recovery.reset()
         self._gate.reset()
-        #: Smoothed mean squared bearing residual (in stds) at the estimate; None before any.
-        self.fit: float | None = None
+        if self.evidence is not None:
+            self.evidence.reset()
+        #: How well the estimate explains the detections (smoothed); None before any.
+        self.quality: FitQuality | None = None
+        #: log of this frame's evidence under the belief (prior-weighted mean likelihood,
+        #: moves through walls included).
+        self.log_evidence = 0.0
+        self._had_odometry = False
         self.frames_without_evidence = 0
         #: How often every particle became impossible and the filter started again.
         self.restarts = 0
@@ -109,7 +137,9 @@ class ParticleFilter:
         self.x, self.y, self.theta = sample_motion(
             self.x, self.y, self.theta, odometry, self.config, self.rng
         )
+        before = log_sum_exp(self.log_w)
         self.log_w = self.log_w + motion_log_penalty(x0, y0, self.x, self.y, self.map)
+        self.log_evidence = log_sum_exp(self.log_w) - before
         if not np.isfinite(self.log_w).any():
             # Every hypothesis walked through a wall or off the map: the belief is
             # wrong everywhere. Start again from no knowledge rather than keep ghosts.
@@ -127,6 +157,8 @@ class ParticleFilter:
         self._seed_from_observation = self.config.recovery
         self._recovery.reset()
         self._gate.reset()
+        if self.evidence is not None:
+            self.evidence.reset()
         self.restarts += 1
 
     def observation_log_likelihood(self, obs: Observation) -> NDArray[np.float64]:
@@ -153,6 +185,7 @@ class ParticleFilter:
         self.log_w = self.log_w + log_lik
         # log of the prior-weighted mean likelihood: lse(w + l) - lse(w)
         mean_ll = log_sum_exp(self.log_w) - before
+        self.log_evidence += mean_ll
         per_class = mean_ll / max(obs.group_kappa.size, 1)
         if not np.isfinite(per_class):
             per_class = -1e3
@@ -208,43 +241,117 @@ class ParticleFilter:
             self.x[slots], self.y[slots], self.theta[slots] = nx, ny, nt
         return True
 
-    def step(self, odometry: Odometry | None, detections: Sequence[Detection]) -> Estimate:
+    def step(
+        self,
+        odometry: Odometry | None,
+        detections: Sequence[Detection],
+        heading: CompassReading | None = None,
+    ) -> Estimate:
         """One full filter step: predict, correct, estimate, resample when due.
+
+        ``heading``, a compass reading, weights the particles' headings too
+        (:mod:`~app.localization.compass`).
 
         The estimate summarizes the weighted particles before resampling: resampling
         only adds noise to what they say (and to what the injected particles say).
         """
         self.predict(odometry)
         inject = self.correct(detections)
+        if heading is not None:
+            self.log_w = self.log_w + compass_log_likelihood(self.theta, heading)
         w = self.weights
         ess = effective_sample_size(w)
         raw = estimate_pose(self.x, self.y, self.theta, w, ess=ess, rng=self.rng)
+        share: float = 0.0
+        searched_ago: int | None = 0
+        if self.evidence is not None:
+            raw, w, ess = self._weigh_alternatives(odometry, raw, w, ess)
+            share, searched_ago = self.evidence.alternative_share, self.evidence.searched_ago
         self._update_fit(raw)
         moved = 1.0 if odometry is None else float(np.hypot(odometry.forward_m, odometry.left_m))
         turned = np.pi if odometry is None else odometry.turn_rad
-        self.estimate = self._gate.confirm(
-            raw, moved, turned, self.fit, self.frames_without_evidence
+        lost = odometry is None and self._had_odometry
+        self._had_odometry = odometry is not None
+        est = self._gate.confirm(
+            raw,
+            moved,
+            turned,
+            self.quality,
+            self.frames_without_evidence,
+            share,
+            searched_ago,
+            motion_lost=lost,
         )
+        if self.evidence is not None:
+            est = with_alternatives(est, self.evidence.hypotheses(), share)
+        if est.converged:
+            reach = self.evidence.farthest_m(est.x, est.y) if self.evidence is not None else 0.0
+            radius = protection_radius(self.x, self.y, w, est, self.rng, share, reach)
+            est = replace(est, protection_m=radius)
+        self.estimate = est
         self._resample(w, ess, inject)
         self.steps += 1
         return self.estimate
 
+    def _weigh_alternatives(
+        self, odometry: Odometry | None, raw: Estimate, w: NDArray[np.float64], ess: float
+    ) -> tuple[Estimate, NDArray[np.float64], float]:
+        """Move and weigh the alternatives; swap the strongest in if the evidence says so."""
+        assert self.evidence is not None and self.last_observation is not None
+        top = raw.hypotheses[0] if raw.hypotheses else None
+        tight = top is not None and top.std_xy_m <= SEARCH_MAX_SPREAD_M
+        particles = (self.x, self.y, self.theta, w)
+        if not self.evidence.update(
+            odometry, self.last_observation, self.log_evidence, top, tight, particles
+        ):
+            return raw, w, ess
+        self.x, self.y, self.theta = self.evidence.swap(self.x, self.y, self.theta, w, self.n)
+        self.log_w = np.zeros(self.n)
+        self._gate.reset()
+        self.quality = None
+        w = self.weights
+        ess = effective_sample_size(w)
+        return estimate_pose(self.x, self.y, self.theta, w, ess=ess, rng=self.rng), w, ess
+
     def _update_fit(self, raw: Estimate) -> None:
         """Smooth how well the estimated pose explains this frame's detections.
 
-        The mean of the squared normalized residuals, each clipped at 3 standard
-        deviations so that one false detection cannot dominate; a cloud collapsed onto
-        a wrong spot leaves many residuals large.
+        Each detection's bearing residual at the estimate (in stds, to the best visible
+        object of its class) is either explained by an object, or better explained by
+        the clutter floor (beyond the residual where the two densities cross; 3 stds
+        without a floor): a false detection then does not count against the estimate.
+        Tracked, score-weighted and smoothed: the mean squared residual of the
+        explained detections (``fit``) and the share left to clutter
+        (``unexplained``). A frame is bad on its own (a kidnap shows at once) when at
+        least three detections' worth of score arrived and their score-weighted mean
+        squared residual, each clipped at the crossover, reaches ``BAD_FRAME_FIT``: a
+        false detection costs at most the crossover squared (about 14.5 at 2 deg), so
+        it takes mostly contradicting detections.
         """
         obs = self.last_observation
-        if not raw.converged or obs is None or obs.empty:
+        top = raw.hypotheses[0] if raw.hypotheses else None
+        if top is None or top.std_xy_m > FIT_MAX_SPREAD_M or obs is None or obs.empty:
             return
         row = self._vis.visible(raw.x, raw.y)[0] if self._vis is not None else None
         r = normalized_residuals(raw.x, raw.y, raw.theta_rad, obs, self.map, self.config, row)
-        value = float(np.mean(np.minimum(r, 3.0) ** 2))
-        smoothed = value if self.fit is None else self.fit + FIT_SMOOTHING * (value - self.fit)
-        # One frame that fits very badly vetoes at once; the average remembers it.
-        self.fit = max(smoothed, value / 2.0)
+        if self.config.clutter:
+            g = obs.det_group
+            cutoff = np.sqrt(2.0 * (obs.group_log_keep[g] - obs.group_log_floor[g]))
+        else:
+            cutoff = np.full(r.shape, PAPER_RESIDUAL_CUTOFF)
+        explained = r <= cutoff
+        score = obs.det_score
+        total = float(score.sum())
+        good = float(score[explained].sum())
+        fit = float(np.sum(score[explained] * r[explained] ** 2) / good) if good > 0 else 9.0
+        unexplained = 1.0 - good / total
+        clipped = float(np.sum(score * np.minimum(r, cutoff) ** 2) / total)
+        bad = total >= 3.0 and clipped >= BAD_FRAME_FIT
+        q = self.quality
+        if q is not None:
+            fit = q.fit + FIT_SMOOTHING * (fit - q.fit)
+            unexplained = q.unexplained + FIT_SMOOTHING * (unexplained - q.unexplained)
+        self.quality = FitQuality(fit, unexplained, bad)
 
 
 def warm_up() -> None:

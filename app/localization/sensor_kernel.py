@@ -24,8 +24,8 @@ from numpy.typing import NDArray
 from app.localization.config import FilterConfig
 from app.localization.fastmath import FAST, grid_cell, sincos, softplus
 from app.localization.sensor import Observation
-from app.localization.visibility import VisibilityGrid
 from app.maps.model import SemanticMap
+from app.maps.visibility import VisibilityGrid
 
 #: Particles per block: the block's working set (unit vectors, best matches of up to
 #: ~20 detections) stays within a 32 KB first-level cache.
@@ -38,7 +38,7 @@ HIDDEN = -4.0
 
 @njit(cache=True, fastmath=FAST, nogil=True, error_model="numpy")
 def _kernel(
-    x, y, theta, use_vis, grid, vis_bits, cos_half_fov, check_fov, max_range_sq,
+    x, y, theta, use_vis, grid, vis_bits, cos_half_fov, check_fov, fov_cos, fov_sin, max_range_sq,
     obj_xy, det_cos, det_sin, det_score, det_group,
     group_kappa, group_weight, group_log_floor, group_log_keep, member_start, members, out,
 ):  # fmt: skip  # pragma: no cover - compiled
@@ -52,6 +52,9 @@ def _kernel(
     check_range = max_range_sq < np.inf
     range_sq = f32(max_range_sq) if check_range else f32(0.0)
     half_fov = f32(cos_half_fov)
+    # The field of view's centre direction in the body frame (cos, sin).
+    fc = f32(fov_cos)
+    fs = f32(fov_sin)
     xs = np.empty(BLOCK, dtype=f32)
     ys = np.empty(BLOCK, dtype=f32)
     ct = np.empty(BLOCK, dtype=f32)
@@ -103,7 +106,8 @@ def _kernel(
                         off[i] = f32(HIDDEN) * f32(one - ((b_bits[i] >> shift) & one))
                     if check_fov:
                         for i in range(m):
-                            off[i] = off[i] if fx[i] >= half_fov else f32(HIDDEN)
+                            inside = fx[i] * fc + fy[i] * fs >= half_fov
+                            off[i] = off[i] if inside else f32(HIDDEN)
                     if check_range:
                         for i in range(m):
                             dx = ox - xs[i]
@@ -185,6 +189,8 @@ def log_likelihood(
         vis_bits,
         float(np.cos(np.radians(config.fov_deg) / 2.0)),
         check_fov,
+        float(np.cos(np.radians(config.fov_centre_deg))),
+        float(np.sin(np.radians(config.fov_centre_deg))),
         float(max_range_sq),
         semantic_map.object_xy.reshape(-1, 2),
         obs.det_cos,

@@ -70,7 +70,10 @@ class Estimate:
 
     ``x, y, theta_rad`` and the standard deviations describe the heaviest cluster.
     ``converged`` is true only when one tight cluster holds most of the weight.
-    ``hypotheses`` lists up to three clusters, heaviest first.
+    ``hypotheses`` lists up to three modes, heaviest first (clusters of the particles
+    and alternatives kept alive by :mod:`~app.localization.evidence`).
+    ``protection_m`` is the radius around (x, y) that holds the true position with at
+    least 99 % probability under the whole belief; None while not converged.
     """
 
     x: float
@@ -83,3 +86,4 @@ class Estimate:
     hypotheses: tuple[Hypothesis, ...] = field(default_factory=tuple)
     n_particles: int = 0
     ess: float = 0.0
+    protection_m: float | None = None

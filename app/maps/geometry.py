@@ -140,9 +140,13 @@ def grid_cells(
     resolution_m: float,
     shape: tuple[int, int],
 ) -> tuple[NDArray[np.int64], NDArray[np.bool_]]:
-    """:func:`grid_cell` for arrays of points: (flat cell index, on the grid?), each (M,)."""
-    xs = np.atleast_1d(np.asarray(x, dtype=np.float64)).reshape(-1)
-    ys = np.atleast_1d(np.asarray(y, dtype=np.float64)).reshape(-1)
+    """:func:`grid_cell` for arrays of points: (flat cell index, on the grid?).
+
+    Both outputs have the broadcast shape of ``x`` and ``y`` (shape (1,) for scalars).
+    """
+    shape_out = np.broadcast_shapes(np.shape(x), np.shape(y)) or (1,)
+    xs = np.broadcast_to(np.asarray(x, dtype=np.float64), shape_out)
+    ys = np.broadcast_to(np.asarray(y, dtype=np.float64), shape_out)
     rows, cols = shape
     flat, inside = grid_cell(xs, ys, origin_x, origin_y, 1.0 / resolution_m, rows, cols)
     return flat.astype(np.int64), inside

@@ -22,7 +22,10 @@ from datetime import UTC, datetime
 import numpy as np
 
 from app.config import Settings
-from app.feedback import Narrator
+from app.feedback import Feedback, Narrator
+from app.feedback.guidance import GuidanceSpeaker
+from app.guidance import DestinationSpec, Guidance, Plan, Target, Unreachable, guide, plan_for
+from app.localization.camera import Camera
 from app.localization.config import FilterConfig
 from app.localization.filter import ParticleFilter
 from app.localization.types import Detection, Estimate, Pose
@@ -100,6 +103,8 @@ class SessionSnapshot:
     estimate: Estimate | None
     detections: list[Detection]
     truth: Pose | None
+    #: The path to the destination from the estimate (metres, (P, 2)), or None.
+    route: np.ndarray | None = None
 
 
 @dataclass
@@ -121,6 +126,33 @@ class Session:
     last_timestamp: float | None = None
     order: asyncio.Lock = field(default_factory=asyncio.Lock)
     state_lock: threading.Lock = field(default_factory=threading.Lock)
+    camera: Camera | None = None
+    #: The destination's plan (None: no destination) and what was said about the way.
+    destination: Plan | None = None
+    speaker: GuidanceSpeaker = field(default_factory=GuidanceSpeaker)
+    last_guidance: Guidance | None = None
+
+    def set_destination(self, plan: Plan | None) -> None:
+        """Guide to ``plan``'s target from the next frame on (None: stop guiding)."""
+        with self.state_lock:
+            self.destination = plan
+            self.speaker.reset()
+            self.last_guidance = None
+
+    def _guide(
+        self, estimate: Estimate, now: float, warnings: list[str]
+    ) -> tuple[Guidance | None, str]:
+        """Directions from the estimate (only when converged) and what to say of them."""
+        if self.destination is None:
+            return None, ""
+        if not estimate.converged:
+            return None, self.speaker.update(None, False, now, estimate.x, estimate.y)
+        try:
+            guidance = guide(self.destination, estimate.x, estimate.y, estimate.theta_rad)
+        except Unreachable as exc:
+            warnings.append(f"guidance: {exc}")
+            return None, self.speaker.no_way(self.destination.target.name, now)
+        return guidance, self.speaker.update(guidance, True, now, estimate.x, estimate.y)
 
     def process_sync(self, frame: FrameInput) -> FrameOutcome:
         """Run one frame through the filter and the narrator (worker thread)."""
@@ -136,14 +168,21 @@ class Session:
                 f"{self.last_timestamp}; frames are processed in the order received"
             )
         with self.state_lock:
-            estimate = self.filter.step(frame.odometry, detections)
+            estimate = self.filter.step(frame.odometry, detections, frame.heading)
             feedback = self.narrator.update(
                 estimate,
                 detections,
                 timestamp_s=frame.timestamp,
                 describe=frame.describe,
                 fov_deg=self.filter.config.fov_deg,
+                fov_centre_deg=self.filter.config.fov_centre_deg,
             )
+            now = time.monotonic() if frame.timestamp is None else frame.timestamp
+            guidance, said = self._guide(estimate, now, warnings)
+            if said:
+                joined = f"{feedback.text} {said}" if feedback.text else said
+                feedback = Feedback(joined, feedback.items)
+            self.last_guidance = guidance
             self.frames += 1
             result = FrameOutcome(
                 seq=self.frames,
@@ -151,6 +190,7 @@ class Session:
                 feedback=feedback,
                 warnings=tuple(warnings),
                 regions=tuple(self.map.region_at(h.x, h.y) for h in estimate.hypotheses),
+                guidance=guidance,
             )
             self.last_outcome = result
             self.last_detections = detections
@@ -176,6 +216,7 @@ class Session:
                 estimate=pf.estimate if self.frames else None,
                 detections=list(self.last_detections),
                 truth=self.truth,
+                route=None if self.last_guidance is None else self.last_guidance.path.copy(),
             )
 
 
@@ -218,11 +259,14 @@ class SessionManager:
                 code="too_many_particles",
             )
         sensor = request.sensor
+        camera = request.camera
         config = FilterConfig(
             particles=particles,
             bearing_std_deg=sensor.bearing_std_deg,
             class_bearing_std_deg=dict(sensor.class_bearing_std_deg),
-            fov_deg=sensor.fov_deg,
+            # A camera fixes the field of view (and where its middle points).
+            fov_deg=sensor.fov_deg if camera is None else camera.fov_deg,
+            fov_centre_deg=0.0 if camera is None else camera.fov_centre_deg,
         )
         seed = request.seed if request.seed is not None else secrets.randbits(63)
         initial = request.initial_pose
@@ -243,6 +287,8 @@ class SessionManager:
             narrator=narrator,
             particles=particles,
             created_at=datetime.now(UTC),
+            camera=camera,
+            speaker=GuidanceSpeaker(request.feedback.style, request.feedback.units),
         )
 
     async def create(self, request: SessionSpec) -> Session:
@@ -290,6 +336,23 @@ class SessionManager:
             self.metrics.frames.inc()
             session.last_active = time.monotonic()
             return result
+
+    async def set_destination(self, session_id: str, spec: DestinationSpec) -> Target:
+        """Guide the session to ``spec`` (the plan is built off the event loop).
+
+        Raises:
+            SessionNotFound, UnknownDestination (nothing by that name: says what the
+            map has), Unreachable (no walkable path leads there).
+        """
+        session = self.get(session_id)
+        plan = await asyncio.to_thread(plan_for, session.map, spec)
+        session.set_destination(plan)
+        log_event("destination_set", session=session_id[:8], kind=spec.kind)
+        return plan.target
+
+    def clear_destination(self, session_id: str) -> None:
+        """Stop guiding the session."""
+        self.get(session_id).set_destination(None)
 
     async def delete(self, session_id: str, *, reason: str = "deleted") -> None:
         session = self._sessions.pop(session_id, None)

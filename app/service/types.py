@@ -13,6 +13,9 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 
 from app.feedback import Feedback, FeedbackOptions
+from app.guidance import Guidance
+from app.localization.camera import Camera
+from app.localization.compass import CompassReading
 from app.localization.types import Detection, Estimate, InitialPose, Odometry, Pose
 
 
@@ -39,6 +42,8 @@ class SessionSpec:
     initial_pose: InitialPose | None = None
     sensor: SensorSpec = field(default_factory=SensorSpec)
     feedback: FeedbackOptions = field(default_factory=FeedbackOptions)
+    #: The phone camera; its field of view replaces ``sensor.fov_deg`` when given.
+    camera: Camera | None = None
 
 
 @dataclass(frozen=True)
@@ -50,6 +55,8 @@ class FrameInput:
     detections: tuple[Detection, ...] = ()
     describe: bool = False
     truth: Pose | None = None
+    #: The phone compass's heading (map frame), or None.
+    heading: CompassReading | None = None
 
 
 @dataclass(frozen=True)
@@ -65,3 +72,5 @@ class FrameOutcome:
     feedback: Feedback
     warnings: tuple[str, ...]
     regions: tuple[str | None, ...]
+    #: Directions to the destination; None without one or while not converged.
+    guidance: Guidance | None = None

@@ -49,6 +49,8 @@ class LiveView:
         self.controls: ViewControls | None = None
         self.watched: str | None = None
         self.frames_drawn = 0
+        #: The drawn path to the destination (hidden without one).
+        self.route: viser.LineSegmentsHandle | None = None
         self._last_version = -1
         self._stop = threading.Event()
         self._draw_lock = threading.Lock()
@@ -169,6 +171,16 @@ class LiveView:
                     thickness=0.02,
                     visible=bool(rays.size),
                 )
+            # The way to the destination, when one is set and the person is located.
+            route = snap.route
+            legs = np.zeros((1, 2, 3), np.float32)
+            if route is not None and len(route) >= 2:
+                legs = np.zeros((len(route) - 1, 2, 3), np.float32)
+                legs[:, 0, :2], legs[:, 1, :2] = route[:-1], route[1:]
+                legs[:, :, 2] = 0.08
+            self.route = scene.add_line_segments(
+                "/session/route", legs, (0, 120, 255), thickness=0.05, visible=route is not None
+            )
             if snap.truth is not None:
                 t = snap.truth
                 scene.add_arrows(

@@ -42,13 +42,16 @@ def test_frame_result_matches_the_contract(client: TestClient, session_id: str) 
     res = r.json()
     assert set(res) == {
         "seq",
+        "protection_m",
         "pose",
         "uncertainty",
         "converged",
         "hypotheses",
         "feedback",
         "warnings",
+        "guidance",
     }
+    assert res["guidance"] is None  # no destination set
     assert res["seq"] == 1
     assert set(res["pose"]) == {"x", "y", "theta_deg"}
     assert set(res["uncertainty"]) == {"std_x_m", "std_y_m", "std_theta_deg"}

@@ -77,3 +77,61 @@ def test_crlb_matches_a_hand_computed_case() -> None:
     assert single_frame_crlb_m(m, Pose(0, 0, 0), 360, 1.0) == pytest.approx(
         np.sqrt(4 * s * s / 1.0)
     )
+
+
+def test_pcrb_single_step_by_hand() -> None:
+    """One step of the Tichavsky recursion against the closed form, numbers by hand.
+
+    Prior information J0 = diag(100, 100, 400), no motion (F = I), process noise
+    Q = diag(0.01, 0.01, 0.0025): the prior after the noise is 1 / (1/J0 + Q) per axis,
+    i.e. 1 / (0.01 + 0.01) = 50 for x and y and 1 / (0.0025 + 0.0025) = 200 for theta.
+    One object 2 m ahead on +x, bearing noise 0.1 rad: its gradient is (0, -1/2, -1),
+    so it adds (0, 0.25, 0.5; ., 1) / 0.01 to the (y, theta) block.
+    """
+    from app.experiments.pcrb import pcrb_step
+
+    j0 = np.diag([100.0, 100.0, 400.0])
+    q = np.diag([0.01, 0.01, 0.0025])
+    h = np.array([[0.0, -0.5, -1.0]])
+    j1 = pcrb_step(j0, np.eye(3), q, h, 0.01)
+    expected = np.array([[50.0, 0.0, 0.0], [0.0, 75.0, 50.0], [0.0, 50.0, 300.0]])
+    assert np.allclose(j1, expected, rtol=1e-12, atol=1e-9)
+
+
+def test_pcrb_on_the_paper_walk_is_below_the_single_frame_bound() -> None:
+    """Odometry only adds information: the PCRB lies under one frame's bound."""
+    from app.experiments.pcrb import pcrb_position_m
+    from app.maps.model import load_map
+    from app.resources import bundled_maps_dir
+    from app.simulation.scenarios import paper_config
+    from app.simulation.simulator import simulate
+
+    paper_office = load_map(bundled_maps_dir() / "paper_office.json")
+    frames = simulate(paper_office, paper_config("nominal", 360), np.random.default_rng(0))
+    truth = [f.truth for f in frames]
+    bound = pcrb_position_m(paper_office, truth, 360.0, 2.0, 0.02, 1.0)
+    single = np.array([single_frame_crlb_m(paper_office, p, 360.0, 2.0) for p in truth])
+    assert bound[0] == pytest.approx(single[0], rel=1e-6)
+    assert np.all(bound[1:] <= single[1:] * (1 + 1e-9))
+    assert 0.0 < bound[-1] < bound[0]
+
+
+def test_building_suite_walks_both_wings_and_recovers_from_the_kidnap(tmp_path) -> None:
+    from app.experiments import building
+    from app.experiments.metrics import first_right_fix_s
+
+    runs = [building.run_condition(c, 0, 3000) for c in ("nominal-360", "kidnap-360")]
+    for r in runs:
+        # The walk reaches the east wing, and the filter follows it there.
+        assert r.truth_xy[:, 0].max() > 30.0 and r.truth_xy[:, 0].min() < 5.0
+        assert np.isfinite(first_right_fix_s(r))
+        assert r.err_m[-25:].max() < 0.5
+    kidnap = runs[1]
+    jumped = np.hypot(*np.diff(kidnap.truth_xy, axis=0).T).max()
+    assert jumped > 15.0  # carried from the east corridor to the west one
+    rows = building.summarize(runs)
+    assert [r["condition"] for r in rows] == ["nominal-360", "kidnap-360"]
+    assert np.isfinite(rows[1]["median_recovery_s"])
+    text = building.markdown(rows, seconds=1.0, particles=3000, seeds=1)
+    assert "| kidnap-360 |" in text
+    assert building.figure(runs, tmp_path).is_file()

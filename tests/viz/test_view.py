@@ -114,3 +114,39 @@ def test_live_view_draws_the_watched_session() -> None:
 
     view = asyncio.run(main())
     assert view.frames_drawn >= 1
+
+
+def test_the_view_draws_the_way_to_the_destination() -> None:
+    from app.guidance import DestinationSpec
+
+    async def main():
+        manager = make_manager()
+        view = LiveView(manager, port=free_port(), host="127.0.0.1")
+        view.start()
+        try:
+            from app.localization.types import InitialPose
+
+            s = await manager.create(
+                SessionSpec(
+                    map_name="paper_office",
+                    particles=2000,
+                    seed=3,
+                    initial_pose=InitialPose(1.5, 1.2, 0.0, 0.3, 0.2),
+                )
+            )
+            await manager.set_destination(s.id, DestinationSpec("label", "main entrance"))
+            frames = simulate(OFFICE, paper_config("nominal", 360), np.random.default_rng(3))
+            for f in frames[:15]:
+                await manager.process(s.id, frame_input_of(f))
+            snap = s.snapshot()
+            view.draw(snap)
+            return snap, view.route
+        finally:
+            view.stop()
+
+    snap, route = asyncio.run(main())
+    assert snap.route is not None and route is not None and route.visible
+    assert route.points.shape == (len(snap.route) - 1, 2, 3)
+    # From the estimate to the door at (10, 5.5).
+    assert route.points[-1, 1, :2] == pytest.approx((10.0, 5.5))
+    assert route.points[0, 0, :2] == pytest.approx((snap.estimate.x, snap.estimate.y), abs=1e-4)

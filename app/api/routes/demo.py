@@ -3,17 +3,21 @@
 from __future__ import annotations
 
 import asyncio
+from dataclasses import replace
+from typing import Annotated
 
 import numpy as np
 from fastapi import APIRouter, Request
 from pydantic import Field, StrictBool
 
+from app.api.convert import camera_of
 from app.api.deps import ManagerDep
 from app.api.errors import error_responses
+from app.api.schemas import CameraIn
 from app.service.sessions import UnknownMap
 from app.simulation.simulator import simulate
 from app.simulation.walks import demo_config
-from app.validation import Finite, Integer, StrictInput
+from app.validation import NUMBER_ONLY, Finite, Integer, StrictInput
 
 router = APIRouter(tags=["demo"])
 
@@ -26,6 +30,12 @@ class SimulationRequest(StrictInput):
     false_rate: Finite = Field(0.0, ge=0, le=5, description="false detections per frame (mean)")
     bearing_noise_deg: Finite = Field(2.0, ge=0, le=45, description="bearing noise std, degrees")
     seed: Integer = Field(0, ge=0, le=2**32 - 1, description="random seed")
+    camera: CameraIn | None = Field(
+        None, description="give detections as this camera's pixel boxes (its field of view)"
+    )
+    compass_std_deg: (
+        Annotated[float, Field(gt=0, le=90, allow_inf_nan=False), NUMBER_ONLY] | None
+    ) = Field(None, description="give each frame a compass heading with this noise")
 
 
 @router.post(
@@ -50,7 +60,9 @@ async def simulations(body: SimulationRequest, manager: ManagerDep) -> dict[str,
             false_rate=body.false_rate,
             bearing_noise_deg=body.bearing_noise_deg,
         )
-        return [f.to_contract() for f in simulate(semantic_map, cfg, rng)]
+        camera = camera_of(body.camera)
+        cfg = replace(cfg, camera=camera, compass_std_deg=body.compass_std_deg)
+        return [f.to_contract(camera) for f in simulate(semantic_map, cfg, rng)]
 
     frames = await asyncio.to_thread(make)
     return {"map": body.map, "rate_hz": 5.0, "frames": frames}

@@ -7,10 +7,25 @@ import json
 from fastapi import APIRouter, Response, WebSocket, WebSocketDisconnect, status
 from pydantic import ValidationError
 
-from app.api.convert import frame_input, frame_result, session_out, session_spec
+from app.api.convert import (
+    destination_out,
+    destination_spec,
+    frame_input,
+    frame_result,
+    session_out,
+    session_spec,
+)
 from app.api.deps import ManagerDep
 from app.api.errors import describe_validation, error_responses
-from app.api.schemas import Frame, FrameResult, SessionCreate, SessionOut
+from app.api.schemas import (
+    DestinationIn,
+    DestinationOut,
+    Frame,
+    FrameResult,
+    SessionCreate,
+    SessionOut,
+)
+from app.localization.camera import BoxError
 from app.service.sessions import LimitReached, SessionManager, SessionNotFound
 
 router = APIRouter(prefix="/sessions", tags=["sessions"])
@@ -56,7 +71,32 @@ async def get_session(session_id: str, manager: ManagerDep) -> SessionOut:
 )
 async def post_frame(session_id: str, frame: Frame, manager: ManagerDep) -> FrameResult:
     """Process one frame; frames of a session are processed strictly in order."""
-    return frame_result(await manager.process(session_id, frame_input(frame)))
+    camera = manager.get(session_id).camera
+    return frame_result(await manager.process(session_id, frame_input(frame, camera)))
+
+
+@router.put(
+    "/{session_id}/destination",
+    response_model=DestinationOut,
+    responses=error_responses(400, 404, 413, 422),
+)
+async def put_destination(
+    session_id: str, body: DestinationIn, manager: ManagerDep
+) -> DestinationOut:
+    """Guide the person to an object's label, the nearest object of a class, a region or a
+    point; every later ``FrameResult`` carries ``guidance`` and the feedback speaks it."""
+    return destination_out(await manager.set_destination(session_id, destination_spec(body)))
+
+
+@router.delete(
+    "/{session_id}/destination",
+    status_code=status.HTTP_204_NO_CONTENT,
+    responses=error_responses(404),
+)
+async def delete_destination(session_id: str, manager: ManagerDep) -> Response:
+    """Stop guiding; results carry ``guidance: null`` again."""
+    manager.clear_destination(session_id)
+    return Response(status_code=status.HTTP_204_NO_CONTENT)
 
 
 @router.delete(
@@ -106,7 +146,12 @@ async def stream(ws: WebSocket, session_id: str) -> None:
                 await _send_error(ws, code, describe_validation(list(exc.errors())))
                 continue
             try:
-                outcome = await manager.process(session_id, frame_input(frame))
+                outcome = await manager.process(
+                    session_id, frame_input(frame, manager.get(session_id).camera)
+                )
+            except BoxError as exc:
+                await _send_error(ws, "invalid_frame", str(exc))
+                continue
             except SessionNotFound as exc:
                 await _send_error(ws, "session_not_found", exc.message)
                 await ws.close(code=status.WS_1008_POLICY_VIOLATION, reason="session ended")
