@@ -128,7 +128,7 @@ def bench_sessions(repeats: int) -> list[dict[str, object]]:
 
 
 def _start_to_first_session(cache_dir: Path) -> float:
-    from tests.support import free_port
+    from tests.helpers import free_port
 
     port = free_port()
     env = {**os.environ, "BEARINGS_CACHE_DIR": str(cache_dir)}
