@@ -44,8 +44,9 @@ ERROR_MEANING: dict[int, str] = {
     413: "the request body is larger than the service's limit",
     422: "the body fails validation (the message says which field and why), asks for "
     "more than a limit allows (code too_many_particles, too_many_detections), puts "
-    "the initial pose outside the map's free space, gives a pixel box the session has "
-    "no camera for, or names a destination that is unknown or cannot be reached",
+    "the initial pose outside the map's free space, gives a pixel box the session's "
+    "camera cannot read (no camera, outside the image), or names a destination that is "
+    "unknown or cannot be reached",
     429: "the service is at capacity (code too_many_sessions): try again later",
     503: "the feature needs something the machine lacks (no speech engine)",
 }
