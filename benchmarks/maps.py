@@ -39,7 +39,8 @@ import numpy as np
 from app.config import Settings
 from app.localization.config import FilterConfig
 from app.localization.filter import ParticleFilter, warm_up
-from app.maps.model import SemanticMap, load_map, parse_map
+from app.maps.check import load_map
+from app.maps.model import SemanticMap, parse_map
 from app.maps.prepare import build, prepare
 from app.resources import bundled_maps_dir
 from app.service.metrics import Metrics

@@ -15,7 +15,8 @@ import uvicorn
 from fastapi import FastAPI
 
 from app.config import Settings
-from app.maps.model import SemanticMap, load_map, parse_map
+from app.maps.check import load_map
+from app.maps.model import SemanticMap, parse_map
 from app.resources import bundled_maps_dir
 
 

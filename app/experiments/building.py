@@ -32,7 +32,8 @@ import numpy as np
 from app.experiments import metrics as m
 from app.localization.config import FilterConfig
 from app.localization.filter import ParticleFilter
-from app.maps.model import SemanticMap, load_map
+from app.maps.check import load_map
+from app.maps.model import SemanticMap
 from app.resources import bundled_maps_dir
 from app.simulation.simulator import SimulationConfig, simulate
 

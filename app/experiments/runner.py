@@ -10,8 +10,9 @@ import numpy as np
 
 from app.experiments.protocol import Cell
 from app.localization.filter import ParticleFilter
+from app.maps.check import load_map
 from app.maps.geometry import wrap_angle
-from app.maps.model import SemanticMap, load_map
+from app.maps.model import SemanticMap
 from app.resources import bundled_maps_dir
 from app.simulation.simulator import simulate
 

@@ -11,17 +11,17 @@ structures the filter needs (free space and visibility grids, see
 from __future__ import annotations
 
 import re
-from dataclasses import dataclass, field
 from functools import cached_property
-from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from pydantic import Field, ValidationError, field_validator, model_validator
 
+from app.maps.freespace import WALL_CLEARANCE_M as WALL_CLEARANCE_M  # re-exported
+from app.maps.freespace import FreeSpaceGrid as FreeSpaceGrid  # re-exported
+from app.maps.freespace import MapError as MapError  # re-exported
 from app.maps.geometry import (
-    grid_cells,
     point_segment_distance,
     points_in_polygon,
     segments_cross_walls,
@@ -37,8 +37,6 @@ if TYPE_CHECKING:
 CLASS_PATTERN = re.compile(r"^[a-z][a-z0-9_-]*$")
 #: A map name is usable as a file name and in a URL.
 NAME_PATTERN = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]*$")
-#: Every point of the free space is at least this far from every wall, in metres.
-WALL_CLEARANCE_M = 0.1
 #: An object closer than this to a wall is mounted in it (doors, windows), in metres.
 MOUNT_TOLERANCE_M = 0.05
 
@@ -103,17 +101,6 @@ class MapFile(StrictInput):
         return value
 
 
-class MapError(ValueError):
-    """A map file that cannot be used; the message says which field and why.
-
-    ``fields`` holds each (field, reason) pair when there are several.
-    """
-
-    def __init__(self, message: str, fields: list[tuple[str, str]] | None = None) -> None:
-        super().__init__(message)
-        self.fields = fields or [("(file)", message)]
-
-
 def _validation_error(source: str, error: ValidationError) -> MapError:
     fields = []
     for item in error.errors():
@@ -149,71 +136,6 @@ def parse_map(
         MapError: naming the offending field and the reason.
     """
     return SemanticMap(validate_spec(data, source=source, expected_name=expected_name))
-
-
-def load_map(path: str | Path) -> SemanticMap:
-    """Load and check one map file (:func:`app.maps.check.check_file`).
-
-    Its ``name`` must match the file name. Warnings are dropped (their fixes, such as
-    an object snapped onto a wall, are applied).
-
-    Raises:
-        MapError: with every error found, each naming its field.
-    """
-    from app.maps.check import check_file
-
-    result = check_file(path)
-    if result.map is None:
-        errors = result.errors
-        raise MapError("; ".join(str(p) for p in errors), [(p.field, p.message) for p in errors])
-    return result.map
-
-
-def load_map_dir(directory: str | Path) -> dict[str, SemanticMap]:
-    """Load every ``*.json`` map in a directory, keyed by name (sorted); any error raises."""
-    d = Path(directory)
-    if not d.is_dir():
-        raise MapError(f"{d}: not a directory of maps")
-    return {m.name: m for m in (load_map(p) for p in sorted(d.glob("*.json")))}
-
-
-@dataclass(frozen=True)
-class FreeSpaceGrid:
-    """Cells where a person can stand: enclosed by walls and clear of them.
-
-    ``mask[row, col]`` covers the square with lower-left corner
-    ``(origin_x + col * resolution_m, origin_y + row * resolution_m)``.
-    """
-
-    origin_x: float
-    origin_y: float
-    resolution_m: float
-    mask: NDArray[np.bool_]  # shape (rows, cols)
-    free_cells: NDArray[np.int64] = field(repr=False)  # flat indices of free cells
-
-    def cell_index(self, x: ArrayLike, y: ArrayLike) -> tuple[NDArray[np.int64], NDArray[np.bool_]]:
-        """Row-major flat cell index for each point and whether it is on the grid.
-
-        Points off the grid get the nearest edge cell (see :func:`grid_cells`).
-        """
-        return grid_cells(x, y, self.origin_x, self.origin_y, self.resolution_m, self.mask.shape)
-
-    def is_free(self, x: ArrayLike, y: ArrayLike) -> NDArray[np.bool_]:
-        """Whether each point lies in a free cell (False off the grid)."""
-        flat, inside = self.cell_index(x, y)
-        return inside & self.mask.reshape(-1)[flat]
-
-    def sample(self, n: int, rng: np.random.Generator) -> NDArray[np.float64]:
-        """``n`` points uniform over the free space, shape (n, 2)."""
-        if self.free_cells.size == 0:
-            raise MapError("the map has no free space inside its walls")
-        cols = self.mask.shape[1]
-        pick = self.free_cells[rng.integers(0, self.free_cells.size, size=n)]
-        r, c = np.divmod(pick, cols)
-        jitter = rng.random((n, 2))
-        x = self.origin_x + (c + jitter[:, 0]) * self.resolution_m
-        y = self.origin_y + (r + jitter[:, 1]) * self.resolution_m
-        return np.column_stack([x, y])
 
 
 class SemanticMap:

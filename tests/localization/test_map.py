@@ -8,7 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from app.maps.model import MapError, load_map, load_map_dir, parse_map
+from app.maps.check import load_map, load_map_dir
+from app.maps.model import MapError, parse_map
 from app.resources import bundled_maps_dir
 from tests.helpers import paper_office
 

@@ -17,8 +17,8 @@ from app.guidance import ARRIVED_M
 from app.localization.camera import Camera
 from app.localization.types import Pose
 from app.main import create_app
+from app.maps.check import load_map
 from app.maps.geometry import segments_cross_walls, wrap_angle
-from app.maps.model import load_map
 from app.resources import bundled_maps_dir
 from app.simulation.camera import CameraModel, visible_objects
 from tests.helpers import free_port, make_settings, serving

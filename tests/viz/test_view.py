@@ -11,7 +11,7 @@ import pytest
 import viser
 
 from app.demo import frame_input_of, new_walk
-from app.maps.model import load_map_dir
+from app.maps.check import load_map_dir
 from app.resources import bundled_maps_dir
 from app.service.metrics import Metrics
 from app.service.sessions import SessionManager
