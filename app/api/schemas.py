@@ -41,8 +41,30 @@ class BoxIn(StrictInput):
     u_max_px: Finite = Field(ge=0, description="right column of the box, pixels")
 
 
+def _exactly_one(*branches: dict[str, object]) -> dict[str, object]:
+    """JSON Schema ``oneOf`` for "exactly one of these": each branch names its required
+    fields (and their types), the others must be null or absent."""
+    names = {name for branch in branches for name in branch}
+    return {
+        "oneOf": [
+            {
+                "required": sorted(branch),
+                "properties": {n: branch.get(n, {"type": "null"}) for n in sorted(names)},
+            }
+            for branch in branches
+        ]
+    }
+
+
 class DetectionIn(StrictInput):
     """One detection from the camera's object detector: a bearing or a pixel box."""
+
+    # The rule of _bearing_or_box, stated in the JSON schema as well.
+    model_config = ConfigDict(
+        json_schema_extra=_exactly_one(
+            {"bearing_deg": {"type": "number"}}, {"box": {"type": "object"}}
+        )
+    )
 
     cls: str = Field(
         alias="class",
@@ -195,6 +217,16 @@ class SessionCreate(StrictInput):
 
 class DestinationIn(StrictInput):
     """Where to guide to: exactly one of label, class, region, or a point x, y."""
+
+    # The rule of _one_target, stated in the JSON schema as well.
+    model_config = ConfigDict(
+        json_schema_extra=_exactly_one(
+            {"label": {"type": "string"}},
+            {"class": {"type": "string"}},
+            {"region": {"type": "string"}},
+            {"x": {"type": "number"}, "y": {"type": "number"}},
+        )
+    )
 
     label: str | None = Field(None, min_length=1, max_length=200, description="an object's label")
     cls: str | None = Field(
