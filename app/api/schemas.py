@@ -11,6 +11,7 @@ from datetime import datetime
 from typing import Annotated, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, StrictBool, model_validator
+from pydantic.json_schema import JsonDict, JsonValue
 
 from app.validation import NUMBER_ONLY, Finite, Integer, StrictInput
 
@@ -41,19 +42,16 @@ class BoxIn(StrictInput):
     u_max_px: Finite = Field(ge=0, description="right column of the box, pixels")
 
 
-def _exactly_one(*branches: dict[str, object]) -> dict[str, object]:
+def _exactly_one(*branches: JsonDict) -> JsonDict:
     """JSON Schema ``oneOf`` for "exactly one of these": each branch names its required
     fields (and their types), the others must be null or absent."""
-    names = {name for branch in branches for name in branch}
-    return {
-        "oneOf": [
-            {
-                "required": sorted(branch),
-                "properties": {n: branch.get(n, {"type": "null"}) for n in sorted(names)},
-            }
-            for branch in branches
-        ]
-    }
+    names = sorted({name for branch in branches for name in branch})
+    one_of: list[JsonValue] = []
+    for branch in branches:
+        required: list[JsonValue] = list(sorted(branch))
+        properties: JsonDict = {n: branch.get(n, {"type": "null"}) for n in names}
+        one_of.append({"required": required, "properties": properties})
+    return {"oneOf": one_of}
 
 
 class DetectionIn(StrictInput):
