@@ -211,6 +211,11 @@ class SessionCreate(StrictInput):
         description="the phone camera, so detections may give pixel boxes; its field of "
         "view replaces sensor.fov_deg",
     )
+    share_view: bool = Field(
+        False,
+        description="addition: list this session in the live view (private by default); "
+        "see docs/SECURITY.md",
+    )
 
 
 class DestinationIn(StrictInput):
@@ -369,6 +374,11 @@ class ErrorBody(_Out):
     message: str = Field(description="one readable sentence covering every problem")
     code: str | None = Field(
         None, description="for a service limit: which one, e.g. too_many_sessions"
+    )
+    retry_after_s: float | None = Field(
+        None,
+        description="for a limit that passes: seconds after which trying again may succeed "
+        "(also in the Retry-After header, whole seconds)",
     )
 
 
