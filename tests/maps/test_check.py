@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 from app.maps import check
-from app.maps.check import check_data, check_file, load_map_dirs
-from app.maps.model import MapError, load_map
+from app.maps.check import check_data, check_file, load_map, load_map_dirs
+from app.maps.model import MapError
 from app.resources import bundled_maps_dir
 from tests.maps.hostile import box, hostile_maps, write_hostile_dir
 
