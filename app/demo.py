@@ -19,7 +19,7 @@ import numpy as np
 from app.localization.compass import CompassReading
 from app.localization.types import Odometry
 from app.maps.geometry import wrap_angle
-from app.service.sessions import SessionManager, SessionNotFound
+from app.service.sessions import LimitReached, SessionManager, SessionNotFound
 from app.service.types import FrameInput, SensorSpec, SessionSpec
 from app.simulation.simulator import SimFrame, simulate
 from app.simulation.walks import demo_config
@@ -36,6 +36,8 @@ class DemoSettings:
     particles: int = 10_000
     seed: int = 0
     speed: float = 1.0  # playback speed; 1.0 is real time
+    share_view: bool = False  # list the walk's session in the live view
+    max_duration_s: float | None = None  # end the walk (and its session) after this long
 
 
 def frame_input_of(frame: SimFrame) -> FrameInput:
@@ -61,6 +63,7 @@ class DemoWalk:
         self._kidnap = False
         self._rng = np.random.default_rng(settings.seed)
         self._task: asyncio.Task[None] | None = None
+        self.finished = False
 
     def kidnap(self) -> None:
         """Carry the person elsewhere at the next frame (no odometry for that frame)."""
@@ -101,9 +104,24 @@ class DemoWalk:
                 particles=s.particles,
                 seed=s.seed,
                 sensor=SensorSpec(fov_deg=s.fov_deg),
+                share_view=s.share_view,
             )
         )
         self.session_id = session.id
+        try:
+            if s.max_duration_s is None:
+                await self._walk(session.id)
+            else:
+                with contextlib.suppress(TimeoutError):
+                    await asyncio.wait_for(self._walk(session.id), s.max_duration_s)
+                log.info("demo walk reached its time limit and ends")
+                with contextlib.suppress(SessionNotFound):
+                    await self.manager.delete(session.id)
+        finally:
+            self.finished = True
+
+    async def _walk(self, session_id: str) -> None:
+        s = self.settings
         period = 1.0 / 5.0 / max(s.speed, 1e-3)
         frames = self._frames()
         i = 0
@@ -119,9 +137,9 @@ class DemoWalk:
                 turn = float(wrap_angle(frames[0].truth.theta_rad - last.theta_rad))
                 frames[0] = replace(frames[0], odometry=Odometry(0.0, 0.0, turn))
             try:
-                await self.manager.process(session.id, frame_input_of(frames[i]))
-            except SessionNotFound:
-                log.info("demo session ended; demo walk stops")
+                await self.manager.process(session_id, frame_input_of(frames[i]))
+            except (SessionNotFound, LimitReached):
+                log.info("demo session ended (or the service is restarting); demo walk stops")
                 return
             i += 1
             next_at += period

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 from fastapi import FastAPI, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
@@ -14,22 +16,45 @@ from app.service.sessions import (
     CapacityReached,
     InvalidSessionSpec,
     LimitReached,
+    QuotaReached,
     RequestTooLarge,
     SessionNotFound,
+    SessionUnavailable,
     UnknownMap,
 )
 
 #: The HTTP status of each service limit: the service says what was hit, the API
-#: decides how HTTP says it.
-LIMIT_STATUS: dict[type[LimitReached], int] = {CapacityReached: 429, RequestTooLarge: 422}
+#: decides how HTTP says it. A client's own quota is 429, the whole service full (or
+#: restarting) is 503, a request larger than ever allowed is 422.
+LIMIT_STATUS: dict[type[LimitReached], int] = {
+    QuotaReached: 429,
+    CapacityReached: 503,
+    SessionUnavailable: 503,
+    RequestTooLarge: 422,
+}
 
 
 def limit_status(exc: LimitReached) -> int:
-    """The status for a service limit (429 for capacity, 422 for an oversized request)."""
+    """The status for a service limit (see :data:`LIMIT_STATUS`; 429 for any other)."""
     for kind, status in LIMIT_STATUS.items():
         if isinstance(exc, kind):
             return status
     return 429
+
+
+def retry_after(exc: LimitReached) -> str | None:
+    """The ``Retry-After`` header value (whole seconds, at least 1), or None."""
+    if exc.retry_after_s is None:
+        return None
+    return str(max(1, math.ceil(exc.retry_after_s)))
+
+
+def limit_body(exc: LimitReached) -> dict[str, object]:
+    """What a refused request is told (HTTP body, or the WebSocket error's fields)."""
+    body: dict[str, object] = {"code": exc.code, "message": str(exc)}
+    if exc.retry_after_s is not None:
+        body["retry_after_s"] = round(max(exc.retry_after_s, 0.0), 3)
+    return body
 
 
 def describe_validation(errors: list[dict]) -> str:
@@ -91,7 +116,9 @@ def install_error_handlers(app: FastAPI) -> None:
 
     @app.exception_handler(LimitReached)
     async def _limit(_: Request, exc: LimitReached) -> JSONResponse:
+        after = retry_after(exc)
         return JSONResponse(
             status_code=limit_status(exc),
-            content={"detail": str(exc), "message": str(exc), "code": exc.code},
+            content={"detail": str(exc), **limit_body(exc)},
+            headers=None if after is None else {"Retry-After": after},
         )

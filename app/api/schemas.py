@@ -187,6 +187,11 @@ class SessionCreate(_In):
         description="the phone camera, so detections may give pixel boxes; its field of "
         "view replaces sensor.fov_deg",
     )
+    share_view: bool = Field(
+        False,
+        description="addition: list this session in the live view (private by default); "
+        "see docs/SECURITY.md",
+    )
 
 
 class DestinationIn(_In):

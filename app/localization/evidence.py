@@ -43,8 +43,9 @@ protection radius.
 from __future__ import annotations
 
 from collections import deque
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -57,9 +58,10 @@ from app.localization.recovery import sample_from_observation
 from app.localization.resampling import systematic_resample
 from app.localization.sensor import Observation
 from app.localization.types import Hypothesis, Odometry
-from app.localization.visibility import VisibilityGrid
 from app.maps.geometry import wrap_angle
 from app.maps.model import SemanticMap
+from app.maps.visibility import VisibilityGrid
+from app.state import from_plain, to_plain
 
 
 @dataclass(frozen=True)
@@ -164,6 +166,51 @@ class EvidenceTracker:
         #: Searches run against the current main mode while it stayed tight.
         self.mode_searches = 0
         self._last_main: Hypothesis | None = None
+
+    # ---------------------------------------------------------- checkpoints
+    def checkpoint(self) -> dict[str, Any]:
+        """The alternatives, the anchor and the recent frames (a window of prepared
+        observations), as plain data and arrays; the random generator is the filter's."""
+        return {
+            "x": self.x,
+            "y": self.y,
+            "theta": self.theta,
+            "llr": self.llr,
+            "anchor": self._anchor,
+            "history": [
+                [to_plain(odo), to_plain(obs), to_plain(heading)]
+                for odo, obs, heading in self._history
+            ],
+            "since_search": self._since_search,
+            "searched_ago": self.searched_ago,
+            "searches": self.searches,
+            "swaps": self.swaps,
+            "mode_searches": self.mode_searches,
+            "last_main": to_plain(self._last_main),
+        }
+
+    def restore(self, state: Mapping[str, Any]) -> None:
+        """Continue from a :meth:`checkpoint` of a tracker with the same map and config."""
+        self.x, self.y, self.theta, self.llr = (
+            np.array(state[k], dtype=np.float64) for k in ("x", "y", "theta", "llr")
+        )
+        anchor = state["anchor"]
+        self._anchor = None if anchor is None else np.array(anchor, dtype=np.float64)
+        self._history.clear()
+        for odo, obs, heading in state["history"]:
+            self._history.append(
+                (
+                    from_plain(Odometry | None, odo),
+                    from_plain(Observation, obs),
+                    from_plain(CompassReading | None, heading),
+                )
+            )
+        self._since_search = int(state["since_search"])
+        self.searched_ago = state["searched_ago"]
+        self.searches = int(state["searches"])
+        self.swaps = int(state["swaps"])
+        self.mode_searches = int(state["mode_searches"])
+        self._last_main = from_plain(Hypothesis | None, state["last_main"])
 
     # ------------------------------------------------------------ read-outs
     @property

@@ -20,6 +20,7 @@ from app.localization.fastmath import FAST, fill_normal, grid_cell, sincos
 from app.localization.types import Odometry
 from app.maps.geometry import GEOMETRY_EPS
 from app.maps.model import WALL_CLEARANCE_M, SemanticMap
+from app.maps.prepare import crosses_wall
 
 #: When a frame carries no odometry the person may still have moved: diffuse this much.
 NO_ODOMETRY_STD_M = 0.15
@@ -87,21 +88,8 @@ def sample_motion(
 @njit(cache=True, nogil=True, error_model="numpy", inline="always")
 def _crosses_a_wall(px, py, qx, qy, walls, eps):  # fmt: skip  # pragma: no cover - compiled
     """Whether segment p->q properly crosses a wall: :func:`segments_cross_walls`, one segment."""
-    rx = qx - px
-    ry = qy - py
     for w in range(walls.shape[0]):
-        ax = walls[w, 0]
-        ay = walls[w, 1]
-        sx = walls[w, 2] - ax
-        sy = walls[w, 3] - ay
-        denom = rx * sy - ry * sx
-        if abs(denom) < eps:
-            continue
-        apx = ax - px
-        apy = ay - py
-        t = (apx * sy - apy * sx) / denom
-        u = (apx * ry - apy * rx) / denom
-        if eps < t < 1.0 - eps and -eps <= u <= 1.0 + eps:
+        if crosses_wall(px, py, qx, qy, walls[w, 0], walls[w, 1], walls[w, 2], walls[w, 3], eps):
             return True
     return False
 
@@ -143,3 +131,21 @@ def motion_log_penalty(
         walls, GEOMETRY_EPS, penalty,
     )  # fmt: skip
     return penalty
+
+
+def compose_odometry(first: Odometry | None, then: Odometry | None) -> Odometry | None:
+    """One odometry equal to moving by ``first`` and then by ``then`` (composition in SE(2)).
+
+    ``then`` is expressed in the body frame reached after ``first``, so it is rotated by
+    ``first``'s turn before the translations add up; the turns add (not wrapped, so a
+    long turn keeps its size for the motion noise). Unknown motion (None) on either side
+    makes the whole motion unknown.
+    """
+    if first is None or then is None:
+        return None
+    c, s = np.cos(first.turn_rad), np.sin(first.turn_rad)
+    return Odometry(
+        forward_m=float(first.forward_m + c * then.forward_m - s * then.left_m),
+        left_m=float(first.left_m + s * then.forward_m + c * then.left_m),
+        turn_rad=float(first.turn_rad + then.turn_rad),
+    )

@@ -20,7 +20,7 @@ Bearings' additions, each switchable in :class:`FilterConfig`:
 
 * ``visibility``: only objects inside the field of view, within range and in line of
   sight of the particle can explain a detection (line of sight from the per-map
-  :mod:`visibility grid <app.localization.visibility>`).
+  :mod:`visibility grid <app.maps.visibility>`).
 * ``clutter``: each detection's likelihood is a mixture (1 - eps) vonMises + eps
   uniform, eps = ``clutter_prob``; a detection that nothing explains (a false
   positive) then costs a bounded amount instead of killing the right particle.

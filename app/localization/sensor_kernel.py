@@ -24,8 +24,8 @@ from numpy.typing import NDArray
 from app.localization.config import FilterConfig
 from app.localization.fastmath import FAST, grid_cell, sincos, softplus
 from app.localization.sensor import Observation
-from app.localization.visibility import VisibilityGrid
 from app.maps.model import SemanticMap
+from app.maps.visibility import VisibilityGrid
 
 #: Particles per block: the block's working set (unit vectors, best matches of up to
 #: ~20 detections) stays within a 32 KB first-level cache.

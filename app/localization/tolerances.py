@@ -23,7 +23,6 @@ from numpy.typing import ArrayLike, NDArray
 from app.localization.config import FilterConfig
 from app.localization.fastmath import SINCOS_MAX_ERROR, SOFTPLUS_MAX_ERROR
 from app.localization.sensor import Observation, candidate_mask
-from app.localization.visibility import visibility_grid
 from app.maps.model import SemanticMap
 
 #: Unit roundoff of float32 and float64 (round to nearest): |fl(a op b) - a op b| <= u |a op b|.
@@ -90,7 +89,7 @@ def log_likelihood_tolerance(
     px = np.atleast_1d(np.asarray(x, dtype=np.float64))
     py = np.atleast_1d(np.asarray(y, dtype=np.float64))
     th = np.atleast_1d(np.asarray(theta, dtype=np.float64))
-    rows = visibility_grid(semantic_map).visible(px, py) if config.visibility else None
+    rows = semantic_map.visibility.visible(px, py) if config.visibility else None
     bound = np.zeros(px.shape)
     cos_t, sin_t = np.cos(th)[:, None], np.sin(th)[:, None]
     for g in range(obs.group_kappa.size):

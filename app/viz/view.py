@@ -1,5 +1,8 @@
 """LiveView: a viser server in the service's process, showing one session at a time.
 
+It listens on loopback unless told otherwise (``--viser-host``) and shows only the
+sessions shared with it and its own demo walks (:mod:`app.viz.gui`).
+
 The view never touches the filter directly: a background thread wakes at most
 ``max_rate_hz`` times a second, takes a snapshot of the watched session (copies made
 under the session's lock) and redraws only when the session's version changed. So
@@ -33,7 +36,7 @@ class LiveView:
         manager: SessionManager,
         *,
         port: int = 8080,
-        host: str = "0.0.0.0",
+        host: str = "127.0.0.1",
         max_rate_hz: float = 10.0,
     ) -> None:
         self.manager = manager
@@ -114,6 +117,9 @@ class LiveView:
             self.controls.sync_sessions()
         sid = self.watched
         if sid is None:
+            return False
+        if self.controls is not None and sid not in self.controls.visible_ids:
+            self.watch(None)  # never draw a session the view may not show
             return False
         try:
             snap = self.manager.get(sid).snapshot()

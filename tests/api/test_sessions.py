@@ -193,14 +193,15 @@ def test_initial_pose_is_used(client: TestClient) -> None:
     assert abs(res["pose"]["x"] - 2.0) < 0.3 and abs(res["pose"]["theta_deg"] - 90) < 15
 
 
-def test_session_limit_is_429(client: TestClient) -> None:
+def test_session_limit_is_503_with_retry_after(client: TestClient) -> None:
     for _ in range(5):
         assert (
             client.post("/sessions", json={"map": "paper_office", "particles": 100}).status_code
             == 201
         )
     r = client.post("/sessions", json={"map": "paper_office", "particles": 100})
-    assert r.status_code == 429 and "maximum" in r.json()["message"]
+    assert r.status_code == 503 and "maximum" in r.json()["message"]
+    assert int(r.headers["retry-after"]) >= 1
 
 
 def test_detection_limit(client: TestClient, session_id: str) -> None:

@@ -16,7 +16,8 @@ from app.guidance import (
     plan_for,
 )
 from app.maps.geometry import segments_cross_walls
-from app.maps.model import SemanticMap, bundled_maps_dir, load_map, parse_map
+from app.maps.model import SemanticMap, load_map, parse_map
+from app.resources import bundled_maps_dir
 
 SUITE = load_map(bundled_maps_dir() / "office_suite.json")
 #: Office 1 of the suite, behind the corridor wall y = 3 from the main entrance.

@@ -15,8 +15,8 @@ from app.localization.fastmath import (
     sincos,
     softplus,
 )
-from app.localization.visibility import pack_bits
 from app.maps.geometry import grid_cells
+from app.maps.visibility import pack_bits
 
 
 @njit(fastmath=FAST, error_model="numpy")

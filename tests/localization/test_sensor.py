@@ -22,7 +22,6 @@ from app.localization.tolerances import (
     log_likelihood_tolerance,
 )
 from app.localization.types import Detection, Pose
-from app.localization.visibility import visibility_grid
 from app.maps.geometry import wrap_angle
 from app.maps.model import SemanticMap, parse_map
 from app.simulation.camera import CameraModel, visible_objects
@@ -43,9 +42,9 @@ def loglik(m, cfg, x, y, th, dets, *, kernel: bool = True) -> np.ndarray:
     x, y, th = (np.atleast_1d(np.asarray(v, dtype=float)) for v in (x, y, th))
     obs = prepare_observation(dets, m, cfg)
     if kernel:
-        grid = visibility_grid(m) if cfg.visibility else None
+        grid = m.visibility if cfg.visibility else None
         return log_likelihood(x, y, th, obs, m, cfg, grid)
-    rows = visibility_grid(m).visible(x, y) if cfg.visibility else None
+    rows = m.visibility.visible(x, y) if cfg.visibility else None
     return log_likelihood_reference(x, y, th, obs, m, cfg, rows)
 
 
@@ -282,7 +281,7 @@ def test_residuals_are_bearing_errors_to_the_best_visible_object(
         Detection("table", -0.2),
     ]
     obs = prepare_observation(dets, small_room, cfg)
-    grid = visibility_grid(small_room)
+    grid = small_room.visibility
     pts = small_room.free_space.sample(200, rng)
     for (x, y), th in zip(pts, rng.uniform(-np.pi, np.pi, 200), strict=True):
         row = grid.visible(x, y)[0]

@@ -18,7 +18,8 @@ from app.localization.camera import Camera
 from app.localization.types import Pose
 from app.main import create_app
 from app.maps.geometry import segments_cross_walls, wrap_angle
-from app.maps.model import bundled_maps_dir, load_map
+from app.maps.model import load_map
+from app.resources import bundled_maps_dir
 from app.simulation.camera import CameraModel, visible_objects
 from tests.api.conftest import make_settings
 from tests.support import free_port, serving

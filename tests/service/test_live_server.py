@@ -50,9 +50,9 @@ async def stream_session(
     seqs = []
     last: dict = {}
     async with websockets.connect(f"ws://{url}/sessions/{sid}/stream") as ws:
+        # One frame at a time, as a phone at a steady rate would: nothing is merged.
         for frame in FRAMES[:n_frames]:
             await ws.send(json.dumps(frame))
-        for _ in range(n_frames):
             last = json.loads(await ws.recv())
             seqs.append(last["seq"])
     return sid, seqs, last

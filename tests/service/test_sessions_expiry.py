@@ -13,6 +13,10 @@ from app.service.types import FrameInput, SessionSpec
 from tests.api.conftest import make_settings
 
 
+def make_manager(**overrides: object) -> SessionManager:
+    return SessionManager(load_map_dir(bundled_maps_dir()), make_settings(**overrides), Metrics())
+
+
 def test_idle_sessions_expire() -> None:
     async def main() -> None:
         manager = SessionManager(

@@ -84,7 +84,9 @@ def test_live_view_draws_the_watched_session() -> None:
         view = LiveView(manager, port=free_port(), host="127.0.0.1")
         view.start()
         try:
-            s = await manager.create(SessionSpec(map_name="paper_office", particles=2000, seed=2))
+            s = await manager.create(
+                SessionSpec(map_name="paper_office", particles=2000, seed=2, share_view=True)
+            )
             frames = simulate(OFFICE, paper_config("nominal", 360), np.random.default_rng(2))[:5]
             for f in frames:
                 await manager.process(s.id, frame_input_of(f))
@@ -93,7 +95,8 @@ def test_live_view_draws_the_watched_session() -> None:
                 await asyncio.sleep(0.05)
             assert view.watched == s.id  # the newest session is watched by default
             assert view.controls is not None
-            assert s.id in view.controls.session.options
+            assert s.id not in view.controls.session.options  # a label, never the id
+            assert view.controls.label(s) in view.controls.session.options
             assert view.refresh() is False  # nothing new: nothing redrawn
             await manager.process(s.id, FrameInput())
             assert view.refresh() is True
