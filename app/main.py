@@ -24,6 +24,7 @@ from app.maps.model import SemanticMap
 from app.resources import bundled_maps_dir, static_dir
 from app.service.metrics import Metrics
 from app.service.sessions import SessionManager
+from app.service.store import open_store
 
 log = logging.getLogger("bearings")
 
@@ -50,6 +51,8 @@ async def drain(app: FastAPI, timeout_s: float = 30.0) -> None:
             await asyncio.wait_for(manager.shutdown(), timeout_s)
         except TimeoutError:
             log.error("frames still unanswered after %.0f s of shutdown; closing anyway", timeout_s)
+        if manager.sharing is not None:  # checkpoint every session, release it
+            await manager.sharing.shutdown()
     await streams.close_all()
 
 
@@ -69,15 +72,21 @@ def create_app(settings: Settings | None = None, *, demo: bool = False) -> FastA
         from app.guidance.planner import warm_up as warm_up_guidance
         from app.localization.filter import warm_up
 
+        def warm_up_all() -> None:
+            warm_up()
+            warm_up_guidance()
+
         # Kernels compile (or load from numba's cache) while the maps are checked and
         # prepared: both release the GIL for most of their work.
         _, maps_ = await asyncio.gather(
-            asyncio.to_thread(warm_up), asyncio.to_thread(load_maps, settings)
+            asyncio.to_thread(warm_up_all), asyncio.to_thread(load_maps, settings)
         )
-        await asyncio.to_thread(warm_up_guidance)
-        manager = SessionManager(maps_, settings, metrics_)
+        store = await asyncio.to_thread(open_store, settings.store)
+        manager = SessionManager(maps_, settings, metrics_, store)
         app.state.manager = manager
         tasks = [asyncio.create_task(manager.run_sweeper())]
+        if manager.sharing is not None:
+            tasks.append(asyncio.create_task(manager.sharing.run_keeper()))
         view = None
         if settings.viser:
             from app.viz import LiveView
@@ -99,6 +108,8 @@ def create_app(settings: Settings | None = None, *, demo: bool = False) -> FastA
                     await task
             if view is not None:
                 view.stop()
+            if manager.sharing is not None:  # (already done when drained)
+                await manager.sharing.shutdown()
             manager.close()
 
     app = FastAPI(

@@ -87,6 +87,15 @@ def run(settings: Settings, *, demo: bool = False) -> int:
     except StartupRefused as exc:
         print(f"bearings: {exc}", file=sys.stderr)
         return 2
+    if settings.store != "memory":
+        from app.service.store import StoreUnavailable, open_store, redacted
+
+        try:  # say at once when the store cannot be reached, before serving anything
+            open_store(settings.store).close()
+        except StoreUnavailable as exc:
+            print(f"bearings: {exc}", file=sys.stderr)
+            return 2
+        print(f"Sessions are shared through {redacted(settings.store)}")
     shown = "localhost" if settings.host in ("0.0.0.0", "::") else settings.host
     print(f"Bearings API and demo page: http://{shown}:{settings.port}/  (docs: /docs)")
     if settings.viser:

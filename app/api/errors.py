@@ -19,6 +19,7 @@ from app.service.sessions import (
     QuotaReached,
     RequestTooLarge,
     SessionNotFound,
+    SessionUnavailable,
     UnknownMap,
 )
 
@@ -28,6 +29,7 @@ from app.service.sessions import (
 LIMIT_STATUS: dict[type[LimitReached], int] = {
     QuotaReached: 429,
     CapacityReached: 503,
+    SessionUnavailable: 503,
     RequestTooLarge: 422,
 }
 

@@ -130,7 +130,8 @@ class Stream:
                 self._answer_now(error_message(code, describe_validation(list(exc.errors()))))
                 continue
             try:
-                camera = self.manager.get(self.session_id, self.owner).camera
+                # (with a shared store the session may have to be resumed here first)
+                camera = (await self.manager.find(self.session_id, self.owner)).camera
                 future = self.manager.submit(
                     self.session_id, frame_input(frame, camera), self.owner
                 )

@@ -16,8 +16,9 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -82,12 +83,38 @@ class Narrator:
     def __init__(self, semantic_map: SemanticMap, options: FeedbackOptions | None = None) -> None:
         self.map = semantic_map
         self.options = options or FeedbackOptions()
-        self._said: dict[object, _Said] = {}
+        self._said: dict[tuple[object, ...], _Said] = {}
         self._region: str | None = None
         self._was_converged = False
         self._status_at: float | None = None
         self._ambiguity: tuple[str, ...] = ()
         self._objects_at: float | None = None
+
+    # ------------------------------------------------------------- checkpoints
+    def checkpoint(self) -> dict[str, Any]:
+        """What was said and when, as plain data (times as this narrator saw them)."""
+        return {
+            "said": [
+                [list(key), said.clock, said.distance_m, said.at_s]
+                for key, said in self._said.items()
+            ],
+            "region": self._region,
+            "was_converged": self._was_converged,
+            "status_at": self._status_at,
+            "ambiguity": list(self._ambiguity),
+            "objects_at": self._objects_at,
+        }
+
+    def restore(self, state: Mapping[str, Any]) -> None:
+        """Continue from a :meth:`checkpoint`. Times from another process's clock (frames
+        without timestamps) only make an announcement come once more: a time in the
+        future counts as long ago."""
+        self._said = {tuple(k): _Said(int(c), d, float(at)) for k, c, d, at in state["said"]}
+        self._region = state["region"]
+        self._was_converged = bool(state["was_converged"])
+        self._status_at = state["status_at"]
+        self._ambiguity = tuple(state["ambiguity"])
+        self._objects_at = state["objects_at"]
 
     # ------------------------------------------------------------------ public
     def update(
@@ -250,7 +277,9 @@ class Narrator:
     def _gap_passed(self, now: float) -> bool:
         return self._objects_at is None or not 0 <= now - self._objects_at < MIN_GAP_S
 
-    def _is_new(self, key: object, clock: int | None, distance_m: float | None, now: float) -> bool:
+    def _is_new(
+        self, key: tuple[object, ...], clock: int | None, distance_m: float | None, now: float
+    ) -> bool:
         """True when this announcement adds something; remembers it if so."""
         said = self._said.get(key)
         changed = (

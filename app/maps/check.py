@@ -23,7 +23,6 @@ from typing import Literal
 
 import numpy as np
 
-from app.maps.geometry import point_segment_distance, segments_cross_walls
 from app.maps.model import (
     MOUNT_TOLERANCE_M,
     MapError,
@@ -32,6 +31,7 @@ from app.maps.model import (
     parse_map,
     validate_spec,
 )
+from app.maps.prepare import enclosed, nearest_walls
 
 log = logging.getLogger("bearings.maps")
 
@@ -222,17 +222,6 @@ def _region_problems(source: str, m: SemanticMap) -> list[Problem]:
     return out
 
 
-def _enclosed(points: np.ndarray, walls: np.ndarray) -> np.ndarray:
-    """Whether an axis ray from each point hits a wall in all four directions."""
-    if walls.shape[0] == 0:
-        return np.ones(points.shape[0], dtype=bool)
-    reach = 4.0 * float(np.abs(walls).max() + np.abs(points).max() + 1.0)
-    inside = np.ones(points.shape[0], dtype=bool)
-    for d in ((1.0, 0.0), (-1.0, 0.0), (0.0, 1.0), (0.0, -1.0)):
-        inside &= segments_cross_walls(points, points + reach * np.array(d), walls)
-    return inside
-
-
 def _object_fixes(source: str, m: SemanticMap) -> tuple[Fixes, list[Problem]]:
     """Objects outside the walls: snapped onto a wall when close, else a warning."""
     walls = m.walls
@@ -241,14 +230,10 @@ def _object_fixes(source: str, m: SemanticMap) -> tuple[Fixes, list[Problem]]:
     fixes: Fixes = {}
     out: list[Problem] = []
     xy = m.object_xy
-    dist = np.vstack(
-        [point_segment_distance(xy[i : i + 256], walls) for i in range(0, xy.shape[0], 256)]
-    )
-    nearest = dist.argmin(axis=1)
-    near = dist[np.arange(xy.shape[0]), nearest]
+    near, nearest, _ = nearest_walls(xy, walls)
     mounted = near < MOUNT_TOLERANCE_M
     candidates = np.flatnonzero(~mounted)
-    outside = candidates[~_enclosed(xy[candidates], walls)] if candidates.size else candidates
+    outside = candidates[~enclosed(xy[candidates], walls)] if candidates.size else candidates
     for i in outside:
         i = int(i)
         label = m.object_labels[i]

@@ -22,10 +22,10 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_valida
 
 from app.maps.geometry import (
     grid_cells,
-    point_segment_distance,
     points_in_polygon,
     segments_cross_walls,
 )
+from app.maps.prepare import nearest_walls
 from app.resources import bundled_maps_dir as bundled_maps_dir  # re-exported for old imports
 
 if TYPE_CHECKING:
@@ -251,12 +251,8 @@ class SemanticMap:
         }
         self.region_names: tuple[str, ...] = tuple(r.name for r in spec.regions)
         self.region_polygons = [np.array(r.polygon, dtype=np.float64) for r in spec.regions]
-        if self.walls.shape[0]:
-            self.mounted_walls = (
-                point_segment_distance(self.object_xy, self.walls) < MOUNT_TOLERANCE_M
-            )
-        else:
-            self.mounted_walls = np.zeros((len(spec.objects), 0), dtype=bool)
+        #: Object n is mounted in wall w: within MOUNT_TOLERANCE_M of it.
+        self.mounted_walls = nearest_walls(self.object_xy, self.walls, MOUNT_TOLERANCE_M)[2]
         self._grid_resolution_m = grid_resolution_m
         self._prepared: PreparedMap | None = None
 

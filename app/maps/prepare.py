@@ -56,15 +56,9 @@ FREE_SPACE_CELLS = 200_000
 MIN_RESOLUTION_M = 0.05
 #: Upper bound on visibility cells x objects (bytes of the boolean table).
 MAX_TABLE_BYTES = 24_000_000
-#: Upper bound on visibility cells x objects x walls (ray-wall tests in the worst
-#: case); beyond it the visibility grid is coarsened so that preparation stays bounded.
-MAX_VISIBILITY_WORK = 6_000_000_000
-
-
-def default_cache_dir() -> Path:
-    """``BEARINGS_CACHE_DIR`` or ``~/.cache/bearings``."""
-    env = os.environ.get("BEARINGS_CACHE_DIR")
-    return Path(env) if env else Path.home() / ".cache" / "bearings"
+#: Upper bound on the estimated ray-wall tests of the visibility grid (cells x objects
+#: x walls per angular bin); beyond it the grid is coarsened so preparation stays bounded.
+MAX_VISIBILITY_WORK = 3_000_000_000
 
 
 @dataclass(frozen=True)
@@ -152,6 +146,76 @@ def _free_mask(walls, ox, oy, res, rows, cols, clearance, eps):  # fmt: skip  # 
                 if np.sqrt(ex * ex + ey * ey) < reach:
                     mask[r, c] = False
     return mask
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _enclosed_points(px, py, walls, eps):  # fmt: skip  # pragma: no cover - compiled
+    """Whether a wall crosses each point's horizontal and vertical lines on both sides."""
+    out = np.zeros(px.shape[0], dtype=np.bool_)
+    for i in range(px.shape[0]):
+        x, y = px[i], py[i]
+        left = right = down = up = False
+        for w in range(walls.shape[0]):
+            x1, y1, x2, y2 = walls[w, 0], walls[w, 1], walls[w, 2], walls[w, 3]
+            if abs(y2 - y1) > eps and min(y1, y2) <= y <= max(y1, y2):
+                cx = x1 + (y - y1) * (x2 - x1) / (y2 - y1)
+                left = left or cx < x
+                right = right or cx > x
+            if abs(x2 - x1) > eps and min(x1, x2) <= x <= max(x1, x2):
+                cy = y1 + (x - x1) * (y2 - y1) / (x2 - x1)
+                down = down or cy < y
+                up = up or cy > y
+            if left and right and down and up:
+                out[i] = True
+                break
+    return out
+
+
+def enclosed(points: np.ndarray, walls: np.ndarray) -> np.ndarray:
+    """Whether each point (M, 2) has a wall on all four axis sides (the free space's
+    enclosure, without the clearance), shape (M,)."""
+    pts = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 2)
+    w = np.ascontiguousarray(walls, dtype=np.float64).reshape(-1, 4)
+    if w.shape[0] == 0:
+        return np.ones(pts.shape[0], dtype=bool)
+    return _enclosed_points(pts[:, 0].copy(), pts[:, 1].copy(), w, GEOMETRY_EPS)
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _nearest_walls(px, py, walls, eps, tolerance, near):  # fmt: skip  # pragma: no cover
+    """Distance to and index of each point's nearest wall; near[i, w] = within tolerance."""
+    n = px.shape[0]
+    dist = np.full(n, np.inf)
+    index = np.full(n, -1, dtype=np.int64)
+    for i in range(n):
+        for w in range(walls.shape[0]):
+            x1, y1 = walls[w, 0], walls[w, 1]
+            dx = walls[w, 2] - x1
+            dy = walls[w, 3] - y1
+            t = ((px[i] - x1) * dx + (py[i] - y1) * dy) / max(dx * dx + dy * dy, eps)
+            t = min(max(t, 0.0), 1.0)
+            ex = px[i] - (x1 + t * dx)
+            ey = py[i] - (y1 + t * dy)
+            d = np.sqrt(ex * ex + ey * ey)
+            near[i, w] = d < tolerance
+            if d < dist[i]:
+                dist[i] = d
+                index[i] = w
+    return dist, index
+
+
+def nearest_walls(
+    points: np.ndarray, walls: np.ndarray, tolerance: float = 0.0
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per point (M, 2): distance to the nearest wall, its index (-1 without walls), and
+    which walls lie closer than ``tolerance`` (M, W); compiled, no (M, W, 2) temporaries."""
+    pts = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 2)
+    w = np.ascontiguousarray(walls, dtype=np.float64).reshape(-1, 4)
+    near = np.zeros((pts.shape[0], w.shape[0]), dtype=np.bool_)
+    dist, index = _nearest_walls(
+        pts[:, 0].copy(), pts[:, 1].copy(), w, GEOMETRY_EPS, float(tolerance), near
+    )
+    return dist, index, near
 
 
 #: Angular bins per object when culling walls for the visibility rays.
@@ -284,14 +348,16 @@ def build_free_space(semantic_map: SemanticMap, resolution_m: float | None = Non
 def visibility_factor(rows: int, cols: int, n_objects: int, n_free: int, n_walls: int) -> int:
     """How many free-space cells (per side) one visibility cell spans.
 
-    The smallest factor whose table fits ``MAX_TABLE_BYTES`` and whose worst-case
-    ray-wall work fits ``MAX_VISIBILITY_WORK``.
+    The smallest factor whose table fits ``MAX_TABLE_BYTES`` and whose estimated
+    ray-wall work fits ``MAX_VISIBILITY_WORK`` (a ray meets the walls of one angular
+    bin: each wall spans a few of the ``ANGLE_BINS`` as seen from an object).
     """
     n_obj = max(n_objects, 1)
+    per_ray = 3.0 * n_walls / ANGLE_BINS + 4.0
     factor = 1
     while (rows // factor + 1) * (cols // factor + 1) * n_obj > MAX_TABLE_BYTES:
         factor += 1
-    while n_free / factor**2 * n_obj * max(n_walls, 1) > MAX_VISIBILITY_WORK:
+    while n_free / factor**2 * n_obj * per_ray > MAX_VISIBILITY_WORK:
         factor += 1
     return factor
 

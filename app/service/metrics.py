@@ -25,6 +25,19 @@ class Metrics:
         self.sessions_created = Counter(
             "bearings_sessions_created", "Sessions created", registry=self.registry
         )
+        self.sessions_resumed = Counter(
+            "bearings_sessions_resumed",
+            "Sessions resumed from the shared session store",
+            registry=self.registry,
+        )
+        self.checkpoints = Counter(
+            "bearings_checkpoints", "Session checkpoints written", registry=self.registry
+        )
+        self.checkpoint_bytes = Counter(
+            "bearings_checkpoint_bytes",
+            "Bytes of session checkpoints written",
+            registry=self.registry,
+        )
         self.frames_merged = Counter(
             "bearings_frames_merged",
             "Frames merged into a waiting frame because the session was busy",

@@ -20,7 +20,7 @@ import os
 import secrets
 import threading
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from datetime import UTC, datetime
 
 import numpy as np
@@ -38,6 +38,8 @@ from app.service.access import OPEN, Principal, TokenBucket
 from app.service.metrics import Metrics
 from app.service.queueing import FrameQueue, merged_warning
 from app.service.scheduler import FairExecutor
+from app.service.sharing import SessionSharing
+from app.service.store import MemoryStore, SessionStore
 from app.service.types import FrameInput, FrameOutcome, SessionSpec
 
 log = logging.getLogger("bearings.sessions")
@@ -95,6 +97,11 @@ class RequestTooLarge(LimitReached):
     """One request asks for more than the service ever allows (particles, detections)."""
 
 
+class SessionUnavailable(LimitReached):
+    """The session exists but cannot be served here right now (another worker still
+    holds it, or this worker is stopping); retrying soon, or reconnecting, serves it."""
+
+
 class InvalidSessionSpec(ValueError):
     """A session cannot be built as asked (e.g. a start pose outside the free space)."""
 
@@ -149,6 +156,8 @@ class Session:
     narrator: Narrator
     particles: int
     created_at: datetime
+    #: What the session was built from (a checkpoint rebuilds it from this).
+    spec: SessionSpec | None = None
     owner: str | None = None
     shared: bool = False
     queue_limit: int = 2
@@ -160,8 +169,6 @@ class Session:
     version: int = 0
     last_timestamp: float | None = None
     state_lock: threading.Lock = field(default_factory=threading.Lock)
-    queue: FrameQueue = field(init=False)
-    pump: asyncio.Task[None] | None = None
     camera: Camera | None = None
     #: The destination's plan (None: no destination) and what was said about the way.
     destination: Plan | None = None
@@ -174,6 +181,7 @@ class Session:
             self.destination = plan
             self.speaker.reset()
             self.last_guidance = None
+            self.version += 1  # a checkpoint keeps it
 
     def _guide(
         self, estimate: Estimate, now: float, warnings: list[str]
@@ -189,6 +197,9 @@ class Session:
             warnings.append(f"guidance: {exc}")
             return None, self.speaker.no_way(self.destination.target.name, now)
         return guidance, self.speaker.update(guidance, True, now, estimate.x, estimate.y)
+
+    queue: FrameQueue = field(init=False)
+    pump: asyncio.Task[None] | None = None
 
     def __post_init__(self) -> None:
         self.queue = FrameQueue(self.queue_limit)
@@ -273,11 +284,30 @@ class Session:
 class SessionManager:
     """Creates, finds, feeds and expires sessions, within the service's limits and quotas."""
 
-    def __init__(self, maps: dict[str, SemanticMap], settings: Settings, metrics: Metrics) -> None:
+    def __init__(
+        self,
+        maps: dict[str, SemanticMap],
+        settings: Settings,
+        metrics: Metrics,
+        store: SessionStore | None = None,
+    ) -> None:
         self.maps = maps
         self.settings = settings
         self.metrics = metrics
         self._sessions: dict[str, Session] = {}
+        self.store = store or MemoryStore()
+        #: With a shared store (Redis): checkpoints, journal and leases; else None.
+        self.sharing = (
+            SessionSharing(
+                self,
+                self.store,
+                lease_s=settings.store_lease_s,
+                checkpoint_interval_s=settings.checkpoint_interval_s,
+                idle_timeout_s=settings.session_idle_timeout_s,
+            )
+            if self.store.shared
+            else None
+        )
         self._buckets: dict[str, TokenBucket] = {}
         #: Set by :meth:`shutdown`: no new sessions or frames are taken.
         self.closing = False
@@ -295,6 +325,8 @@ class SessionManager:
     def close(self) -> None:
         """Stop the step threads (at shutdown); steps not started are dropped."""
         self._steps.shutdown(wait=False, cancel_futures=True)
+        if self.sharing is not None:
+            self.sharing.close()
 
     async def shutdown(self) -> None:
         """Take no new sessions or frames, and answer every frame already accepted.
@@ -319,6 +351,46 @@ class SessionManager:
         ):
             raise SessionNotFound(session_id)
         return session
+
+    async def find(self, session_id: str, owner: Principal | None = None) -> Session:
+        """:meth:`get`, or with a shared store, the session resumed from it."""
+        if self.sharing is None or session_id in self._sessions:
+            return self.get(session_id, owner)
+        await self.sharing.resume(session_id)
+        return self.get(session_id, owner)
+
+    async def settled(self, session_id: str, owner: Principal | None = None) -> Session:
+        """:meth:`find`, once the frames waiting for it are answered: with a shared store,
+        what it reports (frames, last result) is then also what the store holds."""
+        for _ in range(3):
+            session = await self.find(session_id, owner)
+            if self.sharing is None:
+                return session
+            if session.pump is not None:
+                await asyncio.wait({session.pump}, timeout=5.0)
+            # A copy in memory may be stale if this worker stalled past its lease.
+            if self._sessions.get(session_id) is session and await self.sharing.confirm(session):
+                return session
+        raise SessionUnavailable(
+            "the session moved while being read; ask again", "session_moved", 1.0
+        )
+
+    def adopt(self, session: Session) -> None:
+        """Serve a session resumed from the store."""
+        self._sessions[session.id] = session
+        self.metrics.active_sessions.set(len(self._sessions))
+
+    def forget(self, session: Session) -> None:
+        """Stop serving a session here (it lives on in the store)."""
+        if self._sessions.get(session.id) is session:
+            del self._sessions[session.id]
+            self.metrics.active_sessions.set(len(self._sessions))
+
+    async def let_go(self, session_id: str) -> None:
+        """Its client went away (WebSocket closed): with a shared store, checkpoint the
+        session and release it, so that its next connection may land on any worker."""
+        if self.sharing is not None:
+            await self.sharing.let_go(session_id)
 
     def _refuse_when_closing(self) -> None:
         if self.closing:
@@ -372,7 +444,13 @@ class SessionManager:
                 1.0,
             )
 
-    def _build(self, request: SessionSpec) -> Session:
+    def _build(
+        self,
+        request: SessionSpec,
+        *,
+        session_id: str | None = None,
+        created_at: datetime | None = None,
+    ) -> Session:
         if request.map_name not in self.maps:
             raise UnknownMap(request.map_name, sorted(self.maps))
         semantic_map = self.maps[request.map_name]
@@ -406,16 +484,17 @@ class SessionManager:
         )
         narrator = Narrator(semantic_map, request.feedback)
         return Session(
-            id=secrets.token_urlsafe(24),  # 192 random bits
+            id=session_id or secrets.token_urlsafe(24),  # 192 random bits
             map=semantic_map,
             filter=pf,
             narrator=narrator,
             particles=particles,
-            created_at=datetime.now(UTC),
-            shared=request.share_view,
-            queue_limit=self.settings.max_queued_frames,
+            created_at=created_at or datetime.now(UTC),
+            spec=replace(request, seed=seed),  # rebuilds this very filter
             camera=camera,
             speaker=GuidanceSpeaker(request.feedback.style, request.feedback.units),
+            shared=request.share_view,
+            queue_limit=self.settings.max_queued_frames,
         )
 
     async def create(self, request: SessionSpec, owner: Principal = OPEN) -> Session:
@@ -425,8 +504,11 @@ class SessionManager:
         session = await asyncio.to_thread(self._build, request)
         self._check_room(owner, particles)  # another create may have won the race
         session.owner = owner.name
-        self._sessions[session.id] = session
-        self.metrics.active_sessions.set(len(self._sessions))
+        if self.sharing is not None:
+            await self.sharing.publish(session)  # any worker may get its frames
+        else:
+            self._sessions[session.id] = session
+            self.metrics.active_sessions.set(len(self._sessions))
         self.metrics.sessions_created.inc()
         log_event(
             "session_created",
@@ -489,20 +571,21 @@ class SessionManager:
             SessionNotFound, UnknownDestination (nothing by that name: says what the
             map has), Unreachable (no walkable path leads there).
         """
-        session = self.get(session_id, owner)
+        session = await self.find(session_id, owner)
         plan = await asyncio.to_thread(plan_for, session.map, spec)
         session.set_destination(plan)
         log_event("destination_set", tag=session.tag, kind=spec.kind)
         return plan.target
 
-    def clear_destination(self, session_id: str, owner: Principal | None = None) -> None:
+    async def clear_destination(self, session_id: str, owner: Principal | None = None) -> None:
         """Stop guiding the session."""
-        self.get(session_id, owner).set_destination(None)
+        (await self.find(session_id, owner)).set_destination(None)
 
     async def process(
         self, session_id: str, frame: FrameInput, owner: Principal | None = None
     ) -> FrameOutcome:
         """Run one frame, strictly after the session's previous ones (maybe merged with others)."""
+        await self.find(session_id, owner)  # with a shared store: resumed here if need be
         return await self.submit(session_id, frame, owner)
 
     def _turn_of(self, session: Session) -> str | None:
@@ -522,13 +605,17 @@ class SessionManager:
                     continue
                 started = time.perf_counter()
                 job = self._steps.submit(
-                    self._turn_of(session),
-                    session.process_sync,
-                    item.frame,
-                    item.count,
+                    self._turn_of(session), self._step_sync, session, item.frame, item.count
                 )
                 try:
-                    result = await asyncio.wrap_future(job)
+                    result, entry = await asyncio.wrap_future(job)
+                    # With a shared store the answer leaves once the frame is journalled.
+                    if entry is not None and not await self.sharing.journal(session, entry):  # type: ignore[union-attr]
+                        raise SessionUnavailable(
+                            "another worker serves this session now; reconnect to go on",
+                            "session_moved",
+                            0.5,
+                        )
                 except Exception as exc:
                     for w in item.waiters:
                         if not w.done():
@@ -543,11 +630,21 @@ class SessionManager:
         finally:
             session.pump = None
 
+    def _step_sync(
+        self, session: Session, frame: FrameInput, merged: int
+    ) -> tuple[FrameOutcome, bytes | None]:
+        """One step (step thread); with a shared store, also its journal entry."""
+        result = session.process_sync(frame, merged)
+        entry = None if self.sharing is None else self.sharing.entry(result.seq, frame, merged)
+        return result, entry
+
     async def delete(
         self, session_id: str, *, reason: str = "deleted", owner: Principal | None = None
     ) -> None:
-        session = self.get(session_id, owner)
+        session = await self.find(session_id, owner)
         del self._sessions[session_id]
+        if self.sharing is not None:
+            await self.sharing.delete(session_id)
         self.metrics.active_sessions.set(len(self._sessions))
         log_event(f"session_{reason}", tag=session.tag, frames=session.frames)
 

@@ -69,7 +69,7 @@ def _frame(pose: Pose, odo: tuple[float, float, float] | None, t: float, rng) ->
 
 def test_guided_around_a_wall_to_the_main_entrance(server_url: str) -> None:
     rng = np.random.default_rng(5)
-    http = httpx.Client(base_url=f"http://{server_url}")
+    http = httpx.Client(base_url=f"http://{server_url}", timeout=60.0)  # slow when loaded
     x, y, th = START
     r = http.post(
         "/sessions",

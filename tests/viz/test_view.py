@@ -139,8 +139,9 @@ def test_the_view_draws_the_way_to_the_destination() -> None:
             for f in frames[:15]:
                 await manager.process(s.id, frame_input_of(f))
             snap = s.snapshot()
-            view.draw(snap)
-            return snap, view.route
+            with view._draw_lock:  # the view's own thread may be drawing too
+                view.draw(snap)
+                return snap, view.route
         finally:
             view.stop()
 

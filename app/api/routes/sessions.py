@@ -28,7 +28,7 @@ from app.api.schemas import (
     SessionOut,
 )
 from app.api.streams import Stream
-from app.service.sessions import SessionManager, SessionNotFound
+from app.service.sessions import LimitReached, SessionManager, SessionNotFound
 
 router = APIRouter(prefix="/sessions", tags=["sessions"])
 
@@ -44,7 +44,7 @@ async def create_session(
 @router.get("/{session_id}", response_model=SessionOut)
 async def get_session(session_id: str, manager: ManagerDep, principal: PrincipalDep) -> SessionOut:
     """The session with its latest result (or null)."""
-    return session_out(manager.get(session_id, principal))
+    return session_out(await manager.settled(session_id, principal))
 
 
 @router.post("/{session_id}/frames", response_model=FrameResult)
@@ -53,7 +53,7 @@ async def post_frame(
 ) -> FrameResult:
     """Process one frame; frames of a session are processed strictly in order (merged when
     they come faster than the filter runs)."""
-    camera = manager.get(session_id, principal).camera
+    camera = (await manager.find(session_id, principal)).camera
     return frame_result(await manager.process(session_id, frame_input(frame, camera), principal))
 
 
@@ -76,7 +76,7 @@ async def delete_destination(
     session_id: str, manager: ManagerDep, principal: PrincipalDep
 ) -> Response:
     """Stop guiding; results carry ``guidance: null`` again."""
-    manager.clear_destination(session_id, principal)
+    await manager.clear_destination(session_id, principal)
     return Response(status_code=status.HTTP_204_NO_CONTENT)
 
 
@@ -98,8 +98,14 @@ async def stream(ws: WebSocket, session_id: str, principal: PrincipalDep) -> Non
     manager: SessionManager = ws.app.state.manager
     await ws.accept()
     try:
-        manager.get(session_id, principal)
+        await manager.find(session_id, principal)  # with a shared store: resumed here
     except SessionNotFound:
         await ws.close(code=status.WS_1008_POLICY_VIOLATION, reason=NO_SESSION_REASON)
         return
-    await ws.app.state.streams.serve(Stream(ws, manager, session_id, principal))
+    except LimitReached as exc:  # held by another worker for now, or this one is stopping
+        await ws.close(code=status.WS_1013_TRY_AGAIN_LATER, reason=str(exc)[:120])
+        return
+    try:
+        await ws.app.state.streams.serve(Stream(ws, manager, session_id, principal))
+    finally:
+        await manager.let_go(session_id)
