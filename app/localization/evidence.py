@@ -177,7 +177,10 @@ class EvidenceTracker:
             "theta": self.theta,
             "llr": self.llr,
             "anchor": self._anchor,
-            "history": [[to_plain(odo), to_plain(obs)] for odo, obs in self._history],
+            "history": [
+                [to_plain(odo), to_plain(obs), to_plain(heading)]
+                for odo, obs, heading in self._history
+            ],
             "since_search": self._since_search,
             "searched_ago": self.searched_ago,
             "searches": self.searches,
@@ -194,8 +197,14 @@ class EvidenceTracker:
         anchor = state["anchor"]
         self._anchor = None if anchor is None else np.array(anchor, dtype=np.float64)
         self._history.clear()
-        for odo, obs in state["history"]:
-            self._history.append((from_plain(Odometry | None, odo), from_plain(Observation, obs)))
+        for odo, obs, heading in state["history"]:
+            self._history.append(
+                (
+                    from_plain(Odometry | None, odo),
+                    from_plain(Observation, obs),
+                    from_plain(CompassReading | None, heading),
+                )
+            )
         self._since_search = int(state["since_search"])
         self.searched_ago = state["searched_ago"]
         self.searches = int(state["searches"])
