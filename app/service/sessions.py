@@ -515,6 +515,7 @@ class SessionManager:
                     wait,
                 )
         waiter: asyncio.Future[FrameOutcome] = asyncio.get_running_loop().create_future()
+        self.metrics.frames_accepted.inc()
         if session.queue.put(frame, waiter):
             self.metrics.frames_merged.inc()
         if session.pump is None:
