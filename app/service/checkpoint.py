@@ -139,9 +139,8 @@ def created_at_of(state: Mapping[str, Any]) -> datetime:
 
 
 def apply(session: Session, state: Mapping[str, Any]) -> None:
-    """Put a checkpoint's state into a session built from the same spec."""
-    if state["filter"] is not None:
-        session.filter.restore(state["filter"])
+    """Put a checkpoint's state into a session built from the same spec (its filter
+    already restored, see :meth:`SessionManager._build`)."""
     if state["narrator"] is not None:
         session.narrator.restore(state["narrator"])
     session.frames = int(state["frames"])
