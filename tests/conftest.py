@@ -5,5 +5,17 @@ from __future__ import annotations
 import os
 import tempfile
 
+import pytest
+
 # Before any Settings is built: tests never write to the user's ~/.cache.
 os.environ.setdefault("BEARINGS_CACHE_DIR", tempfile.mkdtemp(prefix="bearings-test-cache-"))
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """Tests marked ``ci`` run in CI (CI=true) or with BEARINGS_ALL_TESTS=1, else skip."""
+    if os.environ.get("CI") or os.environ.get("BEARINGS_ALL_TESTS"):
+        return
+    skip = pytest.mark.skip(reason="runs in CI (CI=true) or with BEARINGS_ALL_TESTS=1")
+    for item in items:
+        if "ci" in item.keywords:
+            item.add_marker(skip)
