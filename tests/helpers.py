@@ -79,7 +79,11 @@ def serving(
     redaction, draining at shutdown), from the app's own settings.
     """
     settings: Settings = app.state.settings
-    config = uvicorn_config(app, settings, host="127.0.0.1", port=port, log_level=log_level)
+    # log_config=None: records go to pytest's capture, not to handlers bound to a stream
+    # that one test's capture closes (the redaction filters sit on the loggers as well).
+    config = uvicorn_config(
+        app, settings, host="127.0.0.1", port=port, log_level=log_level, log_config=None
+    )
     server = BearingsServer(config, app)
     thread = threading.Thread(target=server.run, daemon=True)
     thread.start()

@@ -17,8 +17,10 @@ import os
 import secrets
 import threading
 import time
+from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from datetime import UTC, datetime
+from typing import Any
 
 import numpy as np
 
@@ -409,6 +411,7 @@ class SessionManager:
         *,
         session_id: str | None = None,
         created_at: datetime | None = None,
+        filter_state: Mapping[str, Any] | None = None,
     ) -> Session:
         if request.map_name not in self.maps:
             raise UnknownMap(request.map_name, sorted(self.maps))
@@ -439,7 +442,11 @@ class SessionManager:
                 "give a pose where a person can stand, or null for a global start"
             )
         pf = ParticleFilter(
-            semantic_map, config, rng=np.random.default_rng(seed), initial_pose=initial
+            semantic_map,
+            config,
+            rng=np.random.default_rng(seed),
+            initial_pose=initial,
+            state=filter_state,
         )
         narrator = Narrator(semantic_map, request.feedback)
         return Session(
@@ -515,6 +522,7 @@ class SessionManager:
                     wait,
                 )
         waiter: asyncio.Future[FrameOutcome] = asyncio.get_running_loop().create_future()
+        self.metrics.frames_accepted.inc()
         if session.queue.put(frame, waiter):
             self.metrics.frames_merged.inc()
         if session.pump is None:
@@ -600,7 +608,12 @@ class SessionManager:
     async def delete(
         self, session_id: str, *, reason: str = "deleted", owner: Principal | None = None
     ) -> None:
-        session = await self.find(session_id, owner)
+        if self.sharing is not None and session_id not in self._sessions:
+            # Only in the store: no need to build it to delete it.
+            frames = await self.sharing.delete_stored(session_id, owner)
+            log_event(f"session_{reason}", tag=session_tag(session_id), frames=frames)
+            return
+        session = self.get(session_id, owner)
         del self._sessions[session_id]
         if self.sharing is not None:
             await self.sharing.delete(session_id)

@@ -39,6 +39,7 @@ from app.service.store import SessionStore
 from app.service.types import FrameInput
 
 if TYPE_CHECKING:
+    from app.service.access import Principal
     from app.service.sessions import Session, SessionManager
 
 log = logging.getLogger("bearings.sharing")
@@ -192,6 +193,7 @@ class SessionSharing:
             checkpoint.spec_of(state),
             session_id=sid,
             created_at=checkpoint.created_at_of(state),
+            filter_state=state["filter"],
         )
         checkpoint.apply(session, state)
         replayed = 0
@@ -244,6 +246,20 @@ class SessionSharing:
                 await self._run(self.store.release, [session_id], self.owner)
         finally:
             self._releasing.discard(session_id)
+
+    async def delete_stored(self, session_id: str, owner: Principal | None) -> int:
+        """Delete a session this worker does not hold, if ``owner`` may see it; return how
+        many frames its checkpoint covered."""
+        from app.service.sessions import SessionNotFound
+
+        data, journal = await self._run(self.store.load, session_id)
+        if data is None:
+            raise SessionNotFound(session_id)
+        state = checkpoint.unpack(data)
+        if owner is not None and owner.name is not None and state["owner"] != owner.name:
+            raise SessionNotFound(session_id)
+        await self.delete(session_id)
+        return int(state["frames"]) + len(journal)
 
     async def delete(self, session_id: str) -> bool:
         """Remove the session from the store; False if it had no checkpoint."""

@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 from app.feedback import FeedbackOptions, Narrator
+from app.localization.compass import CompassReading
 from app.localization.config import FilterConfig
 from app.localization.filter import CHECKPOINT_PARTICLES, ParticleFilter
 from app.localization.types import InitialPose
@@ -56,6 +57,10 @@ def test_plain_data_round_trip_of_a_full_spec_and_an_outcome() -> None:
     outcome = FrameOutcome(3, estimate, feedback, ("a warning",), ("Kitchen", None, None))
     assert from_plain(FrameOutcome, to_plain(outcome)) == outcome
     assert from_plain(FrameInput, to_plain(frame(3))) == frame(3)
+    # The journal's written-out encoding says the same as the generic one.
+    for f in (frame(3), FrameInput(), FrameInput(heading=CompassReading(1.0, 0.2))):
+        assert checkpoint._frame_plain(f) == to_plain(f)
+        assert checkpoint.decode_frame(checkpoint.encode_frame(7, f, 2)) == (7, f, 2)
 
 
 def test_from_plain_says_what_does_not_fit() -> None:

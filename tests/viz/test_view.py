@@ -108,7 +108,9 @@ def test_live_view_draws_the_watched_session() -> None:
             # The GUI's demo button starts a simulated walk and watches it.
             sid = await view.controls.start_walk()
             assert view.watched == sid
-            await asyncio.sleep(0.6)
+            deadline = time.time() + 10  # the walk simulates its path, then 5 frames/s
+            while manager.get(sid).frames < 2 and time.time() < deadline:
+                await asyncio.sleep(0.05)
             assert manager.get(sid).frames >= 2
             await view.controls.reset_walk()
             return view

@@ -116,7 +116,9 @@ def test_view_walks_end_with_their_viewer_and_after_the_time_limit() -> None:
                     await asyncio.sleep(0.05)
                 (viewer,) = view.server.get_clients()
                 sid = await view.controls.start_walk(viewer)
-                await asyncio.sleep(0.5)
+                deadline = time.monotonic() + 10  # the walk simulates its path first
+                while manager.get(sid).frames < 1 and time.monotonic() < deadline:
+                    await asyncio.sleep(0.05)
                 assert manager.get(sid).frames >= 1 and manager.get(sid).shared is False
                 assert view.controls.label(manager.get(sid)) == "walk 1 (paper_office)"
                 reading.cancel()
