@@ -19,3 +19,16 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
     for item in items:
         if "ci" in item.keywords:
             item.add_marker(skip)
+
+
+@pytest.fixture(scope="session", autouse=True)
+def compiled_kernels() -> None:
+    """Compile (or load from the disk cache) every numba kernel once, before any test.
+
+    On a fresh clone the cache is empty and compiling takes a while on a busy machine;
+    done here, no test's server start-up (which warms up too) waits for the compiler,
+    whichever test runs first.
+    """
+    from app.localization.filter import warm_up
+
+    warm_up()
