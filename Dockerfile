@@ -34,4 +34,8 @@ EXPOSE 8000 8080
 HEALTHCHECK --interval=30s --timeout=5s --start-period=60s --retries=3 \
     CMD python -c "import urllib.request,sys; sys.exit(0 if urllib.request.urlopen('http://127.0.0.1:8000/healthz', timeout=4).status == 200 else 1)"
 
+# Reachable from outside the container, so API keys are required: mount a key file at
+# /run/secrets/bearings-keys (docs/SECURITY.md). The live view stays on the container's
+# loopback unless BEARINGS_VISER_HOST says otherwise.
+ENV BEARINGS_API_KEYS_FILE=/run/secrets/bearings-keys
 CMD ["bearings", "serve", "--host", "0.0.0.0", "--port", "8000", "--viser-port", "8080"]

@@ -45,6 +45,35 @@ def _add_server_flags(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--max-particles", type=int, help="most particles per session (BEARINGS_MAX_PARTICLES)"
     )
+    p.add_argument(
+        "--store",
+        metavar="memory|redis://HOST:PORT/DB",
+        help="where sessions live (BEARINGS_STORE, default memory): a Redis URL shares them "
+        "between workers, checkpointed, so any worker resumes them",
+    )
+    p.add_argument(
+        "--api-keys",
+        dest="api_keys_file",
+        type=Path,
+        metavar="FILE",
+        help="API key file: one 'KEY' or 'NAME KEY MAX_SESSIONS MAX_PARTICLES MAX_FRAMES_PER_S' "
+        "a line (BEARINGS_API_KEYS_FILE); see docs/SECURITY.md",
+    )
+    p.add_argument(
+        "--insecure-open",
+        action="store_true",
+        default=None,
+        help="run without API keys on a host other than loopback (BEARINGS_INSECURE_OPEN)",
+    )
+    p.add_argument(
+        "--allowed-origins",
+        help="browser origins allowed for CORS and WebSocket, comma-separated "
+        "(BEARINGS_ALLOWED_ORIGINS; default: same origin only)",
+    )
+    p.add_argument(
+        "--viser-host",
+        help="address the viser view listens on (BEARINGS_VISER_HOST, default 127.0.0.1)",
+    )
 
 
 def settings_from_args(args: argparse.Namespace) -> Settings:

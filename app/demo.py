@@ -13,13 +13,14 @@ import contextlib
 import logging
 import math
 from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 
 from app.localization.compass import CompassReading
 from app.localization.types import Odometry
 from app.maps.geometry import wrap_angle
-from app.service.sessions import SessionManager, SessionNotFound
+from app.service.sessions import LimitReached, SessionManager, SessionNotFound
 from app.service.types import FrameInput, SensorSpec, SessionSpec
 from app.simulation.simulator import SimFrame, simulate
 from app.simulation.walks import demo_config
@@ -36,6 +37,8 @@ class DemoSettings:
     particles: int = 10_000
     seed: int = 0
     speed: float = 1.0  # playback speed; 1.0 is real time
+    share_view: bool = False  # list the walk's session in the live view
+    max_duration_s: float | None = None  # end the walk (and its session) after this long
 
 
 def frame_input_of(frame: SimFrame) -> FrameInput:
@@ -51,6 +54,16 @@ def frame_input_of(frame: SimFrame) -> FrameInput:
     )
 
 
+def new_walk(manager: SessionManager, **settings: Any) -> DemoWalk:
+    """A walk with the given :class:`DemoSettings` fields, started on the running loop.
+
+    What the live view's demo button calls (as ``functools.partial(new_walk, manager)``).
+    """
+    walk = DemoWalk(manager, DemoSettings(**settings))
+    walk.start()
+    return walk
+
+
 class DemoWalk:
     """One simulated person walking in a loop, streaming into one session."""
 
@@ -61,6 +74,7 @@ class DemoWalk:
         self._kidnap = False
         self._rng = np.random.default_rng(settings.seed)
         self._task: asyncio.Task[None] | None = None
+        self.finished = False
 
     def kidnap(self) -> None:
         """Carry the person elsewhere at the next frame (no odometry for that frame)."""
@@ -101,9 +115,24 @@ class DemoWalk:
                 particles=s.particles,
                 seed=s.seed,
                 sensor=SensorSpec(fov_deg=s.fov_deg),
+                share_view=s.share_view,
             )
         )
         self.session_id = session.id
+        try:
+            if s.max_duration_s is None:
+                await self._walk(session.id)
+            else:
+                with contextlib.suppress(TimeoutError):
+                    await asyncio.wait_for(self._walk(session.id), s.max_duration_s)
+                log.info("demo walk reached its time limit and ends")
+                with contextlib.suppress(SessionNotFound):
+                    await self.manager.delete(session.id)
+        finally:
+            self.finished = True
+
+    async def _walk(self, session_id: str) -> None:
+        s = self.settings
         period = 1.0 / 5.0 / max(s.speed, 1e-3)
         frames = self._frames()
         i = 0
@@ -119,16 +148,16 @@ class DemoWalk:
                 turn = float(wrap_angle(frames[0].truth.theta_rad - last.theta_rad))
                 frames[0] = replace(frames[0], odometry=Odometry(0.0, 0.0, turn))
             try:
-                await self.manager.process(session.id, frame_input_of(frames[i]))
-            except SessionNotFound:
-                log.info("demo session ended; demo walk stops")
+                await self.manager.process(session_id, frame_input_of(frames[i]))
+            except (SessionNotFound, LimitReached):
+                log.info("demo session ended (or the service is restarting); demo walk stops")
                 return
             i += 1
             next_at += period
             await asyncio.sleep(max(0.0, next_at - loop.time()))
 
 
-async def run_demo_walk(manager: SessionManager, **settings: object) -> None:
+async def run_demo_walk(manager: SessionManager, **settings: Any) -> None:
     """The walk `bearings demo` starts: the paper office, 360 degree camera, real time."""
-    walk = DemoWalk(manager, DemoSettings(**settings))  # type: ignore[arg-type]
+    walk = DemoWalk(manager, DemoSettings(**settings))
     await walk.run()

@@ -66,6 +66,7 @@ def session_spec(body: SessionCreate) -> SessionSpec:
         ),
         feedback=FeedbackOptions(fb.style, fb.units, fb.max_items),
         camera=camera_of(body.camera),
+        share_view=body.share_view,
     )
 
 

@@ -39,6 +39,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "(--quick: five scenarios, 2 seeds); building: a walk through the bundled two-wing "
         "floor (global start, 180 deg camera, clutter, kidnap between wings)",
     )
+    parser.add_argument(
+        "--scenarios",
+        default=None,
+        help="integrity only: comma-separated MAP or MAP/CONDITION (* for any map), e.g. "
+        "'symmetric_room,*/compass-180'",
+    )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -89,10 +95,13 @@ def _run_integrity(args: argparse.Namespace) -> int:
     seeds = min(args.seeds, 2) if args.quick else args.seeds
     if seeds < 1 or args.particles < 100:
         raise SystemExit("bearings experiments: need --seeds >= 1 and --particles >= 100")
-    summary = integrity.run(
-        args.out, seeds=seeds, particles=args.particles, workers=max(1, args.workers),
-        quick=args.quick,
-    )  # fmt: skip
+    try:
+        summary = integrity.run(
+            args.out, seeds=seeds, particles=args.particles, workers=max(1, args.workers),
+            quick=args.quick, select=args.scenarios,
+        )  # fmt: skip
+    except ValueError as exc:
+        raise SystemExit(f"bearings experiments: {exc}") from None
     print(integrity.markdown_table(summary))
     print(f"wrote {args.out / 'integrity.md'}, integrity.json and integrity.png")
     return 0

@@ -3,7 +3,7 @@
 The motion (forward, left, turn) is perturbed per particle with zero-mean Gaussian
 noise whose standard deviation grows with the motion and never falls below a floor,
 in the spirit of *sample_motion_odometry* (Probabilistic Robotics, Table 5.6), but
-parameterized directly in the body frame that CONTRACT.md's odometry uses. The
+parameterized directly in the body frame that the API's odometry uses (docs/API.md). The
 Gaussian draws come from :func:`~app.localization.fastmath.fill_normal` (a tabulated
 inverse CDF, four times faster here than numpy's sampler) and the particle loop is
 compiled.
@@ -131,3 +131,21 @@ def motion_log_penalty(
         walls, GEOMETRY_EPS, penalty,
     )  # fmt: skip
     return penalty
+
+
+def compose_odometry(first: Odometry | None, then: Odometry | None) -> Odometry | None:
+    """One odometry equal to moving by ``first`` and then by ``then`` (composition in SE(2)).
+
+    ``then`` is expressed in the body frame reached after ``first``, so it is rotated by
+    ``first``'s turn before the translations add up; the turns add (not wrapped, so a
+    long turn keeps its size for the motion noise). Unknown motion (None) on either side
+    makes the whole motion unknown.
+    """
+    if first is None or then is None:
+        return None
+    c, s = np.cos(first.turn_rad), np.sin(first.turn_rad)
+    return Odometry(
+        forward_m=float(first.forward_m + c * then.forward_m - s * then.left_m),
+        left_m=float(first.left_m + s * then.forward_m + c * then.left_m),
+        turn_rad=float(first.turn_rad + then.turn_rad),
+    )

@@ -449,3 +449,27 @@ def load_map_dirs(
             )
             maps[result.map.name] = result.map
     return maps, problems
+
+
+def load_map(path: str | Path) -> SemanticMap:
+    """Load and check one map file (:func:`app.maps.check.check_file`).
+
+    Its ``name`` must match the file name. Warnings are dropped (their fixes, such as
+    an object snapped onto a wall, are applied).
+
+    Raises:
+        MapError: with every error found, each naming its field.
+    """
+    result = check_file(path)
+    if result.map is None:
+        errors = result.errors
+        raise MapError("; ".join(str(p) for p in errors), [(p.field, p.message) for p in errors])
+    return result.map
+
+
+def load_map_dir(directory: str | Path) -> dict[str, SemanticMap]:
+    """Load every ``*.json`` map in a directory, keyed by name (sorted); any error raises."""
+    d = Path(directory)
+    if not d.is_dir():
+        raise MapError(f"{d}: not a directory of maps")
+    return {m.name: m for m in (load_map(p) for p in sorted(d.glob("*.json")))}

@@ -1,23 +1,26 @@
 """Live sessions: each owns one particle filter and one narrator.
 
-Frames of one session run strictly in order, one at a time (an asyncio lock per
-session), and the filter work runs in a worker thread so the event loop, other
-sessions and ``/healthz`` stay responsive. A WebSocket disconnect does not end a
-session; ``DELETE`` or the idle timeout does.
+Frames of one session run strictly in order, one step at a time: a session's frames
+wait in a short queue that merges them when they come faster than the filter runs
+(:mod:`app.service.queueing`), and one task per busy session feeds them to the step
+threads, which are shared fairly between clients (:mod:`app.service.scheduler`). The
+event loop, other sessions and ``/healthz`` stay responsive. A session belongs to the
+principal (API key) that created it; to any other it does not exist. A WebSocket
+disconnect does not end a session; ``DELETE``, the idle timeout or a restart does.
 """
 
 from __future__ import annotations
 
 import asyncio
-import json
 import logging
 import os
 import secrets
 import threading
 import time
-from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass, field
+from collections.abc import Mapping
+from dataclasses import dataclass, field, replace
 from datetime import UTC, datetime
+from typing import Any
 
 import numpy as np
 
@@ -30,46 +33,48 @@ from app.localization.config import FilterConfig
 from app.localization.filter import ParticleFilter
 from app.localization.types import Detection, Estimate, Pose
 from app.maps.model import SemanticMap
+from app.service.access import OPEN, Principal, TokenBucket
+from app.service.errors import (
+    STARTED_AT as STARTED_AT,
+)
+from app.service.errors import (
+    CapacityReached as CapacityReached,
+)
+from app.service.errors import (
+    InvalidSessionSpec as InvalidSessionSpec,
+)
+from app.service.errors import (
+    LimitReached as LimitReached,
+)
+from app.service.errors import (
+    QuotaReached as QuotaReached,
+)
+from app.service.errors import (
+    RequestTooLarge as RequestTooLarge,
+)
+from app.service.errors import (
+    SessionNotFound as SessionNotFound,
+)
+from app.service.errors import (
+    SessionUnavailable as SessionUnavailable,
+)
+from app.service.errors import (
+    UnknownMap as UnknownMap,
+)
+from app.service.errors import (
+    log_event as log_event,
+)
+from app.service.errors import (
+    session_tag as session_tag,
+)
 from app.service.metrics import Metrics
+from app.service.queueing import FrameQueue, merged_warning
+from app.service.scheduler import FairExecutor
+from app.service.sharing import SessionSharing
+from app.service.store import MemoryStore, SessionStore
 from app.service.types import FrameInput, FrameOutcome, SessionSpec
 
 log = logging.getLogger("bearings.sessions")
-
-
-class SessionNotFound(KeyError):
-    """No live session has that id."""
-
-    def __init__(self, session_id: str) -> None:
-        super().__init__(session_id)
-        self.message = f"no session {session_id!r}: it never existed, was deleted or expired"
-
-    def __str__(self) -> str:
-        return self.message
-
-
-class LimitReached(RuntimeError):
-    """A service limit was hit; ``code`` names the limit in a machine-readable word."""
-
-    def __init__(self, message: str, code: str = "limit") -> None:
-        super().__init__(message)
-        self.code = code
-
-
-class CapacityReached(LimitReached):
-    """The service (or a client's share of it) is full now; it may have room later."""
-
-
-class RequestTooLarge(LimitReached):
-    """One request asks for more than the service ever allows (particles, detections)."""
-
-
-class InvalidSessionSpec(ValueError):
-    """A session cannot be built as asked (e.g. a start pose outside the free space)."""
-
-
-class UnknownMap(LookupError):
-    def __init__(self, name: str, known: list[str]) -> None:
-        super().__init__(f"no map {name!r}; known maps: {', '.join(known) or 'none'}")
 
 
 def unknown_class_warnings(
@@ -81,11 +86,6 @@ def unknown_class_warnings(
         f"class {c!r} is not on map {semantic_map.name!r}; its detections were ignored"
         for c in unknown
     ]
-
-
-def log_event(event: str, **fields: object) -> None:
-    """One structured (JSON) log line per session event."""
-    log.info(json.dumps({"event": event, **fields}, default=str))
 
 
 @dataclass(frozen=True)
@@ -117,6 +117,11 @@ class Session:
     narrator: Narrator
     particles: int
     created_at: datetime
+    #: What the session was built from (a checkpoint rebuilds it from this).
+    spec: SessionSpec | None = None
+    owner: str | None = None
+    shared: bool = False
+    queue_limit: int = 2
     last_active: float = field(default_factory=time.monotonic)
     frames: int = 0
     last_outcome: FrameOutcome | None = None
@@ -124,7 +129,6 @@ class Session:
     truth: Pose | None = None
     version: int = 0
     last_timestamp: float | None = None
-    order: asyncio.Lock = field(default_factory=asyncio.Lock)
     state_lock: threading.Lock = field(default_factory=threading.Lock)
     camera: Camera | None = None
     #: The destination's plan (None: no destination) and what was said about the way.
@@ -138,6 +142,7 @@ class Session:
             self.destination = plan
             self.speaker.reset()
             self.last_guidance = None
+            self.version += 1  # a checkpoint keeps it
 
     def _guide(
         self, estimate: Estimate, now: float, warnings: list[str]
@@ -154,10 +159,27 @@ class Session:
             return None, self.speaker.no_way(self.destination.target.name, now)
         return guidance, self.speaker.update(guidance, True, now, estimate.x, estimate.y)
 
-    def process_sync(self, frame: FrameInput) -> FrameOutcome:
-        """Run one frame through the filter and the narrator (worker thread)."""
+    queue: FrameQueue = field(init=False)
+    pump: asyncio.Task[None] | None = None
+
+    def __post_init__(self) -> None:
+        self.queue = FrameQueue(self.queue_limit)
+
+    @property
+    def tag(self) -> str:
+        return session_tag(self.id)
+
+    @property
+    def busy(self) -> bool:
+        """A step is running or frames are waiting."""
+        return self.pump is not None
+
+    def process_sync(self, frame: FrameInput, merged: int = 1) -> FrameOutcome:
+        """Run one frame (``merged`` frames merged into one) through the filter and narrator."""
         detections = list(frame.detections)
         warnings = unknown_class_warnings(frame.detections, self.map)
+        if merged > 1:
+            warnings.append(merged_warning(merged))
         if (
             frame.timestamp is not None
             and self.last_timestamp is not None
@@ -221,33 +243,176 @@ class Session:
 
 
 class SessionManager:
-    """Creates, finds, feeds and expires sessions, within the service's limits."""
+    """Creates, finds, feeds and expires sessions, within the service's limits and quotas."""
 
-    def __init__(self, maps: dict[str, SemanticMap], settings: Settings, metrics: Metrics) -> None:
+    def __init__(
+        self,
+        maps: dict[str, SemanticMap],
+        settings: Settings,
+        metrics: Metrics,
+        store: SessionStore | None = None,
+    ) -> None:
         self.maps = maps
         self.settings = settings
         self.metrics = metrics
         self._sessions: dict[str, Session] = {}
+        self.store = store or MemoryStore()
+        #: With a shared store (Redis): checkpoints, journal and leases; else None.
+        self.sharing = (
+            SessionSharing(
+                self,
+                self.store,
+                lease_s=settings.store_lease_s,
+                checkpoint_interval_s=settings.checkpoint_interval_s,
+                idle_timeout_s=settings.session_idle_timeout_s,
+            )
+            if self.store.shared
+            else None
+        )
+        self._buckets: dict[str, TokenBucket] = {}
+        #: Set by :meth:`shutdown`: no new sessions or frames are taken.
+        self.closing = False
         # Filter steps are CPU-bound and release the GIL inside their kernels: one
         # thread per core runs them, so they never crowd out the event loop's thread
-        # (a larger default pool measured higher latency under load, same throughput).
-        self._steps = ThreadPoolExecutor(max_workers=os.cpu_count() or 1, thread_name_prefix="step")
+        # (a larger pool measured higher latency under load, same throughput), taking
+        # turns between clients, and one key uses at most all threads but one, so that
+        # another key's step finds a thread at once (benchmarks/abuse.py).
+        workers = os.cpu_count() or 1
+        per_key = settings.steps_per_key or max(1, workers - 1)
+        self._steps = FairExecutor(
+            workers, max_per_owner=per_key if settings.fair_steps else None, name="step"
+        )
 
     def close(self) -> None:
-        """Stop the step threads (at shutdown); frames still queued are dropped."""
+        """Stop the step threads (at shutdown); steps not started are dropped."""
         self._steps.shutdown(wait=False, cancel_futures=True)
+        if self.sharing is not None:
+            self.sharing.close()
+
+    async def shutdown(self) -> None:
+        """Take no new sessions or frames, and answer every frame already accepted.
+
+        Returns once every session's queue is empty and its last step answered. Whatever
+        must outlive the process (a checkpoint of each session) can run after this.
+        """
+        self.closing = True
+        pumps = [s.pump for s in self._sessions.values() if s.pump is not None]
+        if pumps:
+            await asyncio.gather(*pumps, return_exceptions=True)
 
     def sessions(self) -> list[Session]:
         """Live sessions, oldest first."""
         return list(self._sessions.values())
 
-    def get(self, session_id: str) -> Session:
-        try:
-            return self._sessions[session_id]
-        except KeyError:
-            raise SessionNotFound(session_id) from None
+    def get(self, session_id: str, owner: Principal | None = None) -> Session:
+        """The session, if ``owner`` may see it (None: the service itself, which sees all)."""
+        session = self._sessions.get(session_id)
+        if session is None or (
+            owner is not None and owner.name is not None and session.owner != owner.name
+        ):
+            raise SessionNotFound(session_id)
+        return session
 
-    def _build(self, request: SessionSpec) -> Session:
+    async def find(self, session_id: str, owner: Principal | None = None) -> Session:
+        """:meth:`get`, or with a shared store, the session resumed from it."""
+        if self.sharing is None or session_id in self._sessions:
+            return self.get(session_id, owner)
+        await self.sharing.resume(session_id)
+        return self.get(session_id, owner)
+
+    async def settled(self, session_id: str, owner: Principal | None = None) -> Session:
+        """:meth:`find`, once the frames waiting for it are answered: with a shared store,
+        what it reports (frames, last result) is then also what the store holds."""
+        for _ in range(3):
+            session = await self.find(session_id, owner)
+            if self.sharing is None:
+                return session
+            if session.pump is not None:
+                await asyncio.wait({session.pump}, timeout=5.0)
+            # A copy in memory may be stale if this worker stalled past its lease.
+            if self._sessions.get(session_id) is session and await self.sharing.confirm(session):
+                return session
+        raise SessionUnavailable(
+            "the session moved while being read; ask again", "session_moved", 1.0
+        )
+
+    def adopt(self, session: Session) -> None:
+        """Serve a session resumed from the store."""
+        self._sessions[session.id] = session
+        self.metrics.active_sessions.set(len(self._sessions))
+
+    def forget(self, session: Session) -> None:
+        """Stop serving a session here (it lives on in the store)."""
+        if self._sessions.get(session.id) is session:
+            del self._sessions[session.id]
+            self.metrics.active_sessions.set(len(self._sessions))
+
+    async def let_go(self, session_id: str) -> None:
+        """Its client went away (WebSocket closed): with a shared store, checkpoint the
+        session and release it, so that its next connection may land on any worker."""
+        if self.sharing is not None:
+            await self.sharing.let_go(session_id)
+
+    def _refuse_when_closing(self) -> None:
+        if self.closing:
+            raise CapacityReached(
+                "the service is restarting; reconnect in a moment", "restarting", 1.0
+            )
+
+    def _next_expiry_s(self, sessions: list[Session]) -> float:
+        """Seconds until the first of ``sessions`` would expire if it stays idle."""
+        now = time.monotonic()
+        limit = self.settings.session_idle_timeout_s
+        return max(1.0, min((limit - (now - s.last_active) for s in sessions), default=1.0))
+
+    def _check_room(self, owner: Principal, particles: int) -> None:
+        """Raise if the service or ``owner``'s quota has no room for one more session."""
+        self._refuse_when_closing()
+        if owner.max_particles is not None and particles > owner.max_particles:
+            raise RequestTooLarge(
+                f"particles: {particles} is more than this key's quota of "
+                f"{owner.max_particles} particles",
+                code="too_many_particles",
+            )
+        mine = [s for s in self._sessions.values() if s.owner == owner.name]
+        if owner.max_sessions is not None and len(mine) >= owner.max_sessions:
+            raise QuotaReached(
+                f"this key already has its quota of {owner.max_sessions} sessions; "
+                "delete one or try again when one has expired",
+                "session_quota",
+                self._next_expiry_s(mine),
+            )
+        held = sum(s.particles for s in mine)
+        if owner.max_particles is not None and held + particles > owner.max_particles:
+            raise QuotaReached(
+                f"this key's sessions already hold {held} of its {owner.max_particles} "
+                f"particles, so {particles} more do not fit; delete a session or ask for fewer",
+                "particle_quota",
+                self._next_expiry_s(mine),
+            )
+        if len(self._sessions) >= self.settings.max_sessions:
+            raise CapacityReached(
+                f"the service already runs its maximum of {self.settings.max_sessions} "
+                "sessions; try again later",
+                "too_many_sessions",
+                self._next_expiry_s(list(self._sessions.values())),
+            )
+        if self._steps.waiting >= self.settings.max_waiting_steps:
+            raise CapacityReached(
+                f"the service is at capacity ({self._steps.waiting} filter steps are waiting "
+                "for a thread); try again shortly",
+                "busy",
+                1.0,
+            )
+
+    def _build(
+        self,
+        request: SessionSpec,
+        *,
+        session_id: str | None = None,
+        created_at: datetime | None = None,
+        filter_state: Mapping[str, Any] | None = None,
+    ) -> Session:
         if request.map_name not in self.maps:
             raise UnknownMap(request.map_name, sorted(self.maps))
         semantic_map = self.maps[request.map_name]
@@ -277,98 +442,190 @@ class SessionManager:
                 "give a pose where a person can stand, or null for a global start"
             )
         pf = ParticleFilter(
-            semantic_map, config, rng=np.random.default_rng(seed), initial_pose=initial
+            semantic_map,
+            config,
+            rng=np.random.default_rng(seed),
+            initial_pose=initial,
+            state=filter_state,
         )
         narrator = Narrator(semantic_map, request.feedback)
         return Session(
-            id=secrets.token_urlsafe(24),  # 192 random bits
+            id=session_id or secrets.token_urlsafe(24),  # 192 random bits
             map=semantic_map,
             filter=pf,
             narrator=narrator,
             particles=particles,
-            created_at=datetime.now(UTC),
+            created_at=created_at or datetime.now(UTC),
+            spec=replace(request, seed=seed),  # rebuilds this very filter
             camera=camera,
             speaker=GuidanceSpeaker(request.feedback.style, request.feedback.units),
+            shared=request.share_view,
+            queue_limit=self.settings.max_queued_frames,
         )
 
-    async def create(self, request: SessionSpec) -> Session:
-        """A new session; the filter is built off the event loop."""
-        if len(self._sessions) >= self.settings.max_sessions:
-            raise CapacityReached(
-                f"the service already runs its maximum of {self.settings.max_sessions} sessions; "
-                "delete one or try again later",
-                code="too_many_sessions",
-            )
+    async def create(self, request: SessionSpec, owner: Principal = OPEN) -> Session:
+        """A new session owned by ``owner``; the filter is built off the event loop."""
+        particles = request.particles or self.settings.default_particles
+        self._check_room(owner, particles)
         session = await asyncio.to_thread(self._build, request)
-        if len(self._sessions) >= self.settings.max_sessions:  # raced with another create
-            raise CapacityReached(
-                f"the service already runs its maximum of {self.settings.max_sessions} sessions",
-                code="too_many_sessions",
-            )
-        self._sessions[session.id] = session
-        self.metrics.active_sessions.set(len(self._sessions))
+        self._check_room(owner, particles)  # another create may have won the race
+        session.owner = owner.name
+        if self.sharing is not None:
+            await self.sharing.publish(session)  # any worker may get its frames
+        else:
+            self._sessions[session.id] = session
+            self.metrics.active_sessions.set(len(self._sessions))
         self.metrics.sessions_created.inc()
         log_event(
             "session_created",
-            session=session.id[:8],
+            tag=session.tag,
             map=session.map.name,
             particles=session.particles,
             global_start=request.initial_pose is None,
+            shared=session.shared,
         )
         return session
 
-    async def process(self, session_id: str, frame: FrameInput) -> FrameOutcome:
-        """Run one frame, strictly after the session's previous ones."""
-        session = self.get(session_id)
+    def _bucket(self, owner: Principal) -> TokenBucket | None:
+        if owner.name is None or owner.max_frames_per_s is None:
+            return None
+        bucket = self._buckets.get(owner.name)
+        if bucket is None:
+            bucket = self._buckets[owner.name] = TokenBucket(owner.max_frames_per_s)
+        return bucket
+
+    def submit(
+        self, session_id: str, frame: FrameInput, owner: Principal | None = None
+    ) -> asyncio.Future[FrameOutcome]:
+        """Accept one frame now (in order) and return the future of its result.
+
+        Raises at once when the frame is refused: unknown session, too many detections,
+        the owner's frame rate used up, or the service restarting.
+        """
+        session = self.get(session_id, owner)
         if len(frame.detections) > self.settings.max_detections:
             raise RequestTooLarge(
                 f"detections: {len(frame.detections)} detections in one frame; the limit is "
                 f"{self.settings.max_detections}",
                 code="too_many_detections",
             )
-        async with session.order:
-            if session_id not in self._sessions:
-                raise SessionNotFound(session_id)
-            started = time.perf_counter()
-            loop = asyncio.get_running_loop()
-            result = await loop.run_in_executor(self._steps, session.process_sync, frame)
-            self.metrics.step_seconds.observe(time.perf_counter() - started)
-            self.metrics.frames.inc()
-            session.last_active = time.monotonic()
-            return result
+        self._refuse_when_closing()
+        bucket = self._bucket(owner) if owner is not None else None
+        if bucket is not None:
+            wait = bucket.take()
+            if wait > 0:
+                self.metrics.frames_refused.inc()
+                raise QuotaReached(
+                    f"this key may send {owner.max_frames_per_s:g} frames per second "  # type: ignore[union-attr]
+                    "over all its sessions; slow down",
+                    "rate_limited",
+                    wait,
+                )
+        waiter: asyncio.Future[FrameOutcome] = asyncio.get_running_loop().create_future()
+        self.metrics.frames_accepted.inc()
+        if session.queue.put(frame, waiter):
+            self.metrics.frames_merged.inc()
+        if session.pump is None:
+            session.pump = asyncio.create_task(self._pump(session))
+        return waiter
 
-    async def set_destination(self, session_id: str, spec: DestinationSpec) -> Target:
+    async def set_destination(
+        self, session_id: str, spec: DestinationSpec, owner: Principal | None = None
+    ) -> Target:
         """Guide the session to ``spec`` (the plan is built off the event loop).
 
         Raises:
             SessionNotFound, UnknownDestination (nothing by that name: says what the
             map has), Unreachable (no walkable path leads there).
         """
-        session = self.get(session_id)
+        session = await self.find(session_id, owner)
         plan = await asyncio.to_thread(plan_for, session.map, spec)
         session.set_destination(plan)
-        log_event("destination_set", session=session_id[:8], kind=spec.kind)
+        log_event("destination_set", tag=session.tag, kind=spec.kind)
         return plan.target
 
-    def clear_destination(self, session_id: str) -> None:
+    async def clear_destination(self, session_id: str, owner: Principal | None = None) -> None:
         """Stop guiding the session."""
-        self.get(session_id).set_destination(None)
+        (await self.find(session_id, owner)).set_destination(None)
 
-    async def delete(self, session_id: str, *, reason: str = "deleted") -> None:
-        session = self._sessions.pop(session_id, None)
-        if session is None:
-            raise SessionNotFound(session_id)
+    async def process(
+        self, session_id: str, frame: FrameInput, owner: Principal | None = None
+    ) -> FrameOutcome:
+        """Run one frame, strictly after the session's previous ones (maybe merged with others)."""
+        await self.find(session_id, owner)  # with a shared store: resumed here if need be
+        return await self.submit(session_id, frame, owner)
+
+    def _turn_of(self, session: Session) -> str | None:
+        """Whose turn a step counts for: its key, or (open service) the session itself."""
+        if not self.settings.fair_steps:
+            return None  # one queue: arrival order
+        return session.owner if session.owner is not None else session.id
+
+    async def _pump(self, session: Session) -> None:
+        """Feed the session's waiting frames to the step threads, one step at a time."""
+        try:
+            while (item := session.queue.pop()) is not None:
+                live = [w for w in item.waiters if not w.done()]
+                if self._sessions.get(session.id) is not session:
+                    for w in live:
+                        w.set_exception(SessionNotFound(session.id))
+                    continue
+                started = time.perf_counter()
+                job = self._steps.submit(
+                    self._turn_of(session), self._step_sync, session, item.frame, item.count
+                )
+                try:
+                    result, entry = await asyncio.wrap_future(job)
+                    # With a shared store the answer leaves once the frame is journalled.
+                    if entry is not None and not await self.sharing.journal(session, entry):  # type: ignore[union-attr]
+                        raise SessionUnavailable(
+                            "another worker serves this session now; reconnect to go on",
+                            "session_moved",
+                            0.5,
+                        )
+                except Exception as exc:
+                    for w in item.waiters:
+                        if not w.done():
+                            w.set_exception(exc)
+                    continue
+                self.metrics.step_seconds.observe(time.perf_counter() - started)
+                self.metrics.frames.inc(item.count)
+                session.last_active = time.monotonic()
+                for w in item.waiters:
+                    if not w.done():
+                        w.set_result(result)
+        finally:
+            session.pump = None
+
+    def _step_sync(
+        self, session: Session, frame: FrameInput, merged: int
+    ) -> tuple[FrameOutcome, bytes | None]:
+        """One step (step thread); with a shared store, also its journal entry."""
+        result = session.process_sync(frame, merged)
+        entry = None if self.sharing is None else self.sharing.entry(result.seq, frame, merged)
+        return result, entry
+
+    async def delete(
+        self, session_id: str, *, reason: str = "deleted", owner: Principal | None = None
+    ) -> None:
+        if self.sharing is not None and session_id not in self._sessions:
+            # Only in the store: no need to build it to delete it.
+            frames = await self.sharing.delete_stored(session_id, owner)
+            log_event(f"session_{reason}", tag=session_tag(session_id), frames=frames)
+            return
+        session = self.get(session_id, owner)
+        del self._sessions[session_id]
+        if self.sharing is not None:
+            await self.sharing.delete(session_id)
         self.metrics.active_sessions.set(len(self._sessions))
-        log_event(f"session_{reason}", session=session_id[:8], frames=session.frames)
+        log_event(f"session_{reason}", tag=session.tag, frames=session.frames)
 
     async def expire_idle(self) -> int:
         """Remove sessions idle longer than the timeout; return how many."""
         limit = self.settings.session_idle_timeout_s
         now = time.monotonic()
         stale = [
-            s.id
-            for s in self._sessions.values()
-            if now - s.last_active > limit and not s.order.locked()
+            s.id for s in self._sessions.values() if now - s.last_active > limit and not s.busy
         ]
         for sid in stale:
             await self.delete(sid, reason="expired")

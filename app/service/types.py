@@ -34,6 +34,7 @@ class SessionSpec:
 
     ``particles`` and ``seed`` of None take the service's default and a fresh random
     seed; ``initial_pose`` of None starts with no knowledge (global localization).
+    ``share_view`` lists the session in the live view (private by default).
     """
 
     map_name: str
@@ -44,6 +45,7 @@ class SessionSpec:
     feedback: FeedbackOptions = field(default_factory=FeedbackOptions)
     #: The phone camera; its field of view replaces ``sensor.fov_deg`` when given.
     camera: Camera | None = None
+    share_view: bool = False
 
 
 @dataclass(frozen=True)

@@ -1,5 +1,8 @@
 """LiveView: a viser server in the service's process, showing one session at a time.
 
+It listens on loopback unless told otherwise (``--viser-host``) and shows only the
+sessions shared with it and its own demo walks (:mod:`app.viz.gui`).
+
 The view never touches the filter directly: a background thread wakes at most
 ``max_rate_hz`` times a second, takes a snapshot of the watched session (copies made
 under the session's lock) and redraws only when the session's version changed. So
@@ -16,7 +19,7 @@ import numpy as np
 import viser
 
 from app.service.sessions import SessionManager, SessionNotFound, SessionSnapshot
-from app.viz.gui import ViewControls
+from app.viz.gui import StartWalk, ViewControls
 from app.viz.particles import detection_rays, pose_arrow, sample_particles
 from app.viz.scene import MapScene, build_map_scene
 
@@ -33,10 +36,14 @@ class LiveView:
         manager: SessionManager,
         *,
         port: int = 8080,
-        host: str = "0.0.0.0",
+        host: str = "127.0.0.1",
         max_rate_hz: float = 10.0,
+        start_walk: StartWalk | None = None,
     ) -> None:
+        """``start_walk``: how the panel's demo button starts a simulated walk (none:
+        no demo controls)."""
         self.manager = manager
+        self.start_walk = start_walk
         self.port = port
         self.host = host
         self.period_s = 1.0 / max_rate_hz
@@ -70,7 +77,7 @@ class LiveView:
             "paper_office" if "paper_office" in self.manager.maps else next(iter(self.manager.maps))
         )
         self.show_map(default_map)
-        self.controls = ViewControls(self)
+        self.controls = ViewControls(self, self.start_walk)
         self._thread = threading.Thread(target=self._run, name="bearings-view", daemon=True)
         self._thread.start()
 
@@ -114,6 +121,9 @@ class LiveView:
             self.controls.sync_sessions()
         sid = self.watched
         if sid is None:
+            return False
+        if self.controls is not None and sid not in self.controls.visible_ids:
+            self.watch(None)  # never draw a session the view may not show
             return False
         try:
             snap = self.manager.get(sid).snapshot()

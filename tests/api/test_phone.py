@@ -9,7 +9,8 @@ import pytest
 from fastapi.testclient import TestClient
 
 from app.localization.types import Pose
-from app.maps.model import bundled_maps_dir, load_map
+from app.maps.check import load_map
+from app.resources import bundled_maps_dir
 from app.simulation.camera import CameraModel, visible_objects
 
 PINHOLE = {"model": "pinhole", "width_px": 2000, "fx_px": 1000.0, "cx_px": 1000.0}

@@ -8,10 +8,9 @@ import numpy as np
 import pytest
 from fastapi.testclient import TestClient
 
-from app.maps.model import load_map
-from app.resources import bundled_maps_dir
 from app.simulation.scenarios import paper_config
 from app.simulation.simulator import simulate
+from tests.helpers import paper_office
 
 
 def test_create_and_get_session(client: TestClient) -> None:
@@ -69,7 +68,7 @@ def test_a_walk_converges_and_says_where(client: TestClient) -> None:
     sid = client.post(
         "/sessions", json={"map": "paper_office", "particles": 3000, "seed": 2}
     ).json()["id"]
-    office = load_map(bundled_maps_dir() / "paper_office.json")
+    office = paper_office()
     frames = simulate(office, paper_config("nominal", 360), np.random.default_rng(5))[:40]
     for f in frames:
         res = client.post(f"/sessions/{sid}/frames", json=f.to_contract()).json()
@@ -193,14 +192,15 @@ def test_initial_pose_is_used(client: TestClient) -> None:
     assert abs(res["pose"]["x"] - 2.0) < 0.3 and abs(res["pose"]["theta_deg"] - 90) < 15
 
 
-def test_session_limit_is_429(client: TestClient) -> None:
+def test_session_limit_is_503_with_retry_after(client: TestClient) -> None:
     for _ in range(5):
         assert (
             client.post("/sessions", json={"map": "paper_office", "particles": 100}).status_code
             == 201
         )
     r = client.post("/sessions", json={"map": "paper_office", "particles": 100})
-    assert r.status_code == 429 and "maximum" in r.json()["message"]
+    assert r.status_code == 503 and "maximum" in r.json()["message"]
+    assert int(r.headers["retry-after"]) >= 1
 
 
 def test_detection_limit(client: TestClient, session_id: str) -> None:

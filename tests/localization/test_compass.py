@@ -18,7 +18,8 @@ from app.localization.compass import (
 from app.localization.config import FilterConfig
 from app.localization.filter import ParticleFilter
 from app.localization.sensor import scaled_bessel_i0
-from app.maps.model import bundled_maps_dir, parse_map
+from app.maps.model import parse_map
+from app.resources import bundled_maps_dir
 from app.simulation.scenarios import paper_config
 from app.simulation.simulator import CompassBias, simulate
 

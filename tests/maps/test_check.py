@@ -11,8 +11,9 @@ import numpy as np
 import pytest
 
 from app.maps import check
-from app.maps.check import check_data, check_file, load_map_dirs
-from app.maps.model import MapError, bundled_maps_dir, load_map
+from app.maps.check import check_data, check_file, load_map, load_map_dirs
+from app.maps.model import MapError
+from app.resources import bundled_maps_dir
 from tests.maps.hostile import box, hostile_maps, write_hostile_dir
 
 CASES = hostile_maps()
