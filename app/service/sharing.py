@@ -250,7 +250,7 @@ class SessionSharing:
     async def delete_stored(self, session_id: str, owner: Principal | None) -> int:
         """Delete a session this worker does not hold, if ``owner`` may see it; return how
         many frames its checkpoint covered."""
-        from app.service.sessions import SessionNotFound
+        from app.service.errors import SessionNotFound
 
         data, journal = await self._run(self.store.load, session_id)
         if data is None:
