@@ -105,7 +105,7 @@ class SimFrame:
         ]
 
     def to_contract(self, camera: Camera | None = None) -> dict[str, object]:
-        """CONTRACT.md's ``Frame`` JSON, with the ground truth as the extra ``truth``.
+        """The ``Frame`` JSON of docs/API.md, with the ground truth in ``truth``.
 
         With ``camera``, detections give pixel boxes (rounded to 0.1 pixel) instead of
         bearings; with a compass reading, the frame carries ``heading``.
