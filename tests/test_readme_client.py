@@ -9,8 +9,7 @@ import pytest
 
 from app.config import Settings
 from app.main import create_app
-from tests.api.conftest import make_settings
-from tests.support import free_port, serving
+from tests.helpers import free_port, make_settings, serving
 
 README = Path(__file__).resolve().parents[1] / "README.md"
 

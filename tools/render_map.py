@@ -16,7 +16,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
-from app.maps.model import load_map
+from app.maps.check import load_map
 
 MARKERS = "osD^v<>phP*X"
 

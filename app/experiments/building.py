@@ -32,7 +32,8 @@ import numpy as np
 from app.experiments import integrity as m
 from app.localization.config import FilterConfig
 from app.localization.filter import ParticleFilter
-from app.maps.model import SemanticMap, load_map
+from app.maps.check import load_map
+from app.maps.model import SemanticMap
 from app.resources import bundled_maps_dir
 from app.simulation.simulator import SimulationConfig, simulate
 
@@ -151,7 +152,7 @@ def run_suite(
     seeds: int,
     particles: int,
     workers: int,
-    progress: Callable[[], None] | None = None,
+    progress: Callable[[], object] | None = None,
 ) -> list[BuildingRun]:
     jobs = [(c, seed, particles) for c in conditions for seed in range(seeds)]
     if workers <= 1:

@@ -10,7 +10,6 @@ from pathlib import Path
 
 from tqdm import tqdm
 
-from app.experiments.figures import figures
 from app.experiments.protocol import cells
 from app.experiments.report import markdown, summarize
 from app.experiments.runner import paper_office, run_all
@@ -79,6 +78,9 @@ def run(args: argparse.Namespace) -> int:
     (out / "tables.md").write_text(
         markdown(rows, seconds=seconds, particles=particles), encoding="utf-8"
     )
+    # matplotlib only when figures are drawn: `bearings serve` builds this parser too.
+    from app.experiments.figures import figures
+
     written = figures(runs, paper_office(), out)
     print(
         f"wrote {out / 'tables.json'}, {out / 'tables.md'} and {len(written)} figures "

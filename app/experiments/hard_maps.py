@@ -22,7 +22,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from app.maps.model import SemanticMap, load_map, parse_map
+from app.maps.check import load_map
+from app.maps.model import SemanticMap, parse_map
 from app.resources import bundled_maps_dir
 from app.simulation.scenarios import PAPER_PATH
 
@@ -79,7 +80,8 @@ def symmetric_room() -> HardMap:
     room = rotation_room()
     spec = room.map.to_json()
     spec["name"] = "symmetric_room"
-    spec["objects"] = [o for o in spec["objects"] if o["class"] != "door"]  # type: ignore[union-attr]
+    objects: list[dict[str, object]] = spec["objects"]  # type: ignore[assignment]  # JSON of a MapFile
+    spec["objects"] = [o for o in objects if o["class"] != "door"]
     return HardMap(parse_map(spec), room.path, room.kidnap_pose, True)
 
 

@@ -251,6 +251,7 @@ class Plan:
                 if cell is None:
                     continue
                 relax = float(np.hypot(*(self._centres(np.array([cell]))[0] - start))) + self.res
+            assert cell is not None  # reached, or snapped onto a reachable cell above
             return self._route(layer, start, int(cell), relax)
         raise Unreachable(f"no walkable path from here to {self.target.name}")
 

@@ -178,8 +178,8 @@ class EvidenceTracker:
             "llr": self.llr,
             "anchor": self._anchor,
             "history": [
-                [to_plain(odo), to_plain(obs), to_plain(heading)]
-                for odo, obs, heading in self._history
+                [to_plain(odo), to_plain(obs), to_plain(compass)]
+                for odo, obs, compass in self._history
             ],
             "since_search": self._since_search,
             "searched_ago": self.searched_ago,
@@ -197,12 +197,12 @@ class EvidenceTracker:
         anchor = state["anchor"]
         self._anchor = None if anchor is None else np.array(anchor, dtype=np.float64)
         self._history.clear()
-        for odo, obs, heading in state["history"]:
+        for odo, obs, *compass in state["history"]:  # older checkpoints hold no compass
             self._history.append(
                 (
                     from_plain(Odometry | None, odo),
                     from_plain(Observation, obs),
-                    from_plain(CompassReading | None, heading),
+                    from_plain(CompassReading | None, compass[0]) if compass else None,
                 )
             )
         self._since_search = int(state["since_search"])
@@ -370,7 +370,7 @@ class EvidenceTracker:
         self.x, self.y, self.theta = nx[first:][keep], ny[first:][keep], nt[first:][keep]
         self.llr = self.llr[keep]
 
-    def _centres(self) -> tuple[NDArray[np.float64], ...]:
+    def _centres(self) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
         c = np.cos(self.theta).mean(axis=1)
         s = np.sin(self.theta).mean(axis=1)
         return self.x.mean(axis=1), self.y.mean(axis=1), np.arctan2(s, c)
@@ -387,7 +387,8 @@ class EvidenceTracker:
         """Drop alternatives the main mode has come to cover (the filter holds them)."""
         if not self.count:
             return
-        keep = ~self._near(*self._centres(), main)
+        x, y, t = self._centres()
+        keep = ~self._near(x, y, t, main)
         self.x, self.y, self.theta, self.llr = (
             self.x[keep], self.y[keep], self.theta[keep], self.llr[keep]
         )  # fmt: skip

@@ -68,6 +68,7 @@ class ParticleFilter:
         rng: the filter's own random generator (same seed, same result).
         initial_pose: a known start, or None for global localization (uniform over the
             free space, any heading).
+        state: a :meth:`checkpoint` to go on from instead (``initial_pose`` is ignored).
     """
 
     def __init__(
@@ -77,6 +78,7 @@ class ParticleFilter:
         *,
         rng: np.random.Generator,
         initial_pose: InitialPose | None = None,
+        state: Mapping[str, Any] | None = None,
     ) -> None:
         self.map = semantic_map
         self.config = config or FilterConfig()
@@ -91,7 +93,10 @@ class ParticleFilter:
             else None
         )
         self.last_observation: Observation | None = None
-        self.reset(initial_pose)
+        if state is None:
+            self.reset(initial_pose)
+        else:  # from a checkpoint (:meth:`checkpoint`): no cloud to draw first
+            self.restore(state)
 
     # ----------------------------------------------------------------- state
     def reset(self, initial_pose: InitialPose | None = None) -> None:
@@ -268,7 +273,8 @@ class ParticleFilter:
         w = self.weights
         ess = effective_sample_size(w)
         raw = estimate_pose(self.x, self.y, self.theta, w, ess=ess, rng=self.rng)
-        share, searched_ago = 0.0, 0
+        share: float = 0.0
+        searched_ago: int | None = 0
         if self.evidence is not None:
             raw, w, ess = self._weigh_alternatives(odometry, raw, w, ess, heading)
             share, searched_ago = self.evidence.alternative_share, self.evidence.searched_ago

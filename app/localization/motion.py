@@ -3,7 +3,7 @@
 The motion (forward, left, turn) is perturbed per particle with zero-mean Gaussian
 noise whose standard deviation grows with the motion and never falls below a floor,
 in the spirit of *sample_motion_odometry* (Probabilistic Robotics, Table 5.6), but
-parameterized directly in the body frame that CONTRACT.md's odometry uses. The
+parameterized directly in the body frame that the API's odometry uses (docs/API.md). The
 Gaussian draws come from :func:`~app.localization.fastmath.fill_normal` (a tabulated
 inverse CDF, four times faster here than numpy's sampler) and the particle loop is
 compiled.

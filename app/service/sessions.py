@@ -12,16 +12,15 @@ disconnect does not end a session; ``DELETE``, the idle timeout or a restart doe
 from __future__ import annotations
 
 import asyncio
-import hashlib
-import hmac
-import json
 import logging
 import os
 import secrets
 import threading
 import time
+from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from datetime import UTC, datetime
+from typing import Any
 
 import numpy as np
 
@@ -35,6 +34,17 @@ from app.localization.filter import ParticleFilter
 from app.localization.types import Detection, Estimate, Pose
 from app.maps.model import SemanticMap
 from app.service.access import OPEN, Principal, TokenBucket
+from app.service.errors import (
+    CapacityReached,
+    InvalidSessionSpec,
+    QuotaReached,
+    RequestTooLarge,
+    SessionNotFound,
+    SessionUnavailable,
+    UnknownMap,
+    log_event,
+    session_tag,
+)
 from app.service.metrics import Metrics
 from app.service.queueing import FrameQueue, merged_warning
 from app.service.scheduler import FairExecutor
@@ -43,72 +53,6 @@ from app.service.store import MemoryStore, SessionStore
 from app.service.types import FrameInput, FrameOutcome, SessionSpec
 
 log = logging.getLogger("bearings.sessions")
-
-#: When this process started: a session id unknown to it may have ended with a restart.
-STARTED_AT = time.monotonic()
-#: Per-process secret of :func:`session_tag` (so a tag cannot be traced back to an id).
-_TAG_KEY = secrets.token_bytes(16)
-
-
-def session_tag(session_id: str) -> str:
-    """A short handle for logs and the view: a keyed hash, not a piece of the id."""
-    return hmac.new(_TAG_KEY, session_id.encode(), hashlib.sha256).hexdigest()[:8]
-
-
-class SessionNotFound(KeyError):
-    """No live session has that id for this caller (another key's session counts as none)."""
-
-    def __init__(self, session_id: str) -> None:
-        super().__init__(session_id)
-        up = time.monotonic() - STARTED_AT
-        self.message = (
-            f"no session {session_id!r}: it never existed, was deleted, expired, or ended "
-            f"when the service restarted (this server started {up:.0f} s ago); "
-            "create a new session"
-        )
-
-    def __str__(self) -> str:
-        return self.message
-
-
-class LimitReached(RuntimeError):
-    """A service limit was hit; ``code`` names the limit in a machine-readable word.
-
-    ``retry_after_s`` says when trying again may succeed (None: it never will as asked).
-    """
-
-    def __init__(
-        self, message: str, code: str = "limit", retry_after_s: float | None = None
-    ) -> None:
-        super().__init__(message)
-        self.code = code
-        self.retry_after_s = retry_after_s
-
-
-class CapacityReached(LimitReached):
-    """The whole service is full now (sessions, step threads, or it is restarting)."""
-
-
-class QuotaReached(LimitReached):
-    """One client's own quota (sessions, particles, frames per second) is used up now."""
-
-
-class RequestTooLarge(LimitReached):
-    """One request asks for more than the service ever allows (particles, detections)."""
-
-
-class SessionUnavailable(LimitReached):
-    """The session exists but cannot be served here right now (another worker still
-    holds it, or this worker is stopping); retrying soon, or reconnecting, serves it."""
-
-
-class InvalidSessionSpec(ValueError):
-    """A session cannot be built as asked (e.g. a start pose outside the free space)."""
-
-
-class UnknownMap(LookupError):
-    def __init__(self, name: str, known: list[str]) -> None:
-        super().__init__(f"no map {name!r}; known maps: {', '.join(known) or 'none'}")
 
 
 def unknown_class_warnings(
@@ -120,11 +64,6 @@ def unknown_class_warnings(
         f"class {c!r} is not on map {semantic_map.name!r}; its detections were ignored"
         for c in unknown
     ]
-
-
-def log_event(event: str, **fields: object) -> None:
-    """One structured (JSON) log line per session event."""
-    log.info(json.dumps({"event": event, **fields}, default=str))
 
 
 @dataclass(frozen=True)
@@ -450,6 +389,7 @@ class SessionManager:
         *,
         session_id: str | None = None,
         created_at: datetime | None = None,
+        filter_state: Mapping[str, Any] | None = None,
     ) -> Session:
         if request.map_name not in self.maps:
             raise UnknownMap(request.map_name, sorted(self.maps))
@@ -480,7 +420,11 @@ class SessionManager:
                 "give a pose where a person can stand, or null for a global start"
             )
         pf = ParticleFilter(
-            semantic_map, config, rng=np.random.default_rng(seed), initial_pose=initial
+            semantic_map,
+            config,
+            rng=np.random.default_rng(seed),
+            initial_pose=initial,
+            state=filter_state,
         )
         narrator = Narrator(semantic_map, request.feedback)
         return Session(
@@ -642,7 +586,12 @@ class SessionManager:
     async def delete(
         self, session_id: str, *, reason: str = "deleted", owner: Principal | None = None
     ) -> None:
-        session = await self.find(session_id, owner)
+        if self.sharing is not None and session_id not in self._sessions:
+            # Only in the store: no need to build it to delete it.
+            frames = await self.sharing.delete_stored(session_id, owner)
+            log_event(f"session_{reason}", tag=session_tag(session_id), frames=frames)
+            return
+        session = self.get(session_id, owner)
         del self._sessions[session_id]
         if self.sharing is not None:
             await self.sharing.delete(session_id)

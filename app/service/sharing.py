@@ -34,11 +34,12 @@ from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from typing import TYPE_CHECKING, Any, TypeVar
 
-from app.service import checkpoint
+import app.service.checkpoint as checkpoint
 from app.service.store import SessionStore
 from app.service.types import FrameInput
 
 if TYPE_CHECKING:
+    from app.service.access import Principal
     from app.service.sessions import Session, SessionManager
 
 log = logging.getLogger("bearings.sharing")
@@ -121,7 +122,7 @@ class SessionSharing:
     # ------------------------------------------------------------------ resuming
     async def resume(self, session_id: str) -> Session:
         """The session from the store, now owned here (one load per id at a time)."""
-        from app.service.sessions import SessionNotFound, SessionUnavailable
+        from app.service.errors import SessionNotFound, SessionUnavailable
 
         if self.stopping:
             raise SessionUnavailable(
@@ -173,7 +174,7 @@ class SessionSharing:
         self._saved[sid] = session.version if not replayed else -1
         self.manager.adopt(session)
         self.manager.metrics.sessions_resumed.inc()
-        from app.service.sessions import log_event
+        from app.service.errors import log_event
 
         log_event(
             "session_resumed",
@@ -192,6 +193,7 @@ class SessionSharing:
             checkpoint.spec_of(state),
             session_id=sid,
             created_at=checkpoint.created_at_of(state),
+            filter_state=state["filter"],
         )
         checkpoint.apply(session, state)
         replayed = 0
@@ -244,6 +246,20 @@ class SessionSharing:
                 await self._run(self.store.release, [session_id], self.owner)
         finally:
             self._releasing.discard(session_id)
+
+    async def delete_stored(self, session_id: str, owner: Principal | None) -> int:
+        """Delete a session this worker does not hold, if ``owner`` may see it; return how
+        many frames its checkpoint covered."""
+        from app.service.errors import SessionNotFound
+
+        data, journal = await self._run(self.store.load, session_id)
+        if data is None:
+            raise SessionNotFound(session_id)
+        state = checkpoint.unpack(data)
+        if owner is not None and owner.name is not None and state["owner"] != owner.name:
+            raise SessionNotFound(session_id)
+        await self.delete(session_id)
+        return int(state["frames"]) + len(journal)
 
     async def delete(self, session_id: str) -> bool:
         """Remove the session from the store; False if it had no checkpoint."""
@@ -326,7 +342,7 @@ class SessionSharing:
         self.manager.forget(session)
         self._saved.pop(session.id, None)
         if reason is not None:
-            from app.service.sessions import log_event
+            from app.service.errors import log_event
 
             log_event(f"session_{reason}", tag=session.tag, frames=session.frames)
 

@@ -14,8 +14,7 @@ import websockets
 from websockets.exceptions import InvalidStatus
 
 from app.main import create_app
-from tests.api.conftest import make_settings
-from tests.support import free_port, serving
+from tests.helpers import free_port, make_settings, serving
 
 ALICE = "alice-key-0123456789abcdef"
 BOB = "bob-key-0123456789abcdef-bob"

@@ -101,7 +101,7 @@ def test_pcrb_single_step_by_hand() -> None:
 def test_pcrb_on_the_paper_walk_is_below_the_single_frame_bound() -> None:
     """Odometry only adds information: the PCRB lies under one frame's bound."""
     from app.experiments.pcrb import pcrb_position_m
-    from app.maps.model import load_map
+    from app.maps.check import load_map
     from app.resources import bundled_maps_dir
     from app.simulation.scenarios import paper_config
     from app.simulation.simulator import simulate

@@ -15,8 +15,9 @@ from app.guidance import (
     guide,
     plan_for,
 )
+from app.maps.check import load_map
 from app.maps.geometry import segments_cross_walls
-from app.maps.model import SemanticMap, load_map, parse_map
+from app.maps.model import SemanticMap, parse_map
 from app.resources import bundled_maps_dir
 
 SUITE = load_map(bundled_maps_dir() / "office_suite.json")

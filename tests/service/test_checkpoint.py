@@ -13,20 +13,22 @@ import numpy as np
 import pytest
 
 from app.feedback import FeedbackOptions, Narrator
+from app.localization.compass import CompassReading
 from app.localization.config import FilterConfig
 from app.localization.filter import CHECKPOINT_PARTICLES, ParticleFilter
 from app.localization.types import InitialPose
-from app.maps.model import load_map
+from app.maps.check import load_map
 from app.resources import bundled_maps_dir
 from app.service import checkpoint
+from app.service.errors import SessionNotFound, SessionUnavailable
 from app.service.metrics import Metrics
-from app.service.sessions import SessionManager, SessionNotFound, SessionUnavailable
+from app.service.sessions import SessionManager
 from app.service.store import MemoryStore
 from app.service.types import FrameInput, FrameOutcome, SensorSpec, SessionSpec
 from app.simulation.scenarios import paper_config
 from app.simulation.simulator import simulate
 from app.state import from_plain, to_plain
-from tests.api.conftest import make_settings
+from tests.helpers import make_settings
 
 OFFICE = load_map(bundled_maps_dir() / "paper_office.json")
 WALK = simulate(OFFICE, paper_config("nominal", 360), np.random.default_rng(5))
@@ -56,6 +58,10 @@ def test_plain_data_round_trip_of_a_full_spec_and_an_outcome() -> None:
     outcome = FrameOutcome(3, estimate, feedback, ("a warning",), ("Kitchen", None, None))
     assert from_plain(FrameOutcome, to_plain(outcome)) == outcome
     assert from_plain(FrameInput, to_plain(frame(3))) == frame(3)
+    # The journal's written-out encoding says the same as the generic one.
+    for f in (frame(3), FrameInput(), FrameInput(heading=CompassReading(1.0, 0.2))):
+        assert checkpoint._frame_plain(f) == to_plain(f)
+        assert checkpoint.decode_frame(checkpoint.encode_frame(7, f, 2)) == (7, f, 2)
 
 
 def test_from_plain_says_what_does_not_fit() -> None:

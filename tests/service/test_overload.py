@@ -13,7 +13,7 @@ from pathlib import Path
 import httpx
 import websockets
 
-from tests.support import rss_kib, server_process
+from tests.helpers import rss_kib, server_process
 
 KEY = "overload-key-0123456789abcdefgh"
 OTHER = "overload-other-key-0123456789abc"

@@ -3,14 +3,15 @@
 from __future__ import annotations
 
 import asyncio
+import functools
 import time
 
 import numpy as np
 import pytest
 import viser
 
-from app.demo import frame_input_of
-from app.maps.model import load_map, load_map_dir
+from app.demo import frame_input_of, new_walk
+from app.maps.check import load_map_dir
 from app.resources import bundled_maps_dir
 from app.service.metrics import Metrics
 from app.service.sessions import SessionManager
@@ -20,10 +21,9 @@ from app.simulation.simulator import simulate
 from app.viz.particles import MAX_DRAWN, detection_rays, sample_particles
 from app.viz.scene import build_map_scene, top_down_camera
 from app.viz.view import LiveView
-from tests.api.conftest import make_settings
-from tests.support import free_port
+from tests.helpers import free_port, make_settings, paper_office
 
-OFFICE = load_map(bundled_maps_dir() / "paper_office.json")
+OFFICE = paper_office()
 
 
 @pytest.fixture
@@ -81,7 +81,12 @@ def test_particles_are_sampled_by_weight_and_capped() -> None:
 def test_live_view_draws_the_watched_session() -> None:
     async def main() -> LiveView:
         manager = make_manager()
-        view = LiveView(manager, port=free_port(), host="127.0.0.1")
+        view = LiveView(
+            manager,
+            port=free_port(),
+            host="127.0.0.1",
+            start_walk=functools.partial(new_walk, manager),
+        )
         view.start()
         try:
             s = await manager.create(
