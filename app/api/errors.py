@@ -58,9 +58,11 @@ ERROR_MEANING: dict[int, str] = {
     "the initial pose outside the map's free space, gives a pixel box the session's "
     "camera cannot read (no camera, outside the image), or names a destination that is "
     "unknown or cannot be reached",
-    429: "the service is at capacity (code too_many_sessions) or restarting (code "
-    "restarting): try again after Retry-After seconds",
-    503: "the feature needs something the machine lacks (no speech engine)",
+    429: "this API key's quota is used up right now (code session_quota, particle_quota "
+    "or rate_limited): try again after Retry-After seconds",
+    503: "the service is full or stopping (code too_many_sessions, busy, restarting: try "
+    "again after Retry-After seconds), or the feature needs something the machine lacks "
+    "(no speech engine)",
 }
 
 

@@ -11,6 +11,7 @@ import time
 from pathlib import Path
 
 import httpx
+import pytest
 import websockets
 
 from tests.helpers import rss_kib, server_process
@@ -68,7 +69,17 @@ async def flood(url: str, sid: str, rate: float, seconds: float) -> tuple[list[f
     return latencies, merged, errors
 
 
-def test_a_flood_of_frames_is_merged_and_answers_stay_prompt(tmp_path: Path) -> None:
+@pytest.mark.parametrize(
+    "seconds",
+    [
+        # A bounded run in the default suite, and the full 10 s as a slow test:
+        # on a machine loaded many times over by other work the longer run meets more
+        # stalls of the whole machine, which no queue can hide.
+        3,
+        pytest.param(10, marks=pytest.mark.slow),
+    ],
+)
+def test_a_flood_of_frames_is_merged_and_answers_stay_prompt(tmp_path: Path, seconds: int) -> None:
     with server_process("--api-keys", str(keys_file(tmp_path))) as server:
         r = httpx.post(
             f"http://{server.url}/sessions",
@@ -76,10 +87,10 @@ def test_a_flood_of_frames_is_merged_and_answers_stay_prompt(tmp_path: Path) -> 
             headers={"Authorization": f"Bearer {KEY}"},
         )
         sid = r.json()["id"]
-        latencies, merged, errors = asyncio.run(flood(server.url, sid, 1000, 10))
+        latencies, merged, errors = asyncio.run(flood(server.url, sid, 1000, seconds))
     latencies.sort()
     assert errors == 0
-    assert len(latencies) >= 9000  # every frame offered was answered
+    assert len(latencies) >= 900 * seconds  # every frame offered was answered
     assert merged > 0  # the filter could not keep up with 1,000 frames/s: frames were merged
     assert latencies[-1] < 1.0, f"worst answer {latencies[-1]:.3f} s"
 

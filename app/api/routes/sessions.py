@@ -53,7 +53,7 @@ _SESSION_LINKS = {
     response_model=SessionOut,
     responses={
         201: {"links": _SESSION_LINKS, "description": "the new session"},
-        **error_responses(400, 404, 413, 422, 429),
+        **error_responses(400, 404, 413, 422, 429, 503),
     },
 )
 async def create_session(
@@ -72,7 +72,7 @@ async def get_session(session_id: str, manager: ManagerDep, principal: Principal
 @router.post(
     "/{session_id}/frames",
     response_model=FrameResult,
-    responses=error_responses(400, 404, 413, 422, 429),
+    responses=error_responses(400, 404, 413, 422, 429, 503),
 )
 async def post_frame(
     session_id: str, frame: Frame, manager: ManagerDep, principal: PrincipalDep
