@@ -60,7 +60,7 @@ def from_plain(kind: Any, data: Any) -> Any:
         raise ValueError(f"{data!r} fits none of {options}")
     if kind is np.ndarray or origin is np.ndarray:
         return np.array(data)  # a writable copy
-    if dataclasses.is_dataclass(kind):
+    if isinstance(kind, type) and dataclasses.is_dataclass(kind):
         if not isinstance(data, Mapping):
             raise TypeError(f"{kind.__name__}: expected an object, got {type(data).__name__}")
         hints = _hints(kind)

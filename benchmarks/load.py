@@ -32,7 +32,7 @@ import httpx
 import numpy as np
 import websockets
 
-from app.maps.model import load_map
+from app.maps.check import load_map
 from app.resources import bundled_maps_dir
 from app.simulation.scenarios import PAPER_PATH, paper_config
 from app.simulation.simulator import simulate

@@ -24,7 +24,7 @@ from pathlib import Path
 import pytest
 
 from app.resources import bundled_maps_dir
-from tests.support import free_port
+from tests.helpers import free_port
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -32,6 +32,8 @@ from app.feedback.phrasing import (
     direction_phrase,
     distance_phrase,
 )
+from app.localization.config import FilterConfig
+from app.localization.sensor import match_detections, prepare_observation
 from app.localization.types import Detection, Estimate
 from app.maps.geometry import wrap_angle
 from app.maps.model import SemanticMap
@@ -253,22 +255,30 @@ class Narrator:
         visible = self.map.visibility.visible(estimate.x, estimate.y)[0]
         rel = self.map.object_xy - pose_xy
         dist = np.hypot(rel[:, 0], rel[:, 1])
-        bearing = wrap_angle(np.arctan2(rel[:, 1], rel[:, 0]) - estimate.theta_rad)
         fov_deg, centre_deg = fov
-        off = wrap_angle(bearing - math.radians(centre_deg))
-        in_view = visible & (np.abs(off) <= math.radians(fov_deg) / 2 + 1e-9)
         matched: list[int] = []
         if dets:
-            # Each detection's best visible object of its class, all detections at once.
-            det_bearing = np.array([d.bearing_rad for d in dets])
-            det_class = np.array([self.map.classes.index(d.cls) for d in dets])
-            err = np.abs(wrap_angle(bearing[None, :] - det_bearing[:, None]))
-            allowed = in_view[None, :] & (self.map.object_class[None, :] == det_class[:, None])
-            err = np.where(allowed, err, np.inf)
-            for k in np.flatnonzero(allowed.any(axis=1)):
-                best = int(np.argmin(err[k]))
-                if best not in matched:
-                    matched.append(best)
+            # Each detection's best visible object of its class: the sensor model's own
+            # correspondence (eq. 3) at the estimated pose, within the camera's view. The
+            # camera may look off the body's forward by centre_deg: the pose turns by it
+            # and the bearings (relative to the body) by the opposite, so each detection
+            # still points the same way while the field of view is centred on the camera.
+            config = FilterConfig(fov_deg=fov_deg, visibility=True, max_range_m=None)
+            centre = math.radians(centre_deg)
+            camera_dets = [Detection(d.cls, d.bearing_rad - centre, d.score) for d in dets]
+            obs = prepare_observation(camera_dets, self.map, config)
+            _, index = match_detections(
+                np.array([estimate.x]),
+                np.array([estimate.y]),
+                np.array([estimate.theta_rad + centre]),
+                obs,
+                self.map,
+                config,
+                visible[None, :],
+            )
+            for best in index[:, 0]:
+                if best >= 0 and int(best) not in matched:
+                    matched.append(int(best))
         matched.sort(key=lambda i: dist[i])  # nearest first: a stable, useful order
         others = [int(i) for i in np.argsort(dist) if visible[i] and int(i) not in matched]
         return matched + others

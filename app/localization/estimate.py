@@ -224,7 +224,7 @@ def estimate_pose(
         np.ascontiguousarray(v, dtype=np.float64) for v in (x, y, theta, weights)
     )
     sub = rng is not None and n > max_points
-    if sub:
+    if rng is not None and sub:
         idx = systematic_resample(weights, max_points, rng)
         cx, cy, ct = x[idx], y[idx], theta[idx]
         cw = np.full(max_points, 1.0 / max_points)

@@ -51,6 +51,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from app.localization import sensor_kernel
+from app.localization.compass import CompassReading, compass_log_likelihood
 from app.localization.config import FilterConfig
 from app.localization.motion import motion_log_penalty, sample_motion
 from app.localization.recovery import sample_from_observation
@@ -154,7 +155,7 @@ class EvidenceTracker:
         self.llr = np.empty(0)
         #: The anchor cloud of the main belief, rows x, y, theta; None until drawn.
         self._anchor: NDArray[np.float64] | None = None
-        self._history: deque[tuple[Odometry | None, Observation]] = deque(
+        self._history: deque[tuple[Odometry | None, Observation, CompassReading | None]] = deque(
             maxlen=self.settings.window
         )
         self._since_search = self.settings.search_every
@@ -176,7 +177,10 @@ class EvidenceTracker:
             "theta": self.theta,
             "llr": self.llr,
             "anchor": self._anchor,
-            "history": [[to_plain(odo), to_plain(obs)] for odo, obs in self._history],
+            "history": [
+                [to_plain(odo), to_plain(obs), to_plain(compass)]
+                for odo, obs, compass in self._history
+            ],
             "since_search": self._since_search,
             "searched_ago": self.searched_ago,
             "searches": self.searches,
@@ -193,8 +197,14 @@ class EvidenceTracker:
         anchor = state["anchor"]
         self._anchor = None if anchor is None else np.array(anchor, dtype=np.float64)
         self._history.clear()
-        for odo, obs in state["history"]:
-            self._history.append((from_plain(Odometry | None, odo), from_plain(Observation, obs)))
+        for odo, obs, *compass in state["history"]:  # older checkpoints hold no compass
+            self._history.append(
+                (
+                    from_plain(Odometry | None, odo),
+                    from_plain(Observation, obs),
+                    from_plain(CompassReading | None, compass[0]) if compass else None,
+                )
+            )
         self._since_search = int(state["since_search"])
         self.searched_ago = state["searched_ago"]
         self.searches = int(state["searches"])
@@ -252,6 +262,7 @@ class EvidenceTracker:
         main: Hypothesis | None,
         main_tight: bool,
         particles: tuple[NDArray[np.float64], ...],
+        heading: CompassReading | None = None,
     ) -> bool:
         """Move and weigh the alternatives, search when due; True if a swap is due.
 
@@ -264,13 +275,15 @@ class EvidenceTracker:
             main_tight: whether the main mode is tight enough to search against.
             particles: the filter's x, y, theta and normalized weights (to draw the
                 anchor from).
+            heading: this frame's compass reading, evidence about every cloud's heading
+                like the detections (app.localization.compass), or None.
         """
         # Frames without detections are kept too: their odometry chains the window.
-        self._history.append((odometry, obs))
+        self._history.append((odometry, obs, heading))
         if self.searched_ago is not None:
             self.searched_ago += 1
         if self.count or self._anchor is not None:
-            self._track(odometry, obs, main_log_evidence)
+            self._track(odometry, obs, main_log_evidence, heading)
         if main is not None:
             self._forget_covered(main)
             self._keep_anchor(main, particles)
@@ -316,7 +329,13 @@ class EvidenceTracker:
         idx = systematic_resample(w / w.sum(), st.particles, self.rng)
         self._anchor = np.vstack([x[idx], y[idx], t[idx]])
 
-    def _track(self, odometry: Odometry | None, obs: Observation, main_ev: float) -> None:
+    def _track(
+        self,
+        odometry: Odometry | None,
+        obs: Observation,
+        main_ev: float,
+        heading: CompassReading | None = None,
+    ) -> None:
         anchored = self._anchor is not None
         rows = [self.x, self.y, self.theta]
         if self._anchor is not None:
@@ -329,6 +348,8 @@ class EvidenceTracker:
             log_w = log_w + sensor_kernel.log_likelihood(
                 nx, ny, nt, obs, self.map, self.config, self.grid
             )
+        if heading is not None:
+            log_w = log_w + compass_log_likelihood(nt, heading)
         log_w = log_w.reshape(a, p)
         ev = _log_mean_exp_rows(log_w)
         if anchored and np.isfinite(ev[0]):
@@ -349,7 +370,7 @@ class EvidenceTracker:
         self.x, self.y, self.theta = nx[first:][keep], ny[first:][keep], nt[first:][keep]
         self.llr = self.llr[keep]
 
-    def _centres(self) -> tuple[NDArray[np.float64], ...]:
+    def _centres(self) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
         c = np.cos(self.theta).mean(axis=1)
         s = np.sin(self.theta).mean(axis=1)
         return self.x.mean(axis=1), self.y.mean(axis=1), np.arctan2(s, c)
@@ -366,7 +387,8 @@ class EvidenceTracker:
         """Drop alternatives the main mode has come to cover (the filter holds them)."""
         if not self.count:
             return
-        keep = ~self._near(*self._centres(), main)
+        x, y, t = self._centres()
+        keep = ~self._near(x, y, t, main)
         self.x, self.y, self.theta, self.llr = (
             self.x[keep], self.y[keep], self.theta[keep], self.llr[keep]
         )  # fmt: skip
@@ -380,11 +402,13 @@ class EvidenceTracker:
         stride = self.settings.window_stride
         frames = list(self._history)
         for k in range(len(frames) - 1, -1, -1):
-            odo, obs = frames[k]
+            odo, obs, heading = frames[k]
             if (len(frames) - 1 - k) % stride == 0:
                 total += sensor_kernel.log_likelihood(
                     x, y, theta, obs, self.map, self.config, self.grid
                 )
+                if heading is not None:
+                    total += compass_log_likelihood(theta, heading)
             if odo is None or k == 0:
                 break
             x, y, theta = chain_back(x, y, theta, odo)

@@ -267,13 +267,16 @@ class ParticleFilter:
         self.predict(odometry)
         inject = self.correct(detections)
         if heading is not None:
+            before = log_sum_exp(self.log_w)
             self.log_w = self.log_w + compass_log_likelihood(self.theta, heading)
+            self.log_evidence += log_sum_exp(self.log_w) - before
         w = self.weights
         ess = effective_sample_size(w)
         raw = estimate_pose(self.x, self.y, self.theta, w, ess=ess, rng=self.rng)
-        share, searched_ago = 0.0, 0
+        share: float = 0.0
+        searched_ago: int | None = 0
         if self.evidence is not None:
-            raw, w, ess = self._weigh_alternatives(odometry, raw, w, ess)
+            raw, w, ess = self._weigh_alternatives(odometry, raw, w, ess, heading)
             share, searched_ago = self.evidence.alternative_share, self.evidence.searched_ago
         self._update_fit(raw)
         moved = 1.0 if odometry is None else float(np.hypot(odometry.forward_m, odometry.left_m))
@@ -302,7 +305,12 @@ class ParticleFilter:
         return self.estimate
 
     def _weigh_alternatives(
-        self, odometry: Odometry | None, raw: Estimate, w: NDArray[np.float64], ess: float
+        self,
+        odometry: Odometry | None,
+        raw: Estimate,
+        w: NDArray[np.float64],
+        ess: float,
+        heading: CompassReading | None = None,
     ) -> tuple[Estimate, NDArray[np.float64], float]:
         """Move and weigh the alternatives; swap the strongest in if the evidence says so."""
         assert self.evidence is not None and self.last_observation is not None
@@ -310,7 +318,7 @@ class ParticleFilter:
         tight = top is not None and top.std_xy_m <= SEARCH_MAX_SPREAD_M
         particles = (self.x, self.y, self.theta, w)
         if not self.evidence.update(
-            odometry, self.last_observation, self.log_evidence, top, tight, particles
+            odometry, self.last_observation, self.log_evidence, top, tight, particles, heading
         ):
             return raw, w, ess
         self.x, self.y, self.theta = self.evidence.swap(self.x, self.y, self.theta, w, self.n)

@@ -66,7 +66,7 @@ def segments_cross_walls(
     hit = (~parallel) & (t > eps) & (t < 1.0 - eps) & (u >= -eps) & (u <= 1.0 + eps)
     if ignore is not None:
         hit &= ~np.broadcast_to(np.asarray(ignore, dtype=bool), hit.shape)
-    return hit.any(axis=1)
+    return np.asarray(hit.any(axis=1), dtype=np.bool_)
 
 
 def point_segment_distance(points: ArrayLike, walls: ArrayLike) -> FloatArray:

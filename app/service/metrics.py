@@ -13,6 +13,11 @@ class Metrics:
     def __init__(self) -> None:
         self.registry = CollectorRegistry()
         self.frames = Counter("bearings_frames", "Frames processed", registry=self.registry)
+        self.frames_accepted = Counter(
+            "bearings_frames_accepted",
+            "Frames accepted into a session's queue (each is answered, maybe merged)",
+            registry=self.registry,
+        )
         self.step_seconds = Histogram(
             "bearings_step_seconds",
             "Time to process one frame (filter step and feedback), seconds",

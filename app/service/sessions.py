@@ -12,9 +12,6 @@ disconnect does not end a session; ``DELETE``, the idle timeout or a restart doe
 from __future__ import annotations
 
 import asyncio
-import hashlib
-import hmac
-import json
 import logging
 import os
 import secrets
@@ -37,6 +34,39 @@ from app.localization.filter import ParticleFilter
 from app.localization.types import Detection, Estimate, Pose
 from app.maps.model import SemanticMap
 from app.service.access import OPEN, Principal, TokenBucket
+from app.service.errors import (
+    STARTED_AT as STARTED_AT,
+)
+from app.service.errors import (
+    CapacityReached as CapacityReached,
+)
+from app.service.errors import (
+    InvalidSessionSpec as InvalidSessionSpec,
+)
+from app.service.errors import (
+    LimitReached as LimitReached,
+)
+from app.service.errors import (
+    QuotaReached as QuotaReached,
+)
+from app.service.errors import (
+    RequestTooLarge as RequestTooLarge,
+)
+from app.service.errors import (
+    SessionNotFound as SessionNotFound,
+)
+from app.service.errors import (
+    SessionUnavailable as SessionUnavailable,
+)
+from app.service.errors import (
+    UnknownMap as UnknownMap,
+)
+from app.service.errors import (
+    log_event as log_event,
+)
+from app.service.errors import (
+    session_tag as session_tag,
+)
 from app.service.metrics import Metrics
 from app.service.queueing import FrameQueue, merged_warning
 from app.service.scheduler import FairExecutor
@@ -45,72 +75,6 @@ from app.service.store import MemoryStore, SessionStore
 from app.service.types import FrameInput, FrameOutcome, SessionSpec
 
 log = logging.getLogger("bearings.sessions")
-
-#: When this process started: a session id unknown to it may have ended with a restart.
-STARTED_AT = time.monotonic()
-#: Per-process secret of :func:`session_tag` (so a tag cannot be traced back to an id).
-_TAG_KEY = secrets.token_bytes(16)
-
-
-def session_tag(session_id: str) -> str:
-    """A short handle for logs and the view: a keyed hash, not a piece of the id."""
-    return hmac.new(_TAG_KEY, session_id.encode(), hashlib.sha256).hexdigest()[:8]
-
-
-class SessionNotFound(KeyError):
-    """No live session has that id for this caller (another key's session counts as none)."""
-
-    def __init__(self, session_id: str) -> None:
-        super().__init__(session_id)
-        up = time.monotonic() - STARTED_AT
-        self.message = (
-            f"no session {session_id!r}: it never existed, was deleted, expired, or ended "
-            f"when the service restarted (this server started {up:.0f} s ago); "
-            "create a new session"
-        )
-
-    def __str__(self) -> str:
-        return self.message
-
-
-class LimitReached(RuntimeError):
-    """A service limit was hit; ``code`` names the limit in a machine-readable word.
-
-    ``retry_after_s`` says when trying again may succeed (None: it never will as asked).
-    """
-
-    def __init__(
-        self, message: str, code: str = "limit", retry_after_s: float | None = None
-    ) -> None:
-        super().__init__(message)
-        self.code = code
-        self.retry_after_s = retry_after_s
-
-
-class CapacityReached(LimitReached):
-    """The whole service is full now (sessions, step threads, or it is restarting)."""
-
-
-class QuotaReached(LimitReached):
-    """One client's own quota (sessions, particles, frames per second) is used up now."""
-
-
-class RequestTooLarge(LimitReached):
-    """One request asks for more than the service ever allows (particles, detections)."""
-
-
-class SessionUnavailable(LimitReached):
-    """The session exists but cannot be served here right now (another worker still
-    holds it, or this worker is stopping); retrying soon, or reconnecting, serves it."""
-
-
-class InvalidSessionSpec(ValueError):
-    """A session cannot be built as asked (e.g. a start pose outside the free space)."""
-
-
-class UnknownMap(LookupError):
-    def __init__(self, name: str, known: list[str]) -> None:
-        super().__init__(f"no map {name!r}; known maps: {', '.join(known) or 'none'}")
 
 
 def unknown_class_warnings(
@@ -122,11 +86,6 @@ def unknown_class_warnings(
         f"class {c!r} is not on map {semantic_map.name!r}; its detections were ignored"
         for c in unknown
     ]
-
-
-def log_event(event: str, **fields: object) -> None:
-    """One structured (JSON) log line per session event."""
-    log.info(json.dumps({"event": event, **fields}, default=str))
 
 
 @dataclass(frozen=True)
@@ -563,6 +522,7 @@ class SessionManager:
                     wait,
                 )
         waiter: asyncio.Future[FrameOutcome] = asyncio.get_running_loop().create_future()
+        self.metrics.frames_accepted.inc()
         if session.queue.put(frame, waiter):
             self.metrics.frames_merged.inc()
         if session.pump is None:

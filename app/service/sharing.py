@@ -34,7 +34,7 @@ from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from typing import TYPE_CHECKING, Any, TypeVar
 
-from app.service import checkpoint
+import app.service.checkpoint as checkpoint
 from app.service.store import SessionStore
 from app.service.types import FrameInput
 
@@ -122,7 +122,7 @@ class SessionSharing:
     # ------------------------------------------------------------------ resuming
     async def resume(self, session_id: str) -> Session:
         """The session from the store, now owned here (one load per id at a time)."""
-        from app.service.sessions import SessionNotFound, SessionUnavailable
+        from app.service.errors import SessionNotFound, SessionUnavailable
 
         if self.stopping:
             raise SessionUnavailable(
@@ -174,7 +174,7 @@ class SessionSharing:
         self._saved[sid] = session.version if not replayed else -1
         self.manager.adopt(session)
         self.manager.metrics.sessions_resumed.inc()
-        from app.service.sessions import log_event
+        from app.service.errors import log_event
 
         log_event(
             "session_resumed",
@@ -342,7 +342,7 @@ class SessionSharing:
         self.manager.forget(session)
         self._saved.pop(session.id, None)
         if reason is not None:
-            from app.service.sessions import log_event
+            from app.service.errors import log_event
 
             log_event(f"session_{reason}", tag=session.tag, frames=session.frames)
 

@@ -401,7 +401,7 @@ class RedisStore:
         for start in range(0, len(items), 64):  # a few MB per call at most
             chunk = items[start : start + 64]
             keys = [k for sid, _, _ in chunk for k in _keys(sid)]
-            args: list[object] = [owner, _ms(ttl_s)]
+            args: list[bytes | str | int | float] = [owner, _ms(ttl_s)]
             for _, data, frames in chunk:
                 args += [data, frames]
             out += [bool(v) for v in self._save(keys=keys, args=args)]
@@ -420,7 +420,8 @@ class RedisStore:
             groups.setdefault((owner, ttl, lease), []).append(i)
         for (owner, ttl, lease), rows in groups.items():
             keys = [k for i in rows for k in _keys(batch[i][0])]
-            args: list[object] = [owner, ttl, lease, *(batch[i][1] for i in rows)]
+            args: list[bytes | str | int | float] = [owner, ttl, lease]
+            args += [batch[i][1] for i in rows]
             for i, v in zip(rows, self._append(keys=keys, args=args), strict=True):
                 results[i] = bool(v)
         return [results[i] for i in range(len(batch))]

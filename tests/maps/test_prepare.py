@@ -4,8 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from app.maps.check import load_map
 from app.maps.geometry import point_segment_distance, segments_cross_walls
-from app.maps.model import WALL_CLEARANCE_M, SemanticMap, load_map, parse_map
+from app.maps.model import WALL_CLEARANCE_M, SemanticMap, parse_map
 from app.maps.prepare import build, content_key, grid_frame, prepare
 from app.resources import bundled_maps_dir
 

@@ -17,7 +17,7 @@ from app.localization.compass import CompassReading
 from app.localization.config import FilterConfig
 from app.localization.filter import CHECKPOINT_PARTICLES, ParticleFilter
 from app.localization.types import InitialPose
-from app.maps.model import load_map
+from app.maps.check import load_map
 from app.resources import bundled_maps_dir
 from app.service import checkpoint
 from app.service.metrics import Metrics
@@ -27,7 +27,7 @@ from app.service.types import FrameInput, FrameOutcome, SensorSpec, SessionSpec
 from app.simulation.scenarios import paper_config
 from app.simulation.simulator import simulate
 from app.state import from_plain, to_plain
-from tests.api.conftest import make_settings
+from tests.helpers import make_settings
 
 OFFICE = load_map(bundled_maps_dir() / "paper_office.json")
 WALK = simulate(OFFICE, paper_config("nominal", 360), np.random.default_rng(5))

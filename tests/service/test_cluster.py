@@ -36,11 +36,11 @@ import numpy as np
 import pytest
 import websockets
 
-from app.maps.model import load_map
+from app.maps.check import load_map
 from app.resources import bundled_maps_dir
 from app.simulation.scenarios import PAPER_PATH, paper_config
 from app.simulation.simulator import simulate
-from tests.support import free_port, need_binary, redis_server, wait_for_port
+from tests.helpers import free_port, need_binary, redis_server, wait_for_port
 
 ROOT = Path(__file__).resolve().parents[2]
 SESSIONS = 20

@@ -13,7 +13,7 @@ from pathlib import Path
 import httpx
 import websockets
 
-from tests.support import rss_kib, server_process
+from tests.helpers import rss_kib, server_process
 
 KEY = "overload-key-0123456789abcdefgh"
 OTHER = "overload-other-key-0123456789abc"
@@ -112,6 +112,14 @@ def test_a_one_megabyte_message_is_refused_before_it_is_buffered(tmp_path: Path)
     assert grown_kib < 4 * 1024, f"the server grew by {grown_kib} KiB"
 
 
+def accepted(metrics: httpx.Response) -> float:
+    """Frames the server has accepted so far, from its Prometheus metrics."""
+    for line in metrics.text.splitlines():
+        if line.startswith("bearings_frames_accepted_total "):
+            return float(line.split()[1])
+    raise AssertionError("no bearings_frames_accepted_total in /metrics")
+
+
 def test_sigterm_answers_every_frame_accepted_then_closes_with_1012(tmp_path: Path) -> None:
     async def main(url: str, proc_pid: int, send_signal) -> tuple[int, int, object, list[int]]:
         auth = {"Authorization": f"Bearer {KEY}"}
@@ -133,7 +141,11 @@ def test_sigterm_answers_every_frame_accepted_then_closes_with_1012(tmp_path: Pa
                 )
                 for i in range(20)
             ]
-            await asyncio.sleep(0.5)  # every frame has reached the server
+            # Signal once the server has accepted all 120 frames (however loaded the machine).
+            deadline = time.monotonic() + 60
+            while accepted(await http.get("/metrics")) < 120:
+                assert time.monotonic() < deadline, "the server did not take every frame"
+                await asyncio.sleep(0.05)
             send_signal()
             answered = 0
             closed = None

@@ -20,7 +20,7 @@ from app.service.store import (
     StoreUnavailable,
     open_store,
 )
-from tests.support import free_port, redis_server
+from tests.helpers import free_port, redis_server
 
 
 @pytest.fixture(scope="module")

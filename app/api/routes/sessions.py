@@ -18,10 +18,10 @@ from app.api.convert import (
     session_spec,
 )
 from app.api.deps import ManagerDep
+from app.api.errors import error_responses
 from app.api.schemas import (
     DestinationIn,
     DestinationOut,
-    ErrorBody,
     Frame,
     FrameResult,
     SessionCreate,
@@ -32,8 +32,29 @@ from app.service.sessions import LimitReached, SessionManager, SessionNotFound
 
 router = APIRouter(prefix="/sessions", tags=["sessions"])
 
+#: OpenAPI links: the ``id`` of a new session is the ``session_id`` of the others.
+_SESSION_LINKS = {
+    name: {
+        "operationRef": f"#/paths/~1sessions~1{{session_id}}{suffix}/{method}",
+        "parameters": {"session_id": "$response.body#/id"},
+    }
+    for name, suffix, method in (
+        ("GetSession", "", "get"),
+        ("PostFrame", "~1frames", "post"),
+        ("DeleteSession", "", "delete"),
+    )
+}
 
-@router.post("", status_code=status.HTTP_201_CREATED, response_model=SessionOut)
+
+@router.post(
+    "",
+    status_code=status.HTTP_201_CREATED,
+    response_model=SessionOut,
+    responses={
+        201: {"links": _SESSION_LINKS, "description": "the new session"},
+        **error_responses(400, 404, 413, 422, 429),
+    },
+)
 async def create_session(
     body: SessionCreate, manager: ManagerDep, principal: PrincipalDep
 ) -> SessionOut:
@@ -41,13 +62,17 @@ async def create_session(
     return session_out(await manager.create(session_spec(body), principal))
 
 
-@router.get("/{session_id}", response_model=SessionOut)
+@router.get("/{session_id}", response_model=SessionOut, responses=error_responses(404))
 async def get_session(session_id: str, manager: ManagerDep, principal: PrincipalDep) -> SessionOut:
     """The session with its latest result (or null)."""
     return session_out(await manager.settled(session_id, principal))
 
 
-@router.post("/{session_id}/frames", response_model=FrameResult)
+@router.post(
+    "/{session_id}/frames",
+    response_model=FrameResult,
+    responses=error_responses(400, 404, 413, 422, 429),
+)
 async def post_frame(
     session_id: str, frame: Frame, manager: ManagerDep, principal: PrincipalDep
 ) -> FrameResult:
@@ -60,7 +85,7 @@ async def post_frame(
 @router.put(
     "/{session_id}/destination",
     response_model=DestinationOut,
-    responses={422: {"model": ErrorBody, "description": "unknown or unreachable destination"}},
+    responses=error_responses(400, 404, 413, 422),
 )
 async def put_destination(
     session_id: str, body: DestinationIn, manager: ManagerDep, principal: PrincipalDep
@@ -71,7 +96,11 @@ async def put_destination(
     return destination_out(target)
 
 
-@router.delete("/{session_id}/destination", status_code=status.HTTP_204_NO_CONTENT)
+@router.delete(
+    "/{session_id}/destination",
+    status_code=status.HTTP_204_NO_CONTENT,
+    responses=error_responses(404),
+)
 async def delete_destination(
     session_id: str, manager: ManagerDep, principal: PrincipalDep
 ) -> Response:
@@ -80,7 +109,9 @@ async def delete_destination(
     return Response(status_code=status.HTTP_204_NO_CONTENT)
 
 
-@router.delete("/{session_id}", status_code=status.HTTP_204_NO_CONTENT)
+@router.delete(
+    "/{session_id}", status_code=status.HTTP_204_NO_CONTENT, responses=error_responses(404)
+)
 async def delete_session(session_id: str, manager: ManagerDep, principal: PrincipalDep) -> Response:
     await manager.delete(session_id, owner=principal)
     return Response(status_code=status.HTTP_204_NO_CONTENT)

@@ -1,4 +1,7 @@
-"""Helpers shared by tests that run real servers."""
+"""Builders shared by the tests: small maps, service settings, real servers and processes.
+
+Fixtures stay in the ``conftest.py`` files; anything a test module imports lives here.
+"""
 
 from __future__ import annotations
 
@@ -18,8 +21,44 @@ import httpx
 from fastapi import FastAPI
 
 from app.config import Settings
+from app.maps.check import load_map
+from app.maps.model import SemanticMap, parse_map
+from app.resources import bundled_maps_dir
 from app.server import BearingsServer, uvicorn_config
 
+
+# ---------------------------------------------------------------------------- maps
+def room(objects: list[dict], walls: list[dict] | None = None, name: str = "room") -> SemanticMap:
+    """A 6 m x 4 m walled room with the given objects (and extra walls)."""
+    outline = [
+        {"x1": 0, "y1": 0, "x2": 6, "y2": 0},
+        {"x1": 6, "y1": 0, "x2": 6, "y2": 4},
+        {"x1": 6, "y1": 4, "x2": 0, "y2": 4},
+        {"x1": 0, "y1": 4, "x2": 0, "y2": 0},
+    ]
+    return parse_map({"name": name, "walls": outline + (walls or []), "objects": objects})
+
+
+def paper_office() -> SemanticMap:
+    """The bundled 10 m x 7 m office of the paper's experiments."""
+    return load_map(bundled_maps_dir() / "paper_office.json")
+
+
+# ------------------------------------------------------------------------- service
+def make_settings(**overrides: object) -> Settings:
+    """Service settings for tests: no viser, small limits so they are easy to hit."""
+    base = {
+        "viser": False,
+        "max_sessions": 5,
+        "max_particles": 20_000,
+        "default_particles": 1000,
+        "max_detections": 20,
+        "max_message_bytes": 8192,
+    }
+    return Settings(**{**base, **overrides})
+
+
+# ------------------------------------------------------------------------- servers
 ROOT = Path(__file__).resolve().parents[1]
 
 
@@ -40,7 +79,11 @@ def serving(
     redaction, draining at shutdown), from the app's own settings.
     """
     settings: Settings = app.state.settings
-    config = uvicorn_config(app, settings, host="127.0.0.1", port=port, log_level=log_level)
+    # log_config=None: records go to pytest's capture, not to handlers bound to a stream
+    # that one test's capture closes (the redaction filters sit on the loggers as well).
+    config = uvicorn_config(
+        app, settings, host="127.0.0.1", port=port, log_level=log_level, log_config=None
+    )
     server = BearingsServer(config, app)
     thread = threading.Thread(target=server.run, daemon=True)
     thread.start()
