@@ -20,7 +20,8 @@ import numpy as np
 from app.localization.compass import CompassReading
 from app.localization.types import Odometry
 from app.maps.geometry import wrap_angle
-from app.service.sessions import LimitReached, SessionManager, SessionNotFound
+from app.service.errors import LimitReached, SessionNotFound
+from app.service.sessions import SessionManager
 from app.service.types import FrameInput, SensorSpec, SessionSpec
 from app.simulation.simulator import SimFrame, simulate
 from app.simulation.walks import demo_config

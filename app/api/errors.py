@@ -15,7 +15,7 @@ from starlette.exceptions import HTTPException as StarletteHTTPException
 from app.api.schemas import ErrorBody
 from app.guidance import UnknownDestination, Unreachable
 from app.localization.camera import BoxError
-from app.service.sessions import (
+from app.service.errors import (
     CapacityReached,
     InvalidSessionSpec,
     LimitReached,

@@ -27,7 +27,8 @@ from app.api.errors import describe_validation, limit_body
 from app.api.schemas import Frame
 from app.localization.camera import BoxError
 from app.service.access import Principal
-from app.service.sessions import LimitReached, SessionManager, SessionNotFound
+from app.service.errors import LimitReached, SessionNotFound
+from app.service.sessions import SessionManager
 from app.service.types import FrameOutcome
 
 log = logging.getLogger("bearings.streams")

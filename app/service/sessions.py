@@ -35,37 +35,15 @@ from app.localization.types import Detection, Estimate, Pose
 from app.maps.model import SemanticMap
 from app.service.access import OPEN, Principal, TokenBucket
 from app.service.errors import (
-    STARTED_AT as STARTED_AT,
-)
-from app.service.errors import (
-    CapacityReached as CapacityReached,
-)
-from app.service.errors import (
-    InvalidSessionSpec as InvalidSessionSpec,
-)
-from app.service.errors import (
-    LimitReached as LimitReached,
-)
-from app.service.errors import (
-    QuotaReached as QuotaReached,
-)
-from app.service.errors import (
-    RequestTooLarge as RequestTooLarge,
-)
-from app.service.errors import (
-    SessionNotFound as SessionNotFound,
-)
-from app.service.errors import (
-    SessionUnavailable as SessionUnavailable,
-)
-from app.service.errors import (
-    UnknownMap as UnknownMap,
-)
-from app.service.errors import (
-    log_event as log_event,
-)
-from app.service.errors import (
-    session_tag as session_tag,
+    CapacityReached,
+    InvalidSessionSpec,
+    QuotaReached,
+    RequestTooLarge,
+    SessionNotFound,
+    SessionUnavailable,
+    UnknownMap,
+    log_event,
+    session_tag,
 )
 from app.service.metrics import Metrics
 from app.service.queueing import FrameQueue, merged_warning

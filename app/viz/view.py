@@ -18,7 +18,8 @@ import threading
 import numpy as np
 import viser
 
-from app.service.sessions import SessionManager, SessionNotFound, SessionSnapshot
+from app.service.errors import SessionNotFound
+from app.service.sessions import SessionManager, SessionSnapshot
 from app.viz.gui import StartWalk, ViewControls
 from app.viz.particles import detection_rays, pose_arrow, sample_particles
 from app.viz.scene import MapScene, build_map_scene

@@ -20,8 +20,9 @@ from app.localization.types import InitialPose
 from app.maps.check import load_map
 from app.resources import bundled_maps_dir
 from app.service import checkpoint
+from app.service.errors import SessionNotFound, SessionUnavailable
 from app.service.metrics import Metrics
-from app.service.sessions import SessionManager, SessionNotFound, SessionUnavailable
+from app.service.sessions import SessionManager
 from app.service.store import MemoryStore
 from app.service.types import FrameInput, FrameOutcome, SensorSpec, SessionSpec
 from app.simulation.scenarios import paper_config

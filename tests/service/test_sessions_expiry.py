@@ -7,8 +7,9 @@ import asyncio
 from app.localization.types import Detection
 from app.maps.check import load_map_dir
 from app.resources import bundled_maps_dir
+from app.service.errors import SessionNotFound
 from app.service.metrics import Metrics
-from app.service.sessions import SessionManager, SessionNotFound
+from app.service.sessions import SessionManager
 from app.service.types import FrameInput, SessionSpec
 from tests.helpers import make_settings
 

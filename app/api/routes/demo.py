@@ -14,7 +14,7 @@ from app.api.convert import camera_of
 from app.api.deps import ManagerDep
 from app.api.errors import error_responses
 from app.api.schemas import CameraIn
-from app.service.sessions import UnknownMap
+from app.service.errors import UnknownMap
 from app.simulation.simulator import simulate
 from app.simulation.walks import demo_config
 from app.validation import NUMBER_ONLY, Finite, Integer, StrictInput

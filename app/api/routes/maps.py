@@ -7,7 +7,7 @@ from fastapi import APIRouter
 from app.api.deps import ManagerDep
 from app.api.errors import error_responses
 from app.api.schemas import Bounds, MapSummary
-from app.service.sessions import UnknownMap
+from app.service.errors import UnknownMap
 
 router = APIRouter(prefix="/maps", tags=["maps"])
 

@@ -28,7 +28,8 @@ from app.api.schemas import (
     SessionOut,
 )
 from app.api.streams import Stream
-from app.service.sessions import LimitReached, SessionManager, SessionNotFound
+from app.service.errors import LimitReached, SessionNotFound
+from app.service.sessions import SessionManager
 
 router = APIRouter(prefix="/sessions", tags=["sessions"])
 
