@@ -57,6 +57,7 @@ def get(url: str) -> tuple[int, bytes]:
         return r.status, r.read()
 
 
+@pytest.mark.ci  # about 80 s: a fresh install compiles every kernel into an empty cache
 def test_installed_wheel_serves_bundled_maps_and_the_demo_page(wheel: Path, tmp_path: Path) -> None:
     venv = tmp_path / "venv"
     subprocess.run([sys.executable, "-m", "venv", "--without-pip", str(venv)], check=True)

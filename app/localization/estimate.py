@@ -408,7 +408,7 @@ class ConvergenceGate:
         return replace(raw, converged=self._held)
 
 
-#: Probability the protection radius must hold (CONTRACT.md, FrameResult.protection_m).
+#: Probability the protection radius must hold (docs/API.md, FrameResult.protection_m).
 PROTECTION_PROBABILITY = 0.99
 #: Particles (a systematic resample) whose distances give the radius's quantile.
 PROTECTION_SAMPLE = 1_000

@@ -410,7 +410,7 @@ def build_visibility(
         table[idx] = part
     elif idx.size:
         table[idx] = True
-    return VisibilityGrid(fs.origin_x, fs.origin_y, res, (rows, cols), table, pack_bits(table))
+    return VisibilityGrid(fs.origin_x, fs.origin_y, res, (rows, cols), pack_bits(table), n_obj)
 
 
 # ----------------------------------------------------------------------- cache
@@ -438,7 +438,7 @@ def _save(path: Path, fs: FreeSpaceGrid, vis: VisibilityGrid) -> None:
                 free_mask=np.packbits(fs.mask.reshape(-1)),
                 free_shape=np.array(fs.mask.shape),
                 vis_frame=np.array([vis.origin_x, vis.origin_y, vis.resolution_m]),
-                vis_shape=np.array([*vis.shape, vis.table.shape[1]]),
+                vis_shape=np.array([*vis.shape, vis.n_objects]),
                 vis_bits=vis.bits,
             )
         os.replace(tmp, path)  # atomic: a reader never sees half a file
@@ -457,9 +457,8 @@ def _load(path: Path) -> tuple[FreeSpaceGrid, VisibilityGrid]:
         bits = np.ascontiguousarray(data["vis_bits"], dtype=np.uint64)
     if bits.shape != (vrows * vcols, max((n_obj + 63) // 64, 1)):
         raise ValueError(f"visibility bits of shape {bits.shape} do not match the grid")
-    table = np.unpackbits(bits.view(np.uint8), axis=1, bitorder="little")[:, :n_obj].astype(bool)
     fs = FreeSpaceGrid(ox, oy, res, mask, np.flatnonzero(mask.reshape(-1)))
-    return fs, VisibilityGrid(vx, vy, vres, (vrows, vcols), table, bits)
+    return fs, VisibilityGrid(vx, vy, vres, (vrows, vcols), bits, n_obj)
 
 
 def build(semantic_map: SemanticMap) -> PreparedMap:
@@ -482,7 +481,7 @@ def prepare(semantic_map: SemanticMap, cache_dir: Path | None = None) -> Prepare
     if path is not None and path.is_file():
         try:
             fs, vis = _load(path)
-            if vis.table.shape[1] != semantic_map.object_count:
+            if vis.n_objects != semantic_map.object_count:
                 raise ValueError("object count differs")
             prepared = PreparedMap(fs, vis, time.perf_counter() - started, from_cache=True)
         except (OSError, ValueError, KeyError) as exc:

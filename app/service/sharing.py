@@ -35,6 +35,7 @@ from concurrent.futures import ThreadPoolExecutor
 from typing import TYPE_CHECKING, Any, TypeVar
 
 import app.service.checkpoint as checkpoint
+from app.service.errors import SessionNotFound, SessionUnavailable, log_event
 from app.service.store import SessionStore
 from app.service.types import FrameInput
 
@@ -122,8 +123,6 @@ class SessionSharing:
     # ------------------------------------------------------------------ resuming
     async def resume(self, session_id: str) -> Session:
         """The session from the store, now owned here (one load per id at a time)."""
-        from app.service.errors import SessionNotFound, SessionUnavailable
-
         if self.stopping:
             raise SessionUnavailable(
                 "this worker is shutting down; reconnect and another worker will serve the session",
@@ -174,8 +173,6 @@ class SessionSharing:
         self._saved[sid] = session.version if not replayed else -1
         self.manager.adopt(session)
         self.manager.metrics.sessions_resumed.inc()
-        from app.service.errors import log_event
-
         log_event(
             "session_resumed",
             tag=session.tag,
@@ -250,8 +247,6 @@ class SessionSharing:
     async def delete_stored(self, session_id: str, owner: Principal | None) -> int:
         """Delete a session this worker does not hold, if ``owner`` may see it; return how
         many frames its checkpoint covered."""
-        from app.service.errors import SessionNotFound
-
         data, journal = await self._run(self.store.load, session_id)
         if data is None:
             raise SessionNotFound(session_id)
@@ -342,8 +337,6 @@ class SessionSharing:
         self.manager.forget(session)
         self._saved.pop(session.id, None)
         if reason is not None:
-            from app.service.errors import log_event
-
             log_event(f"session_{reason}", tag=session.tag, frames=session.frames)
 
     async def shutdown(self) -> None:

@@ -69,6 +69,8 @@ def test_visibility_equals_line_of_sight_at_cell_centres() -> None:
             ]
         )
         assert np.array_equal(vis.table[used], m.line_of_sight(centres)), seed
+        # Rows read straight from the packed bits equal the unpacked table's.
+        assert np.array_equal(vis.visible(centres[:, 0], centres[:, 1]), vis.table[used])
         assert used.size > 100, seed  # the test saw many cells
 
 
