@@ -11,6 +11,8 @@ compiled.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numba import njit
 from numpy.typing import NDArray
@@ -143,7 +145,7 @@ def compose_odometry(first: Odometry | None, then: Odometry | None) -> Odometry 
     """
     if first is None or then is None:
         return None
-    c, s = np.cos(first.turn_rad), np.sin(first.turn_rad)
+    c, s = math.cos(first.turn_rad), math.sin(first.turn_rad)
     return Odometry(
         forward_m=float(first.forward_m + c * then.forward_m - s * then.left_m),
         left_m=float(first.left_m + s * then.forward_m + c * then.left_m),
