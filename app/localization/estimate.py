@@ -294,9 +294,11 @@ class ConvergenceGate:
     no frame that most detections contradict), dead reckoning has not lasted longer
     than ``hold_without_evidence`` frames, the odometry has not broken off (a frame
     without it after frames with it: the person may have been carried anywhere), and
-    the alternatives stay below ``hold_alternatives``. A false detection explained by clutter does not count
-    against the estimate; a kidnap, a pose drifting away from the evidence, or an
-    alternative place gaining probability does.
+    the alternatives stay below ``hold_alternatives`` (counting those that survived
+    their probation). Only frames with detections count towards a light cluster
+    (frames without any leave freshly injected particles unweighed). A false detection
+    explained by clutter does not count against the estimate; a kidnap, a pose
+    drifting away from the evidence, or an alternative place gaining probability does.
     """
 
     gain_fit: float = 2.0
@@ -340,6 +342,8 @@ class ConvergenceGate:
         alternatives: float = 0.0,
         searched_ago: int | None = 0,
         motion_lost: bool = False,
+        confirmed_alternatives: float | None = None,
+        evidence_frame: bool = True,
     ) -> Estimate:
         """``raw`` with ``converged`` decided by the rules above."""
         last = self._last
@@ -349,7 +353,11 @@ class ConvergenceGate:
         if self._held:
             top = raw.hypotheses[0] if raw.hypotheses else None
             light = top is None or top.weight < self.hold_mass
-            self._light = self._light + 1 if light else 0
+            if light and evidence_frame:
+                self._light += 1
+            elif not light:
+                self._light = 0
+            against = alternatives if confirmed_alternatives is None else confirmed_alternatives
             self._held = (
                 top is not None
                 and self._light < self.hold_light_frames
@@ -361,7 +369,7 @@ class ConvergenceGate:
                 and quality.unexplained <= self.hold_unexplained
                 and not quality.bad_frame
                 and frames_without_evidence <= self.hold_without_evidence
-                and alternatives <= self.hold_alternatives
+                and against <= self.hold_alternatives
                 and not motion_lost
             )
             if not self._held:

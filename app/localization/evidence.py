@@ -77,11 +77,17 @@ class EvidenceSettings:
     max_candidates: int = 6_000
     #: Best candidates refined and scored on the window.
     shortlist: int = 32
-    #: Jittered copies per refinement round: (count, position std m, heading std rad).
-    refine: tuple[tuple[int, float, float], ...] = (
-        (16, 0.2, float(np.radians(5.0))),
-        (16, 0.07, float(np.radians(2.0))),
-        (16, 0.025, float(np.radians(0.7))),
+    #: Jittered copies per coarse refinement round of the shortlist: (count, position
+    #: std m, heading std rad).
+    refine: tuple[tuple[int, float, float], ...] = ((16, 0.2, float(np.radians(5.0))),)
+    #: The best ``finalists`` (distinct places) are then refined finely, and so is the
+    #: main mode: a newcomer placed 0.2 m off would start several units of evidence
+    #: behind a main mode that the filter has had time to centre.
+    finalists: int = 6
+    refine_fine: tuple[tuple[int, float, float], ...] = (
+        (48, 0.1, float(np.radians(2.5))),
+        (48, 0.04, float(np.radians(1.0))),
+        (48, 0.015, float(np.radians(0.4))),
     )
     #: Particles per alternative.
     particles: int = 200
@@ -89,6 +95,8 @@ class EvidenceSettings:
     seed_std_m: float = 0.1
     seed_std_rad: float = float(np.radians(2.0))
     max_alternatives: int = 6
+    #: Frames an alternative is tracked before it can take ``converged`` away.
+    probation: int = 5
     #: A candidate within this log-evidence of the main mode over the window is kept.
     seed_llr: float = -6.0
     #: An alternative whose evidence against falls below this is dropped.
@@ -150,6 +158,8 @@ class EvidenceTracker:
         self.y = np.empty((0, p))
         self.theta = np.empty((0, p))
         self.llr = np.empty(0)
+        #: Frames each alternative has been tracked.
+        self.age = np.empty(0, dtype=np.int64)
         #: The anchor cloud of the main belief, rows x, y, theta; None until drawn.
         self._anchor: NDArray[np.float64] | None = None
         self._history: deque[tuple[Odometry | None, Observation]] = deque(
@@ -181,6 +191,17 @@ class EvidenceTracker:
     def alternative_share(self) -> float:
         """Probability that the person is at one of the alternatives, not the main mode."""
         return float(self.probabilities().sum())
+
+    @property
+    def confirmed_share(self) -> float:
+        """:attr:`alternative_share` of the alternatives tracked for ``probation`` frames.
+
+        The best of thousands of candidates fits a short window better than a typical
+        look-alike would, by selection alone; one that then keeps its evidence for a
+        second of tracking is a real competitor.
+        """
+        p = self.probabilities()
+        return float(p[self.age >= self.settings.probation].sum())
 
     def hypotheses(self) -> list[Hypothesis]:
         """One :class:`Hypothesis` per alternative, weight = its probability."""
@@ -297,6 +318,7 @@ class EvidenceTracker:
             main_ev = float(ev[0])
         first = 1 if anchored else 0
         self.llr = self.llr + (ev[first:] - main_ev)
+        self.age = self.age + 1
         alive = np.isfinite(ev)
         alive[first:] &= self.llr >= self.settings.drop_llr
         # Resample each alternative's cloud on its own (systematic, equal weights after).
@@ -310,6 +332,7 @@ class EvidenceTracker:
         keep = alive[first:]
         self.x, self.y, self.theta = nx[first:][keep], ny[first:][keep], nt[first:][keep]
         self.llr = self.llr[keep]
+        self.age = self.age[keep]
 
     def _centres(self) -> tuple[NDArray[np.float64], ...]:
         c = np.cos(self.theta).mean(axis=1)
@@ -329,8 +352,8 @@ class EvidenceTracker:
         if not self.count:
             return
         keep = ~self._near(*self._centres(), main)
-        self.x, self.y, self.theta, self.llr = (
-            self.x[keep], self.y[keep], self.theta[keep], self.llr[keep]
+        self.x, self.y, self.theta, self.llr, self.age = (
+            self.x[keep], self.y[keep], self.theta[keep], self.llr[keep], self.age[keep]
         )  # fmt: skip
 
     # --------------------------------------------------------------- search
@@ -353,12 +376,16 @@ class EvidenceTracker:
         return total
 
     def _refined(
-        self, x: NDArray[np.float64], y: NDArray[np.float64], t: NDArray[np.float64]
+        self,
+        x: NDArray[np.float64],
+        y: NDArray[np.float64],
+        t: NDArray[np.float64],
+        rounds: tuple[tuple[int, float, float], ...],
     ) -> tuple[NDArray[np.float64], ...]:
         """Each pose moved to the best of its jittered copies over the window."""
         score = self.window_score(x, y, t)
         m = x.shape[0]
-        for count, std_m, std_rad in self.settings.refine:
+        for count, std_m, std_rad in rounds:
             jx = x[:, None] + self.rng.normal(0.0, std_m, (m, count))
             jy = y[:, None] + self.rng.normal(0.0, std_m, (m, count))
             jt = wrap_angle(t[:, None] + self.rng.normal(0.0, std_rad, (m, count)))
@@ -398,9 +425,20 @@ class EvidenceTracker:
         score = sensor_kernel.log_likelihood(cx, cy, ct, obs, self.map, self.config, self.grid)
         k = min(st.shortlist, cx.size)
         top = np.argpartition(-score, k - 1)[:k]
-        rx, ry, rt, rs = self._refined(cx[top], cy[top], ct[top])
+        rx, ry, rt, rs = self._refined(cx[top], cy[top], ct[top], st.refine)
+        picked: list[int] = []
+        for i in np.argsort(-rs):
+            h = Hypothesis(float(rx[i]), float(ry[i]), float(rt[i]), 0.0)
+            if not np.isfinite(rs[i]) or len(picked) >= st.finalists:
+                break
+            if picked and self._near(rx[picked], ry[picked], rt[picked], h).any():
+                continue
+            picked.append(int(i))
+        if not picked:
+            return
+        rx, ry, rt, rs = self._refined(rx[picked], ry[picked], rt[picked], st.refine_fine)
         mx, my, mt, ms = self._refined(
-            np.array([main.x]), np.array([main.y]), np.array([main.theta_rad])
+            np.array([main.x]), np.array([main.y]), np.array([main.theta_rad]), st.refine_fine
         )
         main_score = float(ms[0])
         order = np.argsort(-rs)
@@ -439,13 +477,14 @@ class EvidenceTracker:
             if self.llr[worst] >= llr:
                 return
             keep = np.arange(self.count) != worst
-            self.x, self.y, self.theta, self.llr = (
-                self.x[keep], self.y[keep], self.theta[keep], self.llr[keep]
+            self.x, self.y, self.theta, self.llr, self.age = (
+                self.x[keep], self.y[keep], self.theta[keep], self.llr[keep], self.age[keep]
             )  # fmt: skip
         self.x = np.vstack([self.x, x[None]])
         self.y = np.vstack([self.y, y[None]])
         self.theta = np.vstack([self.theta, t[None]])
         self.llr = np.append(self.llr, llr)
+        self.age = np.append(self.age, 0)
 
     # ----------------------------------------------------------------- swap
     def swap(

@@ -252,10 +252,11 @@ class ParticleFilter:
         w = self.weights
         ess = effective_sample_size(w)
         raw = estimate_pose(self.x, self.y, self.theta, w, ess=ess, rng=self.rng)
-        share, searched_ago = 0.0, 0
+        share, confirmed, searched_ago = 0.0, 0.0, 0
         if self.evidence is not None:
             raw, w, ess = self._weigh_alternatives(odometry, raw, w, ess)
             share, searched_ago = self.evidence.alternative_share, self.evidence.searched_ago
+            confirmed = self.evidence.confirmed_share
         self._update_fit(raw)
         moved = 1.0 if odometry is None else float(np.hypot(odometry.forward_m, odometry.left_m))
         turned = np.pi if odometry is None else odometry.turn_rad
@@ -270,6 +271,8 @@ class ParticleFilter:
             share,
             searched_ago,
             motion_lost=lost,
+            confirmed_alternatives=confirmed,
+            evidence_frame=self.frames_without_evidence == 0,
         )
         if self.evidence is not None:
             est = with_alternatives(est, self.evidence.hypotheses(), share)
