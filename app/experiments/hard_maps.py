@@ -11,7 +11,8 @@ hard on purpose:
 * ``twin_offices``: two identical offices off one corridor; only the corridor's two
   ends differ. The walk starts inside Office 1.
 * ``door_corridor``: a 40 m corridor with a door every 4 m on each side (staggered);
-  only its two ends differ, more than 15 m (the camera's range) from the middle.
+  only an extinguisher, a plant and the two ends differ (the ends lie on the axis, so
+  their bearings tell nothing about the position along it).
 * ``two_wings``: two 25 m wings of doors and windows joined by a hall, the second a
   translated copy of the first except for one object in each wing.
 """
@@ -141,6 +142,9 @@ def door_corridor() -> HardMap:
     objects = [_obj("door", x, width) for x in range(2, 40, 4)]
     objects += [_obj("door", x, 0.0) for x in range(4, 40, 4)]
     objects += [_obj("window", 0.0, width / 2), _obj("exit", length, width / 2)]
+    # Two things off the corridor's axis that tell places apart when passed (its ends
+    # do not: from anywhere on the axis they lie straight ahead or straight behind).
+    objects += [_obj("extinguisher", 11.0, 0.0), _obj("plant", 27.0, width)]
     spec = {
         "name": "door_corridor",
         "walls": _box(0.0, 0.0, length, width),

@@ -331,6 +331,7 @@ class ConvergenceGate:
         self._last: Estimate | None = None
         self._held = False
         self._light = 0
+        self.lost_because: tuple[str, ...] = ()
 
     def confirm(
         self,
@@ -358,22 +359,24 @@ class ConvergenceGate:
             elif not light:
                 self._light = 0
             against = alternatives if confirmed_alternatives is None else confirmed_alternatives
-            self._held = (
-                top is not None
-                and self._light < self.hold_light_frames
-                and max(raw.std_x_m, raw.std_y_m) <= self.hold_std_xy_m
-                and raw.std_theta_rad <= self.hold_std_theta_rad
-                and step <= moved_m + self.hold_jump_m
-                and quality is not None
-                and quality.fit <= self.hold_fit
-                and quality.unexplained <= self.hold_unexplained
-                and not quality.bad_frame
-                and frames_without_evidence <= self.hold_without_evidence
-                and against <= self.hold_alternatives
-                and not motion_lost
-            )
+            reasons = {
+                "light": top is None or self._light >= self.hold_light_frames,
+                "wide": max(raw.std_x_m, raw.std_y_m) > self.hold_std_xy_m
+                or raw.std_theta_rad > self.hold_std_theta_rad,
+                "jump": step > moved_m + self.hold_jump_m,
+                "misfit": quality is None
+                or quality.fit > self.hold_fit
+                or quality.unexplained > self.hold_unexplained,
+                "bad frame": quality is not None and quality.bad_frame,
+                "dead reckoning": frames_without_evidence > self.hold_without_evidence,
+                "alternative": against > self.hold_alternatives,
+                "odometry lost": motion_lost,
+            }
+            self._held = not any(reasons.values())
             if not self._held:
                 self._streak = 0
+                #: Why ``converged`` was last lost (for diagnostics and the suite).
+                self.lost_because = tuple(k for k, v in reasons.items() if v)
             return replace(raw, converged=self._held)
         fits = (
             quality is not None

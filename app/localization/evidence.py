@@ -90,17 +90,20 @@ class EvidenceSettings:
         (48, 0.015, float(np.radians(0.4))),
     )
     #: Particles per alternative.
-    particles: int = 200
+    particles: int = 150
     #: Spread of a new alternative's cloud (m, rad).
     seed_std_m: float = 0.1
     seed_std_rad: float = float(np.radians(2.0))
-    max_alternatives: int = 6
-    #: Frames an alternative is tracked before it can take ``converged`` away.
+    max_alternatives: int = 8
+    #: Frames an alternative is tracked, once settled, before it can take ``converged``
+    #: away.
     probation: int = 5
+    #: Frames a fresh cloud (alternative or anchor) settles before its evidence counts.
+    settle: int = 5
     #: A candidate within this log-evidence of the main mode over the window is kept.
     seed_llr: float = -6.0
     #: An alternative whose evidence against falls below this is dropped.
-    drop_llr: float = -12.0
+    drop_llr: float = -20.0
     #: An alternative this much more likely than the main belief replaces it.
     switch_llr: float = float(np.log(20.0))
     #: Distinct from the main mode (and from each other) beyond these.
@@ -162,6 +165,7 @@ class EvidenceTracker:
         self.age = np.empty(0, dtype=np.int64)
         #: The anchor cloud of the main belief, rows x, y, theta; None until drawn.
         self._anchor: NDArray[np.float64] | None = None
+        self._anchor_age = 0
         self._history: deque[tuple[Odometry | None, Observation]] = deque(
             maxlen=self.settings.window
         )
@@ -201,7 +205,8 @@ class EvidenceTracker:
         second of tracking is a real competitor.
         """
         p = self.probabilities()
-        return float(p[self.age >= self.settings.probation].sum())
+        st = self.settings
+        return float(p[self.age >= st.settle + st.probation].sum())
 
     def hypotheses(self) -> list[Hypothesis]:
         """One :class:`Hypothesis` per alternative, weight = its probability."""
@@ -255,8 +260,8 @@ class EvidenceTracker:
         if self.count or self._anchor is not None:
             self._track(odometry, obs, main_log_evidence)
         if main is not None:
+            self._follow_main(main, particles)
             self._forget_covered(main)
-            self._keep_anchor(main, particles)
         last, self._last_main = self._last_main, main
         if (
             not main_tight
@@ -279,17 +284,44 @@ class EvidenceTracker:
             self._search(main)
         return bool(self.count and self.llr.max() >= self.settings.switch_llr)
 
-    def _keep_anchor(self, main: Hypothesis, particles: tuple[NDArray[np.float64], ...]) -> None:
-        """Redraw the anchor from the filter's heaviest cluster when it has left it."""
+    def _follow_main(self, main: Hypothesis, particles: tuple[NDArray[np.float64], ...]) -> None:
+        """Keep the anchor on the filter's heaviest cluster, and the ratios meaningful.
+
+        The anchor is redrawn from the cluster when it has drifted from it (same place).
+        When the filter's heaviest cluster moves to another place, the evidence must not
+        be re-referenced silently: if that place is an alternative, the two swap roles
+        and every ratio is re-expressed against it; otherwise the old anchor becomes an
+        alternative with even odds, and evidence decides between them from now on.
+        """
         st = self.settings
         if self._anchor is not None:
             c = self._anchor
             mean_t = np.arctan2(np.sin(c[2]).mean(), np.cos(c[2]).mean())
-            if (
-                np.hypot(c[0].mean() - main.x, c[1].mean() - main.y) < st.distinct_m / 2
-                and abs(float(wrap_angle(mean_t - main.theta_rad))) < st.distinct_rad / 2
-            ):
-                return
+            centre = Hypothesis(float(c[0].mean()), float(c[1].mean()), float(mean_t), 0.0)
+            same = self._near(
+                np.array([main.x]), np.array([main.y]), np.array([main.theta_rad]), centre
+            )[0]
+            if same:
+                if (
+                    np.hypot(centre.x - main.x, centre.y - main.y) < st.distinct_m / 2
+                    and abs(float(wrap_angle(centre.theta_rad - main.theta_rad)))
+                    < st.distinct_rad / 2
+                ):
+                    return
+            else:
+                hit = np.flatnonzero(self._near(*self._centres(), main)) if self.count else []
+                if len(hit):
+                    i = int(hit[np.argmax(self.llr[hit])])
+                    shift = float(self.llr[i])
+                    old = self._anchor
+                    self._anchor = np.vstack([self.x[i], self.y[i], self.theta[i]])
+                    self._anchor_age = int(self.age[i])
+                    self.x[i], self.y[i], self.theta[i] = old
+                    self.llr = self.llr - shift
+                    self.llr[i] = -shift
+                    self.age[i] = 0
+                    return
+                self._add_cloud(c[0], c[1], c[2], 0.0)
         x, y, t, w = particles
         near = self._near(x, y, t, main)
         w = np.where(near, w, 0.0)
@@ -298,9 +330,11 @@ class EvidenceTracker:
             return
         idx = systematic_resample(w / w.sum(), st.particles, self.rng)
         self._anchor = np.vstack([x[idx], y[idx], t[idx]])
+        self._anchor_age = 0
 
     def _track(self, odometry: Odometry | None, obs: Observation, main_ev: float) -> None:
         anchored = self._anchor is not None
+        st = self.settings
         rows = [self.x, self.y, self.theta]
         if self._anchor is not None:
             rows = [np.vstack([self._anchor[k][None], rows[k]]) for k in range(3)]
@@ -317,8 +351,13 @@ class EvidenceTracker:
         if anchored and np.isfinite(ev[0]):
             main_ev = float(ev[0])
         first = 1 if anchored else 0
-        self.llr = self.llr + (ev[first:] - main_ev)
+        # A fresh cloud (either side) first settles: a few hundred particles drawn
+        # tight but 0.1 m off would swing the ratio by units of evidence in the first
+        # frames, by chance, not by what was seen (its search already scored them).
+        counts = (self.age >= st.settle) & (self._anchor_age >= st.settle)
+        self.llr = self.llr + np.where(counts, ev[first:] - main_ev, 0.0)
         self.age = self.age + 1
+        self._anchor_age += 1
         alive = np.isfinite(ev)
         alive[first:] &= self.llr >= self.settings.drop_llr
         # Resample each alternative's cloud on its own (systematic, equal weights after).
@@ -412,6 +451,10 @@ class EvidenceTracker:
         prior = st.seed_llr if self.mode_searches else 0.0
         self.mode_searches += 1
         obs = self._history[-1][1]
+        mx, my, mt, ms = self._refined(
+            np.array([main.x]), np.array([main.y]), np.array([main.theta_rad]), st.refine_fine
+        )
+        self._recentre(mx[0], my[0], mt[0])
         fs = self.map.free_space
         area = fs.free_cells.size * fs.resolution_m**2
         n = int(np.clip(st.candidates_per_m2 * area, st.min_candidates, st.max_candidates))
@@ -437,9 +480,6 @@ class EvidenceTracker:
         if not picked:
             return
         rx, ry, rt, rs = self._refined(rx[picked], ry[picked], rt[picked], st.refine_fine)
-        mx, my, mt, ms = self._refined(
-            np.array([main.x]), np.array([main.y]), np.array([main.theta_rad]), st.refine_fine
-        )
         main_score = float(ms[0])
         order = np.argsort(-rs)
         ex, ey, et = self._centres() if self.count else (np.empty(0),) * 3
@@ -452,8 +492,26 @@ class EvidenceTracker:
                 continue
             if ex.size and self._near(ex, ey, et, h).any():
                 continue
-            self._add(h, gain + prior)
+            # The best of thousands of candidates fits the window better than the main
+            # mode by selection alone: a newcomer never starts ahead; tracked evidence
+            # will show whether it is.
+            self._add(h, min(gain, 0.0) + prior)
             ex, ey, et = self._centres()
+
+    def _recentre(self, x: float, y: float, theta: float) -> None:
+        """Move the anchor onto the main mode's refined pose, and every alternative onto
+        its own (refined the same way), rigidly: a small cloud that started a little off
+        recovers slowly by itself, and would lose evidence meanwhile for nothing."""
+        if self._anchor is not None:
+            self._anchor = np.vstack(_moved(*self._anchor, x, y, theta))
+        if not self.count:
+            return
+        cx, cy, ct = self._centres()
+        rx, ry, rt, _ = self._refined(cx, cy, ct, self.settings.refine_fine)
+        for i in range(self.count):
+            self.x[i], self.y[i], self.theta[i] = _moved(
+                self.x[i], self.y[i], self.theta[i], rx[i], ry[i], rt[i]
+            )
 
     def _add(self, h: Hypothesis, llr: float) -> None:
         st = self.settings
@@ -461,17 +519,18 @@ class EvidenceTracker:
         if self._anchor is not None:
             # The anchor's cloud moved rigidly onto the candidate: both sides of the
             # ratio then start with the same spread (no Occam penalty for a newcomer).
-            ax, ay, at = self._anchor
-            mx, my = ax.mean(), ay.mean()
-            turn = h.theta_rad - float(np.arctan2(np.sin(at).mean(), np.cos(at).mean()))
-            c, s = np.cos(turn), np.sin(turn)
-            x = h.x + c * (ax - mx) - s * (ay - my)
-            y = h.y + s * (ax - mx) + c * (ay - my)
-            t = wrap_angle(at + turn)
+            x, y, t = _moved(*self._anchor, h.x, h.y, h.theta_rad)
         else:
             x = h.x + self.rng.normal(0.0, st.seed_std_m, p)
             y = h.y + self.rng.normal(0.0, st.seed_std_m, p)
             t = wrap_angle(h.theta_rad + self.rng.normal(0.0, st.seed_std_rad, p))
+        self._add_cloud(x, y, t, llr)
+
+    def _add_cloud(
+        self, x: NDArray[np.float64], y: NDArray[np.float64], t: NDArray[np.float64], llr: float
+    ) -> None:
+        """Append one alternative's cloud (dropping the weakest when full)."""
+        st = self.settings
         if self.count >= st.max_alternatives:
             worst = int(np.argmin(self.llr))
             if self.llr[worst] >= llr:
@@ -516,11 +575,29 @@ class EvidenceTracker:
             idx = systematic_resample(main_w, st.particles, self.rng)
             self.x[best], self.y[best], self.theta[best] = main_x[idx], main_y[idx], main_theta[idx]
         self._anchor = new_anchor
+        self._anchor_age = int(self.age[best])
         self.llr = self.llr - shift
         self.llr[best] = -shift
         self.swaps += 1
         self.mode_searches = 0
         return nx, ny, nt
+
+
+def _moved(
+    x: NDArray[np.float64],
+    y: NDArray[np.float64],
+    t: NDArray[np.float64],
+    to_x: float,
+    to_y: float,
+    to_theta: float,
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """A cloud turned about its centre and moved so its centre is the given pose."""
+    mx, my = float(x.mean()), float(y.mean())
+    turn = to_theta - float(np.arctan2(np.sin(t).mean(), np.cos(t).mean()))
+    c, s = np.cos(turn), np.sin(turn)
+    nx = to_x + c * (x - mx) - s * (y - my)
+    ny = to_y + s * (x - mx) + c * (y - my)
+    return nx, ny, wrap_angle(t + turn)
 
 
 def main_mode(hypotheses: Sequence[Hypothesis]) -> Hypothesis | None:
