@@ -84,11 +84,12 @@ class EvidenceSettings:
     #: main mode: a newcomer placed 0.2 m off would start several units of evidence
     #: behind a main mode that the filter has had time to centre.
     finalists: int = 6
-    refine_fine: tuple[tuple[int, float, float], ...] = (
-        (48, 0.1, float(np.radians(2.5))),
-        (48, 0.04, float(np.radians(1.0))),
-        (48, 0.015, float(np.radians(0.4))),
-    )
+    #: Pattern search that polishes a pose (the finalists, the main mode, every
+    #: alternative): first steps (m, rad), halved this many times. Deterministic, so
+    #: that the two sides of an exact symmetry land on exactly symmetric poses.
+    polish_step_m: float = 0.08
+    polish_step_rad: float = float(np.radians(2.0))
+    polish_rounds: int = 6
     #: Particles per alternative.
     particles: int = 150
     #: Spread of a new alternative's cloud (m, rad).
@@ -156,16 +157,14 @@ class EvidenceTracker:
 
     def reset(self) -> None:
         """Forget every alternative and the history (a new start)."""
-        p = self.settings.particles
-        self.x = np.empty((0, p))
-        self.y = np.empty((0, p))
-        self.theta = np.empty((0, p))
+        #: Per alternative, the rigid motion (turn, shift x, shift y) that carries the
+        #: anchor onto it, shape (A, 3).
+        self.moves = np.empty((0, 3))
         self.llr = np.empty(0)
         #: Frames each alternative has been tracked.
         self.age = np.empty(0, dtype=np.int64)
         #: The anchor cloud of the main belief, rows x, y, theta; None until drawn.
         self._anchor: NDArray[np.float64] | None = None
-        self._anchor_age = 0
         self._history: deque[tuple[Odometry | None, Observation]] = deque(
             maxlen=self.settings.window
         )
@@ -205,31 +204,30 @@ class EvidenceTracker:
         second of tracking is a real competitor.
         """
         p = self.probabilities()
-        st = self.settings
-        return float(p[self.age >= st.settle + st.probation].sum())
+        return float(p[self.age >= self.settings.probation].sum())
+
+    def clouds(self) -> tuple[NDArray[np.float64], ...]:
+        """The alternatives' clouds (the anchor carried onto each), each shape (A, P)."""
+        assert self._anchor is not None
+        return _carry(self.moves, *self._anchor)
 
     def hypotheses(self) -> list[Hypothesis]:
         """One :class:`Hypothesis` per alternative, weight = its probability."""
-        out = []
-        for a, p in enumerate(self.probabilities()):
-            c, s = np.cos(self.theta[a]).mean(), np.sin(self.theta[a]).mean()
-            spread = float(np.hypot(self.x[a].std(), self.y[a].std()))
-            out.append(
-                Hypothesis(
-                    float(self.x[a].mean()),
-                    float(self.y[a].mean()),
-                    float(np.arctan2(s, c)),
-                    float(p),
-                    spread,
-                )
-            )
-        return out
+        if not self.count or self._anchor is None:
+            return []
+        cx, cy, ct = self._centres()
+        spread = float(np.hypot(self._anchor[0].std(), self._anchor[1].std()))
+        return [
+            Hypothesis(float(cx[i]), float(cy[i]), float(ct[i]), float(p), spread)
+            for i, p in enumerate(self.probabilities())
+        ]
 
     def farthest_m(self, x: float, y: float) -> float:
         """Distance from (x, y) that holds every alternative's particles."""
-        if not self.count:
+        if not self.count or self._anchor is None:
             return 0.0
-        return float(np.max(np.hypot(self.x - x, self.y - y)))
+        ax, ay, _ = self.clouds()
+        return float(np.max(np.hypot(ax - x, ay - y)))
 
     # ------------------------------------------------------------ one frame
     def update(
@@ -246,19 +244,19 @@ class EvidenceTracker:
         Args:
             odometry: this frame's odometry (as given to the filter).
             obs: this frame's observation (may be empty: no evidence).
-            main_log_evidence: the main belief's log evidence for this frame (its
-                prior-weighted mean likelihood, moves through walls included).
+            main_log_evidence: unused when the anchor exists (kept for the first frame).
             main: the main belief's heaviest mode, None when it has none.
             main_tight: whether the main mode is tight enough to search against.
             particles: the filter's x, y, theta and normalized weights (to draw the
                 anchor from).
         """
+        del main_log_evidence
         # Frames without detections are kept too: their odometry chains the window.
         self._history.append((odometry, obs))
         if self.searched_ago is not None:
             self.searched_ago += 1
-        if self.count or self._anchor is not None:
-            self._track(odometry, obs, main_log_evidence)
+        if self._anchor is not None:
+            self._track(odometry, obs)
         if main is not None:
             self._follow_main(main, particles)
             self._forget_covered(main)
@@ -268,9 +266,7 @@ class EvidenceTracker:
             or main is None
             or last is None
             or odometry is None
-            or not self._near(
-                np.array([main.x]), np.array([main.y]), np.array([main.theta_rad]), last
-            )[0]
+            or not _near(main.x, main.y, main.theta_rad, last, self.settings)
         ):
             # A new main mode (or none): its searches start again.
             self.mode_searches = 0
@@ -278,122 +274,137 @@ class EvidenceTracker:
         if (
             main is not None
             and main_tight
+            and self._anchor is not None
             and not obs.empty
             and self._since_search >= self.settings.search_every
         ):
             self._search(main)
         return bool(self.count and self.llr.max() >= self.settings.switch_llr)
 
+    def _track(self, odometry: Odometry | None, obs: Observation) -> None:
+        """Move the anchor by the odometry; weigh it and its carried copies."""
+        assert self._anchor is not None
+        x0, y0, t0 = self._anchor
+        nx, ny, nt = sample_motion(x0, y0, t0, odometry, self.config, self.rng)
+        a, p = self.count, x0.size
+        # The copies move with the same body-frame motion: a rigid motion of the map
+        # commutes with it, so the carried cloud is the moved cloud carried.
+        sx, sy, _ = _carry(self.moves, x0, y0, t0)
+        ex, ey, et = _carry(self.moves, nx, ny, nt)
+        fx = np.concatenate([nx, ex.reshape(-1)])
+        fy = np.concatenate([ny, ey.reshape(-1)])
+        ft = np.concatenate([nt, et.reshape(-1)])
+        log_w = motion_log_penalty(
+            np.concatenate([x0, sx.reshape(-1)]), np.concatenate([y0, sy.reshape(-1)]),
+            fx, fy, self.map,
+        )  # fmt: skip
+        if not obs.empty:
+            log_w = log_w + sensor_kernel.log_likelihood(
+                fx, fy, ft, obs, self.map, self.config, self.grid
+            )
+        log_w = log_w.reshape(a + 1, p)
+        ev = _log_mean_exp_rows(log_w)
+        if not np.isfinite(ev[0]):
+            self._anchor = None  # the anchor walked through a wall: draw it again
+            return
+        self.llr = self.llr + (ev[1:] - ev[0])
+        self.age = self.age + 1
+        keep = np.isfinite(ev[1:]) & (self.llr >= self.settings.drop_llr)
+        self._keep(keep)
+        w = np.exp(log_w[0] - log_w[0].max())
+        idx = systematic_resample(w / w.sum(), p, self.rng)
+        self._anchor = np.vstack([nx[idx], ny[idx], nt[idx]])
+
+    def _keep(self, keep: NDArray[np.bool_]) -> None:
+        self.moves, self.llr, self.age = self.moves[keep], self.llr[keep], self.age[keep]
+
+    def _anchor_pose(self) -> tuple[float, float, float]:
+        assert self._anchor is not None
+        x, y, t = self._anchor
+        return (
+            float(x.mean()),
+            float(y.mean()),
+            float(np.arctan2(np.sin(t).mean(), np.cos(t).mean())),
+        )
+
+    def _centres(self) -> tuple[NDArray[np.float64], ...]:
+        """Each alternative's centre pose (x, y, theta), each shape (A,)."""
+        ax, ay, at = self._anchor_pose()
+        cx, cy, ct = _carry(self.moves, np.array([ax]), np.array([ay]), np.array([at]))
+        return cx[:, 0], cy[:, 0], ct[:, 0]
+
+    def _set_anchor(self, cloud: NDArray[np.float64]) -> None:
+        """Replace the anchor, leaving every alternative's place where it was."""
+        old = self._anchor
+        places = self._centres() if old is not None and self.count else None
+        self._anchor = cloud
+        if places is not None:
+            self.moves = _moves_onto(self._anchor_pose(), *places)
+
+    def _draw_anchor(self, main: Hypothesis, particles: tuple[NDArray[np.float64], ...]) -> bool:
+        """Draw the anchor from the filter's particles of the main mode; False if none."""
+        x, y, t, w = particles
+        w = np.where(_near(x, y, t, main, self.settings), w, 0.0)
+        if w.sum() <= 0.0:
+            return False
+        idx = systematic_resample(w / w.sum(), self.settings.particles, self.rng)
+        self._set_anchor(np.vstack([x[idx], y[idx], t[idx]]))
+        return True
+
     def _follow_main(self, main: Hypothesis, particles: tuple[NDArray[np.float64], ...]) -> None:
         """Keep the anchor on the filter's heaviest cluster, and the ratios meaningful.
 
         The anchor is redrawn from the cluster when it has drifted from it (same place).
-        When the filter's heaviest cluster moves to another place, the evidence must not
-        be re-referenced silently: if that place is an alternative, the two swap roles
-        and every ratio is re-expressed against it; otherwise the old anchor becomes an
-        alternative with even odds, and evidence decides between them from now on.
+        When the filter's heaviest cluster moves to another place, the evidence is not
+        re-referenced silently: if that place is an alternative, the two swap roles and
+        every ratio is re-expressed against it; otherwise the old anchor's place becomes
+        an alternative with even odds, and evidence decides between them from now on.
         """
         st = self.settings
-        if self._anchor is not None:
-            c = self._anchor
-            mean_t = np.arctan2(np.sin(c[2]).mean(), np.cos(c[2]).mean())
-            centre = Hypothesis(float(c[0].mean()), float(c[1].mean()), float(mean_t), 0.0)
-            same = self._near(
-                np.array([main.x]), np.array([main.y]), np.array([main.theta_rad]), centre
-            )[0]
-            if same:
-                if (
-                    np.hypot(centre.x - main.x, centre.y - main.y) < st.distinct_m / 2
-                    and abs(float(wrap_angle(centre.theta_rad - main.theta_rad)))
-                    < st.distinct_rad / 2
-                ):
-                    return
-            else:
-                hit = np.flatnonzero(self._near(*self._centres(), main)) if self.count else []
-                if len(hit):
-                    i = int(hit[np.argmax(self.llr[hit])])
-                    shift = float(self.llr[i])
-                    old = self._anchor
-                    self._anchor = np.vstack([self.x[i], self.y[i], self.theta[i]])
-                    self._anchor_age = int(self.age[i])
-                    self.x[i], self.y[i], self.theta[i] = old
-                    self.llr = self.llr - shift
-                    self.llr[i] = -shift
-                    self.age[i] = 0
-                    return
-                self._add_cloud(c[0], c[1], c[2], 0.0)
-        x, y, t, w = particles
-        near = self._near(x, y, t, main)
-        w = np.where(near, w, 0.0)
-        if w.sum() <= 0.0:
-            self._anchor = None
+        if self._anchor is None:
+            self._draw_anchor(main, particles)
             return
-        idx = systematic_resample(w / w.sum(), st.particles, self.rng)
-        self._anchor = np.vstack([x[idx], y[idx], t[idx]])
-        self._anchor_age = 0
-
-    def _track(self, odometry: Odometry | None, obs: Observation, main_ev: float) -> None:
-        anchored = self._anchor is not None
-        st = self.settings
-        rows = [self.x, self.y, self.theta]
-        if self._anchor is not None:
-            rows = [np.vstack([self._anchor[k][None], rows[k]]) for k in range(3)]
-        a, p = rows[0].shape
-        fx, fy, ft = (v.reshape(-1) for v in rows)
-        nx, ny, nt = sample_motion(fx, fy, ft, odometry, self.config, self.rng)
-        log_w = motion_log_penalty(fx, fy, nx, ny, self.map)
-        if not obs.empty:
-            log_w = log_w + sensor_kernel.log_likelihood(
-                nx, ny, nt, obs, self.map, self.config, self.grid
+        ax, ay, at = self._anchor_pose()
+        anchor = Hypothesis(ax, ay, at, 0.0)
+        if _near(main.x, main.y, main.theta_rad, anchor, st):
+            close = (
+                np.hypot(ax - main.x, ay - main.y) < st.distinct_m / 2
+                and abs(float(wrap_angle(at - main.theta_rad))) < st.distinct_rad / 2
             )
-        log_w = log_w.reshape(a, p)
-        ev = _log_mean_exp_rows(log_w)
-        if anchored and np.isfinite(ev[0]):
-            main_ev = float(ev[0])
-        first = 1 if anchored else 0
-        # A fresh cloud (either side) first settles: a few hundred particles drawn
-        # tight but 0.1 m off would swing the ratio by units of evidence in the first
-        # frames, by chance, not by what was seen (its search already scored them).
-        counts = (self.age >= st.settle) & (self._anchor_age >= st.settle)
-        self.llr = self.llr + np.where(counts, ev[first:] - main_ev, 0.0)
-        self.age = self.age + 1
-        self._anchor_age += 1
-        alive = np.isfinite(ev)
-        alive[first:] &= self.llr >= self.settings.drop_llr
-        # Resample each alternative's cloud on its own (systematic, equal weights after).
-        nx, ny, nt = (v.reshape(a, p) for v in (nx, ny, nt))
-        for i in np.flatnonzero(alive):
-            w = np.exp(log_w[i] - ev[i]) / p
-            idx = systematic_resample(w / w.sum(), p, self.rng)
-            nx[i], ny[i], nt[i] = nx[i, idx], ny[i, idx], nt[i, idx]
-        if anchored:
-            self._anchor = np.vstack([nx[0], ny[0], nt[0]]) if alive[0] else None
-        keep = alive[first:]
-        self.x, self.y, self.theta = nx[first:][keep], ny[first:][keep], nt[first:][keep]
-        self.llr = self.llr[keep]
-        self.age = self.age[keep]
+            if not close:
+                self._draw_anchor(main, particles)
+            return
+        hit = np.flatnonzero(_near(*self._centres(), main, st)) if self.count else np.empty(0)
+        if hit.size:
+            self._make_main(int(hit[np.argmax(self.llr[hit])]))
+            return
+        if self._draw_anchor(main, particles):
+            # The old anchor's place, now an alternative, carried from the new anchor.
+            back = _moves_onto(self._anchor_pose(), np.array([ax]), np.array([ay]), np.array([at]))
+            self._append(back[0], 0.0)
 
-    def _centres(self) -> tuple[NDArray[np.float64], ...]:
-        c = np.cos(self.theta).mean(axis=1)
-        s = np.sin(self.theta).mean(axis=1)
-        return self.x.mean(axis=1), self.y.mean(axis=1), np.arctan2(s, c)
+    def _make_main(self, i: int) -> None:
+        """Alternative ``i`` becomes the main mode; the old main an alternative."""
+        ax, ay, at = self._anchor_pose()
+        shift = float(self.llr[i])
+        cx, cy, ct = _carry(self.moves[i : i + 1], *self._anchor)
+        places = self._centres()
+        self._anchor = np.vstack([cx[0], cy[0], ct[0]])
+        px, py, pt = (v.copy() for v in places)
+        px[i], py[i], pt[i] = ax, ay, at
+        self.moves = _moves_onto(self._anchor_pose(), px, py, pt)
+        self.llr = self.llr - shift
+        self.llr[i] = -shift
+        self.age[i] = 0
+        self.mode_searches = 0
 
-    def _near(
-        self, x: NDArray[np.float64], y: NDArray[np.float64], t: NDArray[np.float64], h: Hypothesis
-    ) -> NDArray[np.bool_]:
-        st = self.settings
-        return (np.hypot(x - h.x, y - h.y) < st.distinct_m) & (
-            np.abs(wrap_angle(t - h.theta_rad)) < st.distinct_rad
-        )
+    def _near_any(self, h: Hypothesis) -> bool:
+        return bool(self.count and _near(*self._centres(), h, self.settings).any())
 
     def _forget_covered(self, main: Hypothesis) -> None:
         """Drop alternatives the main mode has come to cover (the filter holds them)."""
-        if not self.count:
-            return
-        keep = ~self._near(*self._centres(), main)
-        self.x, self.y, self.theta, self.llr, self.age = (
-            self.x[keep], self.y[keep], self.theta[keep], self.llr[keep], self.age[keep]
-        )  # fmt: skip
+        if self.count and self._anchor is not None:
+            self._keep(~_near(*self._centres(), main, self.settings))
 
     # --------------------------------------------------------------- search
     def window_score(
@@ -419,9 +430,12 @@ class EvidenceTracker:
         x: NDArray[np.float64],
         y: NDArray[np.float64],
         t: NDArray[np.float64],
-        rounds: tuple[tuple[int, float, float], ...],
+        rounds: tuple[tuple[int, float, float], ...] | None,
     ) -> tuple[NDArray[np.float64], ...]:
-        """Each pose moved to the best of its jittered copies over the window."""
+        """Each pose moved to the best of its jittered copies over the window (``rounds``
+        of random jitter), or polished by pattern search (``rounds`` None)."""
+        if rounds is None:
+            return self._polished(x, y, t)
         score = self.window_score(x, y, t)
         m = x.shape[0]
         for count, std_m, std_rad in rounds:
@@ -442,6 +456,33 @@ class EvidenceTracker:
             score = np.where(better, js[np.arange(m), best], score)
         return x, y, t, score
 
+    def _polished(
+        self, x: NDArray[np.float64], y: NDArray[np.float64], t: NDArray[np.float64]
+    ) -> tuple[NDArray[np.float64], ...]:
+        """Pattern search over the window: each round tries the 27 steps of -1, 0, +1 in
+        x, y and heading around each pose, moves to the best, and halves the steps."""
+        st = self.settings
+        m = x.shape[0]
+        grid = np.array(np.meshgrid([-1.0, 0.0, 1.0], [-1.0, 0.0, 1.0], [-1.0, 0.0, 1.0]))
+        dx, dy, dt = (g.reshape(-1) for g in grid)  # 27 steps, (0, 0, 0) among them
+        step_m, step_rad = st.polish_step_m, st.polish_step_rad
+        score = self.window_score(x, y, t)
+        for _ in range(st.polish_rounds):
+            jx = x[:, None] + step_m * dx[None, :]
+            jy = y[:, None] + step_m * dy[None, :]
+            jt = wrap_angle(t[:, None] + step_rad * dt[None, :])
+            js = self.window_score(jx.reshape(-1), jy.reshape(-1), jt.reshape(-1)).reshape(m, 27)
+            js = np.where(self.map.free_space.is_free(jx, jy), js, -np.inf)
+            best = np.argmax(js, axis=1)
+            rows = np.arange(m)
+            better = js[rows, best] > score
+            x = np.where(better, jx[rows, best], x)
+            y = np.where(better, jy[rows, best], y)
+            t = np.where(better, jt[rows, best], t)
+            score = np.maximum(score, js[rows, best])
+            step_m, step_rad = step_m / 2.0, step_rad / 2.0
+        return x, y, t, score
+
     def _search(self, main: Hypothesis) -> None:
         """One global consistency search (module docstring); may add alternatives."""
         st = self.settings
@@ -452,16 +493,16 @@ class EvidenceTracker:
         self.mode_searches += 1
         obs = self._history[-1][1]
         mx, my, mt, ms = self._refined(
-            np.array([main.x]), np.array([main.y]), np.array([main.theta_rad]), st.refine_fine
+            np.array([main.x]), np.array([main.y]), np.array([main.theta_rad]), None
         )
-        self._recentre(mx[0], my[0], mt[0])
+        self._recentre(float(mx[0]), float(my[0]), float(mt[0]))
         fs = self.map.free_space
         area = fs.free_cells.size * fs.resolution_m**2
         n = int(np.clip(st.candidates_per_m2 * area, st.min_candidates, st.max_candidates))
         cx, cy, ct = sample_from_observation(
             n, obs, self.map, self.rng, self.config.bearing_std_rad("")
         )
-        away = ~self._near(cx, cy, ct, main)
+        away = ~_near(cx, cy, ct, main, st)
         cx, cy, ct = cx[away], cy[away], ct[away]
         if not cx.size:
             return
@@ -474,130 +515,110 @@ class EvidenceTracker:
             h = Hypothesis(float(rx[i]), float(ry[i]), float(rt[i]), 0.0)
             if not np.isfinite(rs[i]) or len(picked) >= st.finalists:
                 break
-            if picked and self._near(rx[picked], ry[picked], rt[picked], h).any():
+            if picked and _near(rx[picked], ry[picked], rt[picked], h, st).any():
                 continue
             picked.append(int(i))
         if not picked:
             return
-        rx, ry, rt, rs = self._refined(rx[picked], ry[picked], rt[picked], st.refine_fine)
+        rx, ry, rt, rs = self._refined(rx[picked], ry[picked], rt[picked], None)
         main_score = float(ms[0])
-        order = np.argsort(-rs)
-        ex, ey, et = self._centres() if self.count else (np.empty(0),) * 3
-        for i in order:
+        main_h = Hypothesis(float(mx[0]), float(my[0]), float(mt[0]), 0.0)
+        for i in np.argsort(-rs):
             gain = float(rs[i] - main_score)
             if gain + prior < st.seed_llr or not np.isfinite(gain):
                 break
             h = Hypothesis(float(rx[i]), float(ry[i]), float(rt[i]), 0.0)
-            if self._near(np.array([mx[0]]), np.array([my[0]]), np.array([mt[0]]), h)[0]:
+            if _near(np.array([h.x]), np.array([h.y]), np.array([h.theta_rad]), main_h, st)[0]:
                 continue
-            if ex.size and self._near(ex, ey, et, h).any():
+            if self._near_any(h):
                 continue
             # The best of thousands of candidates fits the window better than the main
             # mode by selection alone: a newcomer never starts ahead; tracked evidence
             # will show whether it is.
-            self._add(h, min(gain, 0.0) + prior)
-            ex, ey, et = self._centres()
+            move = _moves_onto(
+                self._anchor_pose(), np.array([h.x]), np.array([h.y]), np.array([h.theta_rad])
+            )[0]
+            self._append(move, min(gain, 0.0) + prior)
 
     def _recentre(self, x: float, y: float, theta: float) -> None:
         """Move the anchor onto the main mode's refined pose, and every alternative onto
-        its own (refined the same way), rigidly: a small cloud that started a little off
-        recovers slowly by itself, and would lose evidence meanwhile for nothing."""
-        if self._anchor is not None:
-            self._anchor = np.vstack(_moved(*self._anchor, x, y, theta))
-        if not self.count:
-            return
-        cx, cy, ct = self._centres()
-        rx, ry, rt, _ = self._refined(cx, cy, ct, self.settings.refine_fine)
-        for i in range(self.count):
-            self.x[i], self.y[i], self.theta[i] = _moved(
-                self.x[i], self.y[i], self.theta[i], rx[i], ry[i], rt[i]
-            )
+        its own (refined the same way): a little cloud off by a few centimetres would
+        otherwise lose evidence for nothing until it had drifted back."""
+        assert self._anchor is not None
+        places = self._refined(*self._centres(), None)[:3] if self.count else None
+        move = _moves_onto(self._anchor_pose(), np.array([x]), np.array([y]), np.array([theta]))
+        cx, cy, ct = _carry(move, *self._anchor)
+        self._anchor = np.vstack([cx[0], cy[0], ct[0]])
+        if places is not None:
+            self.moves = _moves_onto(self._anchor_pose(), *places)
 
-    def _add(self, h: Hypothesis, llr: float) -> None:
-        st = self.settings
-        p = st.particles
-        if self._anchor is not None:
-            # The anchor's cloud moved rigidly onto the candidate: both sides of the
-            # ratio then start with the same spread (no Occam penalty for a newcomer).
-            x, y, t = _moved(*self._anchor, h.x, h.y, h.theta_rad)
-        else:
-            x = h.x + self.rng.normal(0.0, st.seed_std_m, p)
-            y = h.y + self.rng.normal(0.0, st.seed_std_m, p)
-            t = wrap_angle(h.theta_rad + self.rng.normal(0.0, st.seed_std_rad, p))
-        self._add_cloud(x, y, t, llr)
-
-    def _add_cloud(
-        self, x: NDArray[np.float64], y: NDArray[np.float64], t: NDArray[np.float64], llr: float
-    ) -> None:
-        """Append one alternative's cloud (dropping the weakest when full)."""
+    def _append(self, move: NDArray[np.float64], llr: float) -> None:
+        """Add one alternative (dropping the weakest when full)."""
         st = self.settings
         if self.count >= st.max_alternatives:
             worst = int(np.argmin(self.llr))
             if self.llr[worst] >= llr:
                 return
-            keep = np.arange(self.count) != worst
-            self.x, self.y, self.theta, self.llr, self.age = (
-                self.x[keep], self.y[keep], self.theta[keep], self.llr[keep], self.age[keep]
-            )  # fmt: skip
-        self.x = np.vstack([self.x, x[None]])
-        self.y = np.vstack([self.y, y[None]])
-        self.theta = np.vstack([self.theta, t[None]])
+            self._keep(np.arange(self.count) != worst)
+        self.moves = np.vstack([self.moves, move[None]])
         self.llr = np.append(self.llr, llr)
         self.age = np.append(self.age, 0)
 
     # ----------------------------------------------------------------- swap
-    def swap(
-        self,
-        main_x: NDArray[np.float64],
-        main_y: NDArray[np.float64],
-        main_theta: NDArray[np.float64],
-        main_w: NDArray[np.float64],
-        n: int,
-    ) -> tuple[NDArray[np.float64], ...]:
-        """Replace the main belief by the strongest alternative; return its cloud (n).
+    def swap(self, n: int) -> tuple[NDArray[np.float64], ...]:
+        """Make the strongest alternative the main belief; return its cloud (n particles).
 
-        The old main belief (particles and normalized weights given) becomes an
-        alternative with the opposite evidence; the others are re-expressed against
-        the new main belief.
+        The old main belief becomes an alternative with the opposite evidence; the
+        others are re-expressed against the new main belief.
         """
-        st = self.settings
         best = int(np.argmax(self.llr))
-        shift = float(self.llr[best])
-        pick = self.rng.integers(0, st.particles, n)
-        jitter = 0.02
-        nx = self.x[best, pick] + self.rng.normal(0.0, jitter, n)
-        ny = self.y[best, pick] + self.rng.normal(0.0, jitter, n)
-        nt = wrap_angle(self.theta[best, pick] + self.rng.normal(0.0, jitter, n))
-        new_anchor = np.vstack([self.x[best], self.y[best], self.theta[best]])
-        if self._anchor is not None:
-            self.x[best], self.y[best], self.theta[best] = self._anchor
-        else:
-            idx = systematic_resample(main_w, st.particles, self.rng)
-            self.x[best], self.y[best], self.theta[best] = main_x[idx], main_y[idx], main_theta[idx]
-        self._anchor = new_anchor
-        self._anchor_age = int(self.age[best])
-        self.llr = self.llr - shift
-        self.llr[best] = -shift
+        self._make_main(best)
         self.swaps += 1
-        self.mode_searches = 0
+        assert self._anchor is not None
+        pick = self.rng.integers(0, self._anchor.shape[1], n)
+        jitter = 0.02
+        nx = self._anchor[0, pick] + self.rng.normal(0.0, jitter, n)
+        ny = self._anchor[1, pick] + self.rng.normal(0.0, jitter, n)
+        nt = wrap_angle(self._anchor[2, pick] + self.rng.normal(0.0, jitter, n))
         return nx, ny, nt
 
 
-def _moved(
+def _near(
+    x: NDArray[np.float64] | float,
+    y: NDArray[np.float64] | float,
+    t: NDArray[np.float64] | float,
+    h: Hypothesis,
+    st: EvidenceSettings,
+) -> NDArray[np.bool_]:
+    """Whether poses are the same place as ``h`` (within ``distinct_m`` and ``_rad``)."""
+    return (np.hypot(np.asarray(x) - h.x, np.asarray(y) - h.y) < st.distinct_m) & (
+        np.abs(wrap_angle(np.asarray(t) - h.theta_rad)) < st.distinct_rad
+    )
+
+
+def _carry(
+    moves: NDArray[np.float64],
     x: NDArray[np.float64],
     y: NDArray[np.float64],
     t: NDArray[np.float64],
-    to_x: float,
-    to_y: float,
-    to_theta: float,
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
-    """A cloud turned about its centre and moved so its centre is the given pose."""
-    mx, my = float(x.mean()), float(y.mean())
-    turn = to_theta - float(np.arctan2(np.sin(t).mean(), np.cos(t).mean()))
+    """Poses carried by each rigid motion (turn, shift x, shift y), each shape (A, N)."""
+    turn, sx, sy = moves[:, 0:1], moves[:, 1:2], moves[:, 2:3]
     c, s = np.cos(turn), np.sin(turn)
-    nx = to_x + c * (x - mx) - s * (y - my)
-    ny = to_y + s * (x - mx) + c * (y - my)
-    return nx, ny, wrap_angle(t + turn)
+    return c * x - s * y + sx, s * x + c * y + sy, wrap_angle(t + turn)
+
+
+def _moves_onto(
+    source: tuple[float, float, float],
+    x: NDArray[np.float64],
+    y: NDArray[np.float64],
+    t: NDArray[np.float64],
+) -> NDArray[np.float64]:
+    """The rigid motions carrying the pose ``source`` onto each pose (x, y, t), (A, 3)."""
+    sx, sy, st = source
+    turn = wrap_angle(np.asarray(t) - st)
+    c, s = np.cos(turn), np.sin(turn)
+    return np.column_stack([turn, x - (c * sx - s * sy), y - (s * sx + c * sy)])
 
 
 def main_mode(hypotheses: Sequence[Hypothesis]) -> Hypothesis | None:

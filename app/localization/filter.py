@@ -297,7 +297,7 @@ class ParticleFilter:
             odometry, self.last_observation, self.log_evidence, top, tight, particles
         ):
             return raw, w, ess
-        self.x, self.y, self.theta = self.evidence.swap(self.x, self.y, self.theta, w, self.n)
+        self.x, self.y, self.theta = self.evidence.swap(self.n)
         self.log_w = np.zeros(self.n)
         self._gate.reset()
         self.quality = None
