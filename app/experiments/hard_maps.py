@@ -27,7 +27,11 @@ from app.simulation.scenarios import PAPER_PATH
 
 @dataclass(frozen=True)
 class HardMap:
-    """A map, a walk on it, and where a kidnapper carries the person (x, y, deg)."""
+    """A map, a walk on it, and where a kidnapper carries the person (x, y, deg).
+
+    The simulator walks on from the kidnap pose straight to the next waypoint, so the
+    pose is chosen with that leg clear of walls.
+    """
 
     map: SemanticMap
     path: tuple[tuple[float, float], ...]
@@ -134,7 +138,7 @@ def twin_offices() -> HardMap:
         (17.0, 4.5),
         (19.0, 5.5),
     )
-    return HardMap(parse_map(spec), path, (15.0, 7.0, -90.0), True)
+    return HardMap(parse_map(spec), path, (16.0, 6.0, -90.0), True)
 
 
 def door_corridor() -> HardMap:
@@ -188,7 +192,7 @@ def two_wings() -> HardMap:
         ],
     }
     path = ((25.0, 1.1), (5.0, 1.1), (1.5, 1.1), (1.5, 6.0))
-    return HardMap(parse_map(spec), path, (15.0, 11.1, 180.0), True)
+    return HardMap(parse_map(spec), path, (21.0, 1.1, 180.0), True)
 
 
 def paper_office() -> HardMap:

@@ -107,6 +107,10 @@ class EvidenceSettings:
     drop_llr: float = -20.0
     #: An alternative this much more likely than the main belief replaces it.
     switch_llr: float = float(np.log(20.0))
+    #: Frames of the main mode's walk kept to test a newcomer against (60 s).
+    trail: int = 300
+    #: Dropped alternatives remembered (while the main mode stays the same).
+    max_graves: int = 32
     #: Distinct from the main mode (and from each other) beyond these.
     distinct_m: float = 1.0
     distinct_rad: float = float(np.radians(45.0))
@@ -163,6 +167,11 @@ class EvidenceTracker:
         self.llr = np.empty(0)
         #: Frames each alternative has been tracked.
         self.age = np.empty(0, dtype=np.int64)
+        #: Rigid motions of alternatives dropped by the evidence while the main mode
+        #: stayed the same: found again, they are known dead, not newcomers.
+        self._graves = np.empty((0, 3))
+        #: The main mode's positions since it formed (the walk so far, as it believes).
+        self._trail: deque[tuple[float, float]] = deque(maxlen=self.settings.trail)
         #: The anchor cloud of the main belief, rows x, y, theta; None until drawn.
         self._anchor: NDArray[np.float64] | None = None
         self._history: deque[tuple[Odometry | None, Observation]] = deque(
@@ -268,8 +277,12 @@ class EvidenceTracker:
             or odometry is None
             or not _near(main.x, main.y, main.theta_rad, last, self.settings)
         ):
-            # A new main mode (or none): its searches start again.
+            # A new main mode (or none): its searches, its dead and its walk start again.
             self.mode_searches = 0
+            self._graves = np.empty((0, 3))
+            self._trail.clear()
+        if main is not None:
+            self._trail.append((main.x, main.y))
         self._since_search += 1
         if (
             main is not None
@@ -310,6 +323,8 @@ class EvidenceTracker:
         self.llr = self.llr + (ev[1:] - ev[0])
         self.age = self.age + 1
         keep = np.isfinite(ev[1:]) & (self.llr >= self.settings.drop_llr)
+        graves = np.vstack([self._graves, self.moves[~keep]])
+        self._graves = graves[-self.settings.max_graves :]
         self._keep(keep)
         w = np.exp(log_w[0] - log_w[0].max())
         idx = systematic_resample(w / w.sum(), p, self.rng)
@@ -397,9 +412,17 @@ class EvidenceTracker:
         self.llr[i] = -shift
         self.age[i] = 0
         self.mode_searches = 0
+        self._graves = np.empty((0, 3))
 
     def _near_any(self, h: Hypothesis) -> bool:
-        return bool(self.count and _near(*self._centres(), h, self.settings).any())
+        """Whether ``h`` is a tracked alternative's place, or a dropped one's."""
+        if self.count and _near(*self._centres(), h, self.settings).any():
+            return True
+        if not self._graves.shape[0]:
+            return False
+        ax, ay, at = (np.array([v]) for v in self._anchor_pose())
+        gx, gy, gt = _carry(self._graves, ax, ay, at)
+        return bool(_near(gx[:, 0], gy[:, 0], gt[:, 0], h, self.settings).any())
 
     def _forget_covered(self, main: Hypothesis) -> None:
         """Drop alternatives the main mode has come to cover (the filter holds them)."""
@@ -530,15 +553,25 @@ class EvidenceTracker:
             h = Hypothesis(float(rx[i]), float(ry[i]), float(rt[i]), 0.0)
             if _near(np.array([h.x]), np.array([h.y]), np.array([h.theta_rad]), main_h, st)[0]:
                 continue
-            if self._near_any(h):
+            move = _moves_onto(
+                self._anchor_pose(), np.array([h.x]), np.array([h.y]), np.array([h.theta_rad])
+            )[0]
+            if self._near_any(h) or not self._walk_fits(move):
                 continue
             # The best of thousands of candidates fits the window better than the main
             # mode by selection alone: a newcomer never starts ahead; tracked evidence
             # will show whether it is.
-            move = _moves_onto(
-                self._anchor_pose(), np.array([h.x]), np.array([h.y]), np.array([h.theta_rad])
-            )[0]
             self._append(move, min(gain, 0.0) + prior)
+
+    def _walk_fits(self, move: NDArray[np.float64]) -> bool:
+        """Whether the main mode's walk so far, carried by ``move``, stays in the free
+        space: a place is only an alternative if the whole walk could have led there
+        (the odometry is the same for both; the window alone forgets the rest)."""
+        if not self._trail:
+            return True
+        tx, ty = (np.array(v) for v in zip(*self._trail, strict=True))
+        cx, cy, _ = _carry(move[None], tx, ty, np.zeros_like(tx))
+        return bool(self.map.free_space.is_free(cx[0], cy[0]).all())
 
     def _recentre(self, x: float, y: float, theta: float) -> None:
         """Move the anchor onto the main mode's refined pose, and every alternative onto
