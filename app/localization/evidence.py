@@ -3,36 +3,44 @@
 A particle filter's weight share says nothing about a mode that resampling has
 already killed: in a symmetric or repetitive building the mirror mode dies by chance,
 not by evidence. So besides the filter's own cloud (the *main* belief), this module
-keeps a small set of **alternative hypotheses**, each a little particle cloud of its own
-with the accumulated log-likelihood ratio ``llr`` of everything observed since it was
-found, against the main belief:
+keeps a small set of **alternative hypotheses**, each with the accumulated
+log-likelihood ratio ``llr`` of everything observed since it was found, against the
+main belief:
 
+* **The anchor.** A cloud of ``particles`` poses drawn from the filter's heaviest
+  cluster, tracked like a little filter (same motion model, same compiled sensor
+  kernel, resampled every frame) and redrawn when it drifts off that cluster.
+* **Alternatives are rigid motions of the anchor.** An alternative is the rigid motion
+  (turn, shift) that carries the anchor onto another place. A rigid motion of the map
+  commutes with body-frame odometry, so the carried cloud moves exactly as the anchor
+  does; each frame its evidence is the log of the mean likelihood of the carried
+  particles (moves through walls included), and ``llr`` gains the difference to the
+  anchor's. Both sides of the ratio use the *same* particles: under an exact symmetry
+  of the map the two are equal to rounding (independent small clouds drifted apart by
+  units of evidence within seconds), and the cost is one kernel call over the anchor
+  and its copies.
 * **Found** by a periodic global consistency search (every ``search_every`` frames while
-  the main belief is a tight mode): candidate poses all over the free space with the
-  heading that points one detection at an object of its class (as in sensor
-  resetting), scored with the compiled sensor kernel on the current frame; the best
-  are refined and scored again on the last ``window`` frames, chained back by the
-  odometry. A candidate away from the main mode whose window evidence is within
-  ``seed_llr`` of the main mode's (scored the same way) becomes an alternative, its
-  ``llr`` starting at that difference. The window forgets what came before it; the
-  earlier searches did not: once the main mode has been searched against, a place
-  they did not find was at most ``seed_llr`` as likely as the main mode then, so a
-  newcomer starts with that prior added (the first search of a mode adds none).
-* **Tracked** every frame like the filter: moved with the same odometry and motion
-  model, weighted by the same sensor kernel. Its frame evidence (the log of its
-  prior-weighted mean likelihood, moves through walls included) minus the main
-  belief's is added to ``llr``; so evidence for and against accumulates over the whole
-  walk, at a few hundred particles per alternative. The main belief's frame evidence
-  comes from an *anchor*: a cloud of the same size drawn from the filter's heaviest
-  cluster and tracked the same way (redrawn whenever it leaves that cluster), so that
-  both sides of the ratio carry the same small-sample bias (a log of a mean of a few
-  hundred peaked likelihoods is biased low; against the filter's thousands of
-  particles it drifted a true alternative down by about one unit a second).
-* **Dropped** only when its evidence against falls below ``drop_llr``, or when the
-  main belief has come to cover it.
-* **Swapped** with the main belief when its evidence for exceeds ``switch_llr``: the
+  the main mode is tight): candidate poses all over the free space with the heading
+  that points one detection at an object of its class (as in sensor resetting), scored
+  on the current frame; the best are refined and scored on the last ``window`` frames
+  chained back by the odometry, then polished by a deterministic pattern search, as
+  are the main mode and every tracked alternative (the motions are re-fitted, so a
+  copy a few centimetres off does not lose evidence for nothing). A finalist away
+  from the main mode whose window evidence is within ``seed_llr`` of the main mode's
+  becomes an alternative, if the main mode's whole walk so far, carried onto it, stays
+  in the free space (the odometry is the same for both: a shifted copy of a walk
+  through a corridor's far end is no alternative). It starts at its window
+  difference, never ahead (the best of thousands fits by selection), plus a prior:
+  once the main mode has been searched against, a place earlier searches did not find
+  was at most ``seed_llr`` as likely then. Places dropped earlier are remembered (as
+  motions relative to the main mode) and not found again as newcomers.
+* **Dropped** only when the evidence against falls below ``drop_llr`` (or every copy
+  walks through a wall), or when the main belief has come to cover the place.
+* **Swapped** with the main belief when the evidence for exceeds ``switch_llr``: the
   filter's cloud is replaced by the alternative's, and the old main mode becomes an
-  alternative carrying the opposite evidence.
+  alternative carrying the opposite evidence. When the filter's heaviest cluster moves
+  to another place by itself, the ratios are re-expressed against it (or the old place
+  becomes an alternative at even odds), never silently re-referenced.
 
 The probability of the alternatives under the whole belief, ``e^llr / (1 + sum e^llr)``
 summed (the main belief's prior counted equal to each alternative's), gates
@@ -90,17 +98,11 @@ class EvidenceSettings:
     polish_step_m: float = 0.08
     polish_step_rad: float = float(np.radians(2.0))
     polish_rounds: int = 6
-    #: Particles per alternative.
+    #: Particles of the anchor (each alternative carries a copy).
     particles: int = 150
-    #: Spread of a new alternative's cloud (m, rad).
-    seed_std_m: float = 0.1
-    seed_std_rad: float = float(np.radians(2.0))
     max_alternatives: int = 8
-    #: Frames an alternative is tracked, once settled, before it can take ``converged``
-    #: away.
+    #: Frames an alternative is tracked before it can take ``converged`` away.
     probation: int = 5
-    #: Frames a fresh cloud (alternative or anchor) settles before its evidence counts.
-    settle: int = 5
     #: A candidate within this log-evidence of the main mode over the window is kept.
     seed_llr: float = -6.0
     #: An alternative whose evidence against falls below this is dropped.
@@ -243,7 +245,6 @@ class EvidenceTracker:
         self,
         odometry: Odometry | None,
         obs: Observation,
-        main_log_evidence: float,
         main: Hypothesis | None,
         main_tight: bool,
         particles: tuple[NDArray[np.float64], ...],
@@ -253,13 +254,11 @@ class EvidenceTracker:
         Args:
             odometry: this frame's odometry (as given to the filter).
             obs: this frame's observation (may be empty: no evidence).
-            main_log_evidence: unused when the anchor exists (kept for the first frame).
             main: the main belief's heaviest mode, None when it has none.
             main_tight: whether the main mode is tight enough to search against.
             particles: the filter's x, y, theta and normalized weights (to draw the
                 anchor from).
         """
-        del main_log_evidence
         # Frames without detections are kept too: their odometry chains the window.
         self._history.append((odometry, obs))
         if self.searched_ago is not None:

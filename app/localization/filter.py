@@ -110,9 +110,6 @@ class ParticleFilter:
             self.evidence.reset()
         #: How well the estimate explains the detections (smoothed); None before any.
         self.quality: FitQuality | None = None
-        #: log of this frame's evidence under the belief (prior-weighted mean likelihood,
-        #: moves through walls included).
-        self.log_evidence = 0.0
         self._had_odometry = False
         self.frames_without_evidence = 0
         #: How often every particle became impossible and the filter started again.
@@ -137,9 +134,7 @@ class ParticleFilter:
         self.x, self.y, self.theta = sample_motion(
             self.x, self.y, self.theta, odometry, self.config, self.rng
         )
-        before = log_sum_exp(self.log_w)
         self.log_w = self.log_w + motion_log_penalty(x0, y0, self.x, self.y, self.map)
-        self.log_evidence = log_sum_exp(self.log_w) - before
         if not np.isfinite(self.log_w).any():
             # Every hypothesis walked through a wall or off the map: the belief is
             # wrong everywhere. Start again from no knowledge rather than keep ghosts.
@@ -185,7 +180,6 @@ class ParticleFilter:
         self.log_w = self.log_w + log_lik
         # log of the prior-weighted mean likelihood: lse(w + l) - lse(w)
         mean_ll = log_sum_exp(self.log_w) - before
-        self.log_evidence += mean_ll
         per_class = mean_ll / max(obs.group_kappa.size, 1)
         if not np.isfinite(per_class):
             per_class = -1e3
@@ -293,9 +287,7 @@ class ParticleFilter:
         top = raw.hypotheses[0] if raw.hypotheses else None
         tight = top is not None and top.std_xy_m <= SEARCH_MAX_SPREAD_M
         particles = (self.x, self.y, self.theta, w)
-        if not self.evidence.update(
-            odometry, self.last_observation, self.log_evidence, top, tight, particles
-        ):
+        if not self.evidence.update(odometry, self.last_observation, top, tight, particles):
             return raw, w, ess
         self.x, self.y, self.theta = self.evidence.swap(self.n)
         self.log_w = np.zeros(self.n)

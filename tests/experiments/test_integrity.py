@@ -75,7 +75,7 @@ def test_tiny_suite_end_to_end(tmp_path: Path) -> None:
     assert cli.run(args) == 0
     summary = json.loads((tmp_path / "integrity.json").read_text())
     assert len(summary["scenarios"]) == 5
-    assert summary["total"]["frames"] > 2000
+    assert summary["total"]["frames"] > 1200
     assert (tmp_path / "integrity.png").stat().st_size > 10_000
     assert "| rotation_room | nominal-180 |" in (tmp_path / "integrity.md").read_text()
 
