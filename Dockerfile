@@ -15,13 +15,13 @@ RUN apt-get update \
 RUN useradd --create-home --uid 10001 bearings
 WORKDIR /srv/bearings
 
-# Dependencies first (better layer caching), then the code.
-COPY pyproject.toml README.md ./
+# A regular (non-editable) install of the wheel: the bundled maps and the demo page
+# travel inside the package (app/resources), so the source folder is not needed at run
+# time and is removed. The numba cache goes to NUMBA_CACHE_DIR.
+COPY pyproject.toml README.md LICENSE ./
 COPY app ./app
-COPY maps ./maps
-COPY static ./static
-# Editable install: the package finds maps/ and static/ next to app/ in this folder.
-RUN pip install -e . && chown -R bearings:bearings /srv/bearings
+RUN pip install . && rm -rf /srv/bearings/* && mkdir -p /tmp/numba-cache \
+    && chown bearings:bearings /tmp/numba-cache
 
 USER bearings
 # Compile the numba kernels into the image's cache (about 17 s), so a container on the
@@ -34,4 +34,8 @@ EXPOSE 8000 8080
 HEALTHCHECK --interval=30s --timeout=5s --start-period=60s --retries=3 \
     CMD python -c "import urllib.request,sys; sys.exit(0 if urllib.request.urlopen('http://127.0.0.1:8000/healthz', timeout=4).status == 200 else 1)"
 
+# Reachable from outside the container, so API keys are required: mount a key file at
+# /run/secrets/bearings-keys (docs/SECURITY.md). The live view stays on the container's
+# loopback unless BEARINGS_VISER_HOST says otherwise.
+ENV BEARINGS_API_KEYS_FILE=/run/secrets/bearings-keys
 CMD ["bearings", "serve", "--host", "0.0.0.0", "--port", "8000", "--viser-port", "8080"]

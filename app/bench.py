@@ -18,8 +18,8 @@ import numpy as np
 
 from app.localization.config import FilterConfig
 from app.localization.filter import ParticleFilter, warm_up
-from app.localization.map import SemanticMap, parse_map
 from app.localization.types import Detection, Odometry
+from app.maps.model import SemanticMap, parse_map
 
 CLASSES = ("door", "window", "table")
 

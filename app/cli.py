@@ -1,4 +1,4 @@
-"""The ``bearings`` command: serve, demo, experiments, bench.
+"""The ``bearings`` command: serve, demo, experiments, bench, map.
 
 Each subcommand's flags default to the matching ``BEARINGS_*`` setting (see
 :mod:`app.config`), so a flag and its environment variable always agree.
@@ -45,6 +45,29 @@ def _add_server_flags(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--max-particles", type=int, help="most particles per session (BEARINGS_MAX_PARTICLES)"
     )
+    p.add_argument(
+        "--api-keys",
+        dest="api_keys_file",
+        type=Path,
+        metavar="FILE",
+        help="API key file: one 'KEY' or 'NAME KEY MAX_SESSIONS MAX_PARTICLES MAX_FRAMES_PER_S' "
+        "a line (BEARINGS_API_KEYS_FILE); see docs/SECURITY.md",
+    )
+    p.add_argument(
+        "--insecure-open",
+        action="store_true",
+        default=None,
+        help="run without API keys on a host other than loopback (BEARINGS_INSECURE_OPEN)",
+    )
+    p.add_argument(
+        "--allowed-origins",
+        help="browser origins allowed for CORS and WebSocket, comma-separated "
+        "(BEARINGS_ALLOWED_ORIGINS; default: same origin only)",
+    )
+    p.add_argument(
+        "--viser-host",
+        help="address the viser view listens on (BEARINGS_VISER_HOST, default 127.0.0.1)",
+    )
 
 
 def settings_from_args(args: argparse.Namespace) -> Settings:
@@ -80,6 +103,11 @@ def build_parser() -> argparse.ArgumentParser:
     from app.bench import add_arguments as add_bench_arguments
 
     add_bench_arguments(bench)
+
+    maps = sub.add_parser("map", help="check map files; import ROS occupancy grids and GeoJSON")
+    from app.maps.cli import add_arguments as add_map_arguments
+
+    add_map_arguments(maps)
     return parser
 
 
@@ -98,6 +126,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         from app.bench import run as run_bench
 
         return run_bench(args)
+    if args.command == "map":
+        from app.maps.cli import run as run_map
+
+        return run_map(args)
     parser.error(f"unknown command {args.command!r}")
     return 2
 

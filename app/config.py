@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+import json
 from functools import lru_cache
 from pathlib import Path
+from typing import Annotated
 
-from pydantic import Field
-from pydantic_settings import BaseSettings, SettingsConfigDict
+from pydantic import Field, field_validator
+from pydantic_settings import BaseSettings, NoDecode, SettingsConfigDict
 
 
 class Settings(BaseSettings):
@@ -18,6 +20,10 @@ class Settings(BaseSettings):
     port: int = Field(8000, ge=0, le=65535, description="HTTP API port")
     maps: list[Path] = Field(
         default_factory=list, description="extra map directories, besides the bundled maps/"
+    )
+    cache_dir: Path | None = Field(
+        default_factory=lambda: Path.home() / ".cache" / "bearings",
+        description="where prepared map grids are cached by content hash (none: no cache)",
     )
     viser: bool = Field(True, description="run the viser view in the same process")
     viser_port: int = Field(8080, ge=0, le=65535, description="viser view port")
@@ -33,6 +39,54 @@ class Settings(BaseSettings):
     max_message_bytes: int = Field(
         65_536, ge=1024, description="largest accepted request body or WebSocket message"
     )
+
+    # Access, privacy and overload (docs/SECURITY.md).
+    api_keys_file: Path | None = Field(
+        None, description="file of API keys ('key' or 'name key sessions particles frames/s')"
+    )
+    insecure_open: bool = Field(
+        False, description="allow running without API keys on a host other than loopback"
+    )
+    allowed_origins: Annotated[list[str], NoDecode] = Field(
+        default_factory=list,
+        description="browser origins allowed for CORS and WebSocket (comma or JSON list); "
+        "same origin only when empty",
+    )
+    viser_host: str = Field("127.0.0.1", description="address the viser view listens on")
+    key_default_sessions: int = Field(
+        10, ge=1, description="sessions of a key whose line gives no quota"
+    )
+    key_default_frames_per_s: float = Field(
+        50.0, gt=0, description="frames per second of a key whose line gives no quota"
+    )
+    max_queued_frames: int = Field(
+        2, ge=1, le=16, description="frames a session holds while busy; later ones are merged"
+    )
+    max_waiting_steps: int = Field(
+        64, ge=1, description="filter steps waiting for a thread before new sessions get 503"
+    )
+    fair_steps: bool = Field(
+        True, description="filter steps take turns between keys (false: arrival order)"
+    )
+    steps_per_key: int = Field(
+        0,
+        ge=0,
+        description="most step threads one key may use at once (0: all threads but one)",
+    )
+    demo_walk_max_s: float = Field(
+        600.0, gt=0, description="a demo walk started from the view ends after this long"
+    )
+
+    @field_validator("allowed_origins", mode="before")
+    @classmethod
+    def _origins(cls, value: object) -> object:
+        """A comma-separated list or a JSON list; origins are compared without a final '/'."""
+        if isinstance(value, str):
+            text = value.strip()
+            value = json.loads(text) if text.startswith("[") else text.split(",")
+        if isinstance(value, list):
+            return [str(v).strip().rstrip("/") for v in value if str(v).strip()]
+        return value
 
 
 @lru_cache

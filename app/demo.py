@@ -11,14 +11,16 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
+import math
 from dataclasses import dataclass, replace
 
 import numpy as np
 
-from app.api.schemas import Frame, SessionCreate
-from app.localization.geometry import wrap_angle
+from app.localization.compass import CompassReading
 from app.localization.types import Odometry
-from app.service.sessions import SessionManager, SessionNotFound
+from app.maps.geometry import wrap_angle
+from app.service.sessions import LimitReached, SessionManager, SessionNotFound
+from app.service.types import FrameInput, SensorSpec, SessionSpec
 from app.simulation.simulator import SimFrame, simulate
 from app.simulation.walks import demo_config
 
@@ -34,6 +36,21 @@ class DemoSettings:
     particles: int = 10_000
     seed: int = 0
     speed: float = 1.0  # playback speed; 1.0 is real time
+    share_view: bool = False  # list the walk's session in the live view
+    max_duration_s: float | None = None  # end the walk (and its session) after this long
+
+
+def frame_input_of(frame: SimFrame) -> FrameInput:
+    """A simulated frame as the service takes it (the ground truth rides along for the view)."""
+    return FrameInput(
+        timestamp=frame.t,
+        odometry=frame.odometry,
+        detections=tuple(frame.detections),
+        truth=frame.truth,
+        heading=None
+        if frame.compass_rad is None
+        else CompassReading(frame.compass_rad, math.radians(frame.compass_std_deg or 20.0)),
+    )
 
 
 class DemoWalk:
@@ -46,6 +63,7 @@ class DemoWalk:
         self._kidnap = False
         self._rng = np.random.default_rng(settings.seed)
         self._task: asyncio.Task[None] | None = None
+        self.finished = False
 
     def kidnap(self) -> None:
         """Carry the person elsewhere at the next frame (no odometry for that frame)."""
@@ -81,11 +99,29 @@ class DemoWalk:
     async def run(self) -> None:
         s = self.settings
         session = await self.manager.create(
-            SessionCreate(
-                map=s.map_name, particles=s.particles, seed=s.seed, sensor={"fov_deg": s.fov_deg}
+            SessionSpec(
+                map_name=s.map_name,
+                particles=s.particles,
+                seed=s.seed,
+                sensor=SensorSpec(fov_deg=s.fov_deg),
+                share_view=s.share_view,
             )
         )
         self.session_id = session.id
+        try:
+            if s.max_duration_s is None:
+                await self._walk(session.id)
+            else:
+                with contextlib.suppress(TimeoutError):
+                    await asyncio.wait_for(self._walk(session.id), s.max_duration_s)
+                log.info("demo walk reached its time limit and ends")
+                with contextlib.suppress(SessionNotFound):
+                    await self.manager.delete(session.id)
+        finally:
+            self.finished = True
+
+    async def _walk(self, session_id: str) -> None:
+        s = self.settings
         period = 1.0 / 5.0 / max(s.speed, 1e-3)
         frames = self._frames()
         i = 0
@@ -100,11 +136,10 @@ class DemoWalk:
                 frames, i = self._frames(), 0
                 turn = float(wrap_angle(frames[0].truth.theta_rad - last.theta_rad))
                 frames[0] = replace(frames[0], odometry=Odometry(0.0, 0.0, turn))
-            frame = Frame.model_validate(frames[i].to_contract())
             try:
-                await self.manager.process(session.id, frame)
-            except SessionNotFound:
-                log.info("demo session ended; demo walk stops")
+                await self.manager.process(session_id, frame_input_of(frames[i]))
+            except (SessionNotFound, LimitReached):
+                log.info("demo session ended (or the service is restarting); demo walk stops")
                 return
             i += 1
             next_at += period

@@ -7,56 +7,88 @@ import contextlib
 import importlib.util
 import logging
 from collections.abc import AsyncIterator
-from pathlib import Path
 
 from fastapi import FastAPI
+from fastapi.middleware.cors import CORSMiddleware
 from fastapi.staticfiles import StaticFiles
 
+from app.api.access import AccessControl, startup_keys
 from app.api.errors import install_error_handlers
 from app.api.limits import BodySizeLimit
+from app.api.redact import install_redaction
 from app.api.routes import health, maps, metrics, sessions, speech
+from app.api.streams import StreamRegistry
 from app.config import Settings, get_settings
-from app.localization.map import SemanticMap, bundled_maps_dir, load_map_dir
+from app.maps.check import load_map_dirs
+from app.maps.model import SemanticMap
+from app.resources import bundled_maps_dir, static_dir
 from app.service.metrics import Metrics
 from app.service.sessions import SessionManager
 
 log = logging.getLogger("bearings")
 
-STATIC_DIR = Path(__file__).resolve().parents[1] / "static"
-
 
 def load_maps(settings: Settings) -> dict[str, SemanticMap]:
-    """Bundled maps plus every ``--maps`` directory (later directories win on a name clash)."""
-    maps = load_map_dir(bundled_maps_dir())
-    for directory in settings.maps:
-        maps.update(load_map_dir(directory))
+    """Bundled maps plus every ``--maps`` directory (later directories win on a name clash).
+
+    Each map is checked and prepared (grids built or read from the cache) here, at
+    start-up, never inside a request; a file with errors is skipped and logged.
+    """
+    maps, _ = load_map_dirs([bundled_maps_dir(), *settings.maps], cache_dir=settings.cache_dir)
     return maps
 
 
+async def drain(app: FastAPI, timeout_s: float = 30.0) -> None:
+    """Before the server closes its connections: take no new frames, answer every frame
+    accepted (waiting at most ``timeout_s``), then close each WebSocket with 1012 and a
+    reason to reconnect."""
+    streams: StreamRegistry = app.state.streams
+    streams.stop_reading()
+    manager = getattr(app.state, "manager", None)
+    if manager is not None:
+        try:
+            await asyncio.wait_for(manager.shutdown(), timeout_s)
+        except TimeoutError:
+            log.error("frames still unanswered after %.0f s of shutdown; closing anyway", timeout_s)
+    await streams.close_all()
+
+
 def create_app(settings: Settings | None = None, *, demo: bool = False) -> FastAPI:
-    """The service: REST + WebSocket API, metrics, the demo page and (optionally) the view."""
+    """The service: REST + WebSocket API, metrics, the demo page and (optionally) the view.
+
+    Raises :class:`~app.api.access.StartupRefused` when the access settings are unsafe
+    or the key file is bad (docs/SECURITY.md).
+    """
     settings = settings or get_settings()
+    keys = startup_keys(settings)
+    install_redaction()
     metrics_ = Metrics()
 
     @contextlib.asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
+        from app.guidance.planner import warm_up as warm_up_guidance
         from app.localization.filter import warm_up
 
-        await asyncio.to_thread(warm_up)
-        manager = SessionManager(load_maps(settings), settings, metrics_)
+        # Kernels compile (or load from numba's cache) while the maps are checked and
+        # prepared: both release the GIL for most of their work.
+        _, maps_ = await asyncio.gather(
+            asyncio.to_thread(warm_up), asyncio.to_thread(load_maps, settings)
+        )
+        await asyncio.to_thread(warm_up_guidance)
+        manager = SessionManager(maps_, settings, metrics_)
         app.state.manager = manager
         tasks = [asyncio.create_task(manager.run_sweeper())]
         view = None
         if settings.viser:
             from app.viz import LiveView
 
-            view = LiveView(manager, port=settings.viser_port, host=settings.host)
+            view = LiveView(manager, port=settings.viser_port, host=settings.viser_host)
             view.start()
             app.state.view = view
         if demo:
             from app.demo import run_demo_walk
 
-            tasks.append(asyncio.create_task(run_demo_walk(manager)))
+            tasks.append(asyncio.create_task(run_demo_walk(manager, share_view=True)))
         try:
             yield
         finally:
@@ -78,7 +110,19 @@ def create_app(settings: Settings | None = None, *, demo: bool = False) -> FastA
     app.state.settings = settings
     app.state.metrics = metrics_
     app.state.view = None
+    app.state.keys = keys
+    app.state.streams = StreamRegistry()
     app.add_middleware(BodySizeLimit, max_bytes=settings.max_message_bytes)
+    app.add_middleware(AccessControl, keys=keys, allowed_origins=settings.allowed_origins)
+    if settings.allowed_origins:  # outermost: answers CORS preflights without a key
+        app.add_middleware(
+            CORSMiddleware,
+            allow_origins=settings.allowed_origins,
+            allow_methods=["GET", "POST", "PUT", "DELETE"],
+            allow_headers=["authorization", "content-type"],
+            expose_headers=["retry-after"],
+            max_age=600,
+        )
     install_error_handlers(app)
     for module in (health, metrics, maps, sessions, speech):
         app.include_router(module.router)
@@ -86,6 +130,5 @@ def create_app(settings: Settings | None = None, *, demo: bool = False) -> FastA
         from app.api.routes import demo as demo_routes
 
         app.include_router(demo_routes.router)
-    if STATIC_DIR.is_dir():
-        app.mount("/", StaticFiles(directory=STATIC_DIR, html=True), name="static")
+    app.mount("/", StaticFiles(directory=static_dir(), html=True), name="static")
     return app

@@ -1,28 +1,94 @@
-"""Run the service (and the viser view) with uvicorn."""
+"""Run the service (and the viser view) with uvicorn.
+
+:func:`uvicorn_config` is the one place a server is configured from the settings (the
+tests start theirs through it too): WebSocket messages larger than the limit are
+refused by the protocol before they are buffered, and every log handler redacts
+session ids and keys. :class:`BearingsServer` drains the service before uvicorn closes
+its connections, so a SIGTERM answers every frame accepted and closes WebSockets with
+1012 and a reason (app.main.drain).
+"""
 
 from __future__ import annotations
 
+import copy
 import logging
+import socket
+import sys
 
 import uvicorn
+from fastapi import FastAPI
+from uvicorn.config import LOGGING_CONFIG
 
+from app.api.access import StartupRefused
 from app.config import Settings
-from app.main import create_app
+from app.main import create_app, drain
+
+log = logging.getLogger("bearings")
+
+#: A WebSocket message up to this many times the message limit gets a readable error
+#: (the connection stays open); a larger one is refused by the protocol (close 1009)
+#: before it is read into memory.
+WS_FRAME_SLACK = 2
+
+
+def log_config(level: str) -> dict[str, object]:
+    """uvicorn's logging configuration, plus redaction on every handler and a root logger."""
+    config = copy.deepcopy(LOGGING_CONFIG)
+    config["filters"] = {"redact": {"()": "app.api.redact.RedactFilter"}}
+    for handler in config["handlers"].values():
+        handler["filters"] = ["redact"]
+    config["loggers"]["bearings"] = {"handlers": ["default"], "level": level.upper()}
+    return config
+
+
+def uvicorn_config(app: FastAPI, settings: Settings, **overrides: object) -> uvicorn.Config:
+    """The uvicorn configuration for ``app`` under ``settings`` (size limits, logging)."""
+    options: dict[str, object] = {
+        "host": settings.host,
+        "port": settings.port,
+        "log_level": settings.log_level.lower(),
+        "log_config": log_config(settings.log_level),
+        "ws_max_size": WS_FRAME_SLACK * settings.max_message_bytes,
+        "ws_per_message_deflate": False,  # a small compressed message must not inflate to MBs
+        "h11_max_incomplete_event_size": max(16_384, settings.max_message_bytes),
+        "timeout_graceful_shutdown": 30,
+    }
+    options.update(overrides)
+    return uvicorn.Config(app, **options)  # type: ignore[arg-type]
+
+
+class BearingsServer(uvicorn.Server):
+    """uvicorn's server, draining the service first when asked to stop."""
+
+    def __init__(self, config: uvicorn.Config, app: FastAPI) -> None:
+        super().__init__(config)
+        self.app = app
+
+    async def shutdown(self, sockets: list[socket.socket] | None = None) -> None:
+        for server in self.servers:  # no new connections while draining
+            server.close()
+        try:
+            await drain(self.app)
+        except Exception:  # the server must still stop
+            log.exception("draining the service failed")
+        await super().shutdown(sockets)
 
 
 def run(settings: Settings, *, demo: bool = False) -> int:
     """Serve until interrupted; print where to look first."""
-    logging.basicConfig(
-        level=settings.log_level.upper(), format="%(levelname)s %(name)s %(message)s"
-    )
-    app = create_app(settings, demo=demo)
+    try:
+        app = create_app(settings, demo=demo)
+    except StartupRefused as exc:
+        print(f"bearings: {exc}", file=sys.stderr)
+        return 2
     shown = "localhost" if settings.host in ("0.0.0.0", "::") else settings.host
     print(f"Bearings API and demo page: http://{shown}:{settings.port}/  (docs: /docs)")
     if settings.viser:
-        print(f"Bearings live view (viser): http://{shown}:{settings.viser_port}/")
+        print(f"Bearings live view (viser): http://{settings.viser_host}:{settings.viser_port}/")
     if demo:
         print(
             "Demo: a simulated walk in the paper office is running; watch the particles converge."
         )
-    uvicorn.run(app, host=settings.host, port=settings.port, log_level=settings.log_level.lower())
+    server = BearingsServer(uvicorn_config(app, settings), app)
+    server.run()
     return 0

@@ -19,7 +19,6 @@ from app.localization.filter import ParticleFilter, warm_up
 from app.localization.resampling import effective_sample_size, systematic_resample
 from app.localization.sensor import normalized_residuals, prepare_observation
 from app.localization.types import Detection, Odometry
-from app.localization.visibility import visibility_grid
 
 
 def main() -> None:
@@ -55,7 +54,7 @@ def main() -> None:
         idx = systematic_resample(w, pf.n, pf.rng)
         _ = pf.x[idx], pf.y[idx], pf.theta[idx], np.zeros(pf.n)
 
-    grid = visibility_grid(semantic_map)
+    grid = semantic_map.visibility
     row = grid.visible(raw.x, raw.y)[0]
 
     stages = [

@@ -23,7 +23,8 @@ import httpx
 import numpy as np
 import websockets
 
-from app.localization.map import bundled_maps_dir, load_map
+from app.maps.model import load_map
+from app.resources import bundled_maps_dir
 from app.simulation.scenarios import paper_config
 from app.simulation.simulator import simulate
 

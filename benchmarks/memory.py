@@ -16,8 +16,8 @@ import numpy as np
 
 from app.api.schemas import Frame, SessionCreate
 from app.config import Settings
-from app.localization.map import bundled_maps_dir, load_map_dir
-from app.localization.visibility import visibility_grid
+from app.maps.model import load_map_dir
+from app.resources import bundled_maps_dir
 from app.service.metrics import Metrics
 from app.service.sessions import SessionManager
 from app.simulation.scenarios import paper_config
@@ -27,7 +27,7 @@ from app.simulation.simulator import simulate
 async def measure(particles: int, frames: int) -> dict[str, float]:
     maps = load_map_dir(bundled_maps_dir())
     office = maps["paper_office"]
-    visibility_grid(office)
+    _ = office.visibility
     _ = office.free_space
     manager = SessionManager(maps, Settings(viser=False, max_particles=10**6), Metrics())
     sim = [

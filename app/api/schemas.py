@@ -9,7 +9,7 @@ from __future__ import annotations
 from datetime import datetime
 from typing import Annotated, Literal
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 Finite = Annotated[float, Field(allow_inf_nan=False)]
 
@@ -33,8 +33,19 @@ class OdometryIn(_In):
     )
 
 
+class BoxIn(_In):
+    """A detector's box, horizontally: its left and right image columns (pixels).
+
+    Columns grow to the right from 0 at the left edge. On a 360-degree image a box with
+    ``u_min_px > u_max_px`` runs over the right edge and continues at the left one.
+    """
+
+    u_min_px: Finite = Field(ge=0, description="left column of the box, pixels")
+    u_max_px: Finite = Field(ge=0, description="right column of the box, pixels")
+
+
 class DetectionIn(_In):
-    """One detection from the 360-degree camera's object detector."""
+    """One detection from the camera's object detector: a bearing or a pixel box."""
 
     cls: str = Field(
         alias="class",
@@ -43,12 +54,35 @@ class DetectionIn(_In):
         description="object class, a lower-case word such as door; classes the map "
         "lacks are ignored and reported in warnings",
     )
-    bearing_deg: Finite = Field(
+    bearing_deg: Finite | None = Field(
+        None,
         description="direction of the object's centre relative to straight ahead, degrees, "
         "counter-clockwise positive (left +90, right -90); any real value, wrapped to "
-        "(-180, 180]"
+        "(-180, 180]. Give this or box.",
+    )
+    box: BoxIn | None = Field(
+        None,
+        description="addition: the detector's pixel box instead of bearing_deg; its "
+        "horizontal centre becomes the bearing through the session's camera",
     )
     score: Finite = Field(1.0, ge=0.0, le=1.0, description="detection confidence in [0, 1]")
+
+    @model_validator(mode="after")
+    def _bearing_or_box(self) -> DetectionIn:
+        if (self.bearing_deg is None) == (self.box is None):
+            raise ValueError("give exactly one of bearing_deg and box")
+        return self
+
+
+class HeadingIn(_In):
+    """The phone compass: an absolute heading in the map frame."""
+
+    heading_deg: Finite = Field(
+        ge=-3600, le=3600, description="heading, degrees counter-clockwise from the map's +x"
+    )
+    std_deg: Finite = Field(
+        20.0, gt=0.0, le=180.0, description="the compass's accuracy (standard deviation), degrees"
+    )
 
 
 class TruthIn(_In):
@@ -70,6 +104,9 @@ class Frame(_In):
     describe: bool = Field(False, description="ask for a full description now ('Where am I?')")
     truth: TruthIn | None = Field(
         None, description="addition: a simulation's ground truth, shown in the view only"
+    )
+    heading: HeadingIn | None = Field(
+        None, description="the phone compass's heading, or null (heavy-tailed: may be off)"
     )
 
 
@@ -101,6 +138,39 @@ class InitialPoseIn(_In):
     std_theta_deg: Finite = Field(10.0, gt=0.0, le=360.0, description="heading std, degrees")
 
 
+class EquirectangularCameraIn(_In):
+    """A 360-degree camera: ``bearing = 360 * (W/2 - u) / W`` degrees."""
+
+    model: Literal["equirectangular"]
+    width_px: int = Field(ge=2, le=1_000_000, description="image width, pixels")
+    yaw_offset_deg: Finite = Field(
+        0.0, ge=-360, le=360, description="camera forward relative to body forward, CCW positive"
+    )
+
+
+class PinholeCameraIn(_In):
+    """An ordinary phone camera: ``bearing = atan((cx - u) / fx)``; the FOV follows."""
+
+    model: Literal["pinhole"]
+    width_px: int = Field(ge=2, le=1_000_000, description="image width, pixels")
+    fx_px: Finite = Field(gt=0, le=1e7, description="horizontal focal length, pixels")
+    cx_px: Finite = Field(description="principal point column, pixels (0 to width_px)")
+    yaw_offset_deg: Finite = Field(
+        0.0, ge=-360, le=360, description="camera forward relative to body forward, CCW positive"
+    )
+
+    @model_validator(mode="after")
+    def _centre_in_image(self) -> PinholeCameraIn:
+        if not 0 <= self.cx_px <= self.width_px:
+            raise ValueError(
+                f"cx_px {self.cx_px:g} must lie within the image (0 to width_px {self.width_px})"
+            )
+        return self
+
+
+CameraIn = Annotated[EquirectangularCameraIn | PinholeCameraIn, Field(discriminator="model")]
+
+
 class SessionCreate(_In):
     map: str = Field(min_length=1, max_length=200, description="name of a map from GET /maps")
     particles: int | None = Field(
@@ -112,6 +182,38 @@ class SessionCreate(_In):
     )
     sensor: SensorSettings = Field(default_factory=SensorSettings)
     feedback: FeedbackSettings = Field(default_factory=FeedbackSettings)
+    camera: CameraIn | None = Field(
+        None,
+        description="the phone camera, so detections may give pixel boxes; its field of "
+        "view replaces sensor.fov_deg",
+    )
+    share_view: bool = Field(
+        False,
+        description="addition: list this session in the live view (private by default); "
+        "see docs/SECURITY.md",
+    )
+
+
+class DestinationIn(_In):
+    """Where to guide to: exactly one of label, class, region, or a point x, y."""
+
+    label: str | None = Field(None, min_length=1, max_length=200, description="an object's label")
+    cls: str | None = Field(
+        None, alias="class", min_length=1, max_length=64, description="nearest object of a class"
+    )
+    region: str | None = Field(None, min_length=1, max_length=200, description="a region's name")
+    x: Finite | None = Field(None, description="a point, metres (with y)")
+    y: Finite | None = Field(None, description="a point, metres (with x)")
+
+    @model_validator(mode="after")
+    def _one_target(self) -> DestinationIn:
+        given = [self.label is not None, self.cls is not None, self.region is not None]
+        point = self.x is not None or self.y is not None
+        if point and (self.x is None or self.y is None):
+            raise ValueError("a point destination needs both x and y")
+        if sum(given) + point != 1:
+            raise ValueError("give exactly one of label, class, region, or x and y")
+        return self
 
 
 # ----------------------------------------------------------------------------- output
@@ -148,6 +250,36 @@ class FeedbackOut(_Out):
     items: list[FeedbackItemOut]
 
 
+class NextTurnOut(_Out):
+    clock: int = Field(description="clock direction 1..12 of the next turn of the path")
+    bearing_deg: float = Field(description="its bearing, degrees CCW positive")
+    distance_m: float = Field(description="straight-line distance to the turn, metres")
+    then_clock: int = Field(
+        description="addition: the turn to take there, as a clock direction relative to "
+        "the direction walked until then"
+    )
+
+
+class GuidanceOut(_Out):
+    target: str = Field(description="the destination as spoken")
+    clock: int = Field(description="clock direction 1..12 of the target")
+    bearing_deg: float = Field(description="bearing of the target, degrees CCW positive")
+    distance_m: float = Field(description="straight-line distance to the target, metres")
+    path_m: float = Field(description="walking distance along the shortest path, metres")
+    next: NextTurnOut | None = Field(
+        description="the next turn of the path; null when the target is in a straight line"
+    )
+    arrived: bool = Field(description="within 1 m of the target (walking distance)")
+
+
+class DestinationOut(_Out):
+    target: str = Field(description="the destination as it will be spoken")
+    kind: Literal["label", "class", "region", "point"]
+    points: list[tuple[float, float]] = Field(
+        description="candidate end points (x, y) in metres; empty for a region"
+    )
+
+
 class FrameResult(_Out):
     seq: int = Field(description="1-based number of this frame in the session")
     pose: PoseOut
@@ -162,6 +294,9 @@ class FrameResult(_Out):
     hypotheses: list[HypothesisOut]
     feedback: FeedbackOut
     warnings: list[str]
+    guidance: GuidanceOut | None = Field(
+        None, description="directions to the destination; null without one or while not converged"
+    )
 
 
 class SessionOut(_Out):

@@ -19,8 +19,8 @@ import numpy as np
 
 from app.experiments.pcrb import pcrb_position_m
 from app.experiments.runner import Run
-from app.localization.map import SemanticMap
 from app.localization.types import Pose
+from app.maps.model import SemanticMap
 from app.simulation.camera import CameraModel, visible_objects
 from app.simulation.simulator import simulate
 

@@ -21,7 +21,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from app.localization.map import SemanticMap, bundled_maps_dir, load_map, parse_map
+from app.maps.model import SemanticMap, load_map, parse_map
+from app.resources import bundled_maps_dir
 from app.simulation.scenarios import PAPER_PATH
 
 

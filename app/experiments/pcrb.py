@@ -24,8 +24,8 @@ from collections.abc import Sequence
 import numpy as np
 from numpy.typing import NDArray
 
-from app.localization.map import SemanticMap
 from app.localization.types import Pose
+from app.maps.model import SemanticMap
 from app.simulation.camera import CameraModel, visible_objects
 
 #: Added to the first frame's information so that it can be inverted even when that

@@ -10,8 +10,9 @@ import numpy as np
 
 from app.experiments.protocol import Cell
 from app.localization.filter import ParticleFilter
-from app.localization.geometry import wrap_angle
-from app.localization.map import SemanticMap, bundled_maps_dir, load_map
+from app.maps.geometry import wrap_angle
+from app.maps.model import SemanticMap, load_map
+from app.resources import bundled_maps_dir
 from app.simulation.simulator import simulate
 
 

@@ -14,7 +14,8 @@ import numpy as np
 from app.feedback import FeedbackOptions, Narrator
 from app.localization.config import FilterConfig
 from app.localization.filter import ParticleFilter
-from app.localization.map import bundled_maps_dir, load_map
+from app.maps.model import load_map
+from app.resources import bundled_maps_dir
 from app.simulation.scenarios import paper_config
 from app.simulation.simulator import simulate
 

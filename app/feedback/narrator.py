@@ -31,10 +31,9 @@ from app.feedback.phrasing import (
     direction_phrase,
     distance_phrase,
 )
-from app.localization.geometry import wrap_angle
-from app.localization.map import SemanticMap
 from app.localization.types import Detection, Estimate
-from app.localization.visibility import visibility_grid
+from app.maps.geometry import wrap_angle
+from app.maps.model import SemanticMap
 
 #: Repeat an unchanged announcement after this long (seconds).
 REPEAT_AFTER_S = 60.0
@@ -101,12 +100,17 @@ class Narrator:
         timestamp_s: float | None,
         describe: bool = False,
         fov_deg: float = 360.0,
+        fov_centre_deg: float = 0.0,
     ) -> Feedback:
-        """Feedback for one frame (see the module docstring for the rules)."""
+        """Feedback for one frame (see the module docstring for the rules).
+
+        ``fov_deg`` and ``fov_centre_deg``: the camera's field of view and the direction
+        of its middle relative to the body (a yawed phone camera).
+        """
         now = time.monotonic() if timestamp_s is None else float(timestamp_s)
         dets = [d for d in detections if d.score > 0 and d.cls in self.map.class_members]
         if estimate.converged:
-            return self._located(estimate, dets, now, describe, fov_deg)
+            return self._located(estimate, dets, now, describe, (fov_deg, fov_centre_deg))
         return self._uncertain(estimate, dets, now, describe)
 
     # ------------------------------------------------------------- not located
@@ -170,13 +174,13 @@ class Narrator:
         dets: list[Detection],
         now: float,
         describe: bool,
-        fov_deg: float,
+        fov: tuple[float, float],
     ) -> Feedback:
         opts = self.options
         certain = max(estimate.std_x_m, estimate.std_y_m) <= CERTAIN_STD_M and (
             estimate.protection_m is None or estimate.protection_m <= CERTAIN_PROTECTION_M
         )
-        ordered = self._ordered_objects(estimate, dets, fov_deg)
+        ordered = self._ordered_objects(estimate, dets, fov)
         pose_xy = np.array([estimate.x, estimate.y])
         items: list[FeedbackItem] = []
         for n in ordered[: opts.max_items]:
@@ -218,16 +222,18 @@ class Narrator:
         return Feedback(" ".join(parts), items)
 
     def _ordered_objects(
-        self, estimate: Estimate, dets: list[Detection], fov_deg: float
+        self, estimate: Estimate, dets: list[Detection], fov: tuple[float, float]
     ) -> list[int]:
         """Objects matched to this frame's detections first, then the nearest visible others."""
         pose_xy = np.array([[estimate.x, estimate.y]])
         # Line of sight from the map's precomputed grid (the cell around the pose).
-        visible = visibility_grid(self.map).visible(estimate.x, estimate.y)[0]
+        visible = self.map.visibility.visible(estimate.x, estimate.y)[0]
         rel = self.map.object_xy - pose_xy
         dist = np.hypot(rel[:, 0], rel[:, 1])
         bearing = wrap_angle(np.arctan2(rel[:, 1], rel[:, 0]) - estimate.theta_rad)
-        in_view = visible & (np.abs(bearing) <= math.radians(fov_deg) / 2 + 1e-9)
+        fov_deg, centre_deg = fov
+        off = wrap_angle(bearing - math.radians(centre_deg))
+        in_view = visible & (np.abs(off) <= math.radians(fov_deg) / 2 + 1e-9)
         matched: list[int] = []
         if dets:
             # Each detection's best visible object of its class, all detections at once.

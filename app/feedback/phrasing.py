@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from typing import Literal
 
-from app.localization.geometry import wrap_deg
+from app.maps.geometry import wrap_deg
 
 Style = Literal["clock", "left_right", "degrees"]
 Units = Literal["metric", "imperial"]

@@ -23,6 +23,9 @@ class FilterConfig:
     class_bearing_std_deg: dict[str, float] = field(default_factory=dict)
     #: Camera field of view centred on the heading (degrees, 0 < fov <= 360).
     fov_deg: float = 360.0
+    #: Direction of the middle of the field of view relative to the body's forward
+    #: (degrees, CCW positive): a yawed or off-centre camera (app.localization.camera).
+    fov_centre_deg: float = 0.0
     #: Maximum detection range in metres (None: unlimited).
     max_range_m: float | None = None
 

@@ -23,9 +23,9 @@ from numba import njit
 from numpy.typing import NDArray
 
 from app.localization.fastmath import FAST, sincos
-from app.localization.geometry import wrap_angle
 from app.localization.resampling import systematic_resample
 from app.localization.types import Estimate, Hypothesis
+from app.maps.geometry import wrap_angle
 
 
 @dataclass(frozen=True)

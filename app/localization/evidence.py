@@ -59,14 +59,14 @@ from numpy.typing import NDArray
 
 from app.localization import sensor_kernel
 from app.localization.config import FilterConfig
-from app.localization.geometry import wrap_angle
-from app.localization.map import SemanticMap
 from app.localization.motion import motion_log_penalty, sample_motion
 from app.localization.recovery import sample_from_observation
 from app.localization.resampling import systematic_resample
 from app.localization.sensor import Observation
 from app.localization.types import Hypothesis, Odometry
-from app.localization.visibility import VisibilityGrid
+from app.maps.geometry import wrap_angle
+from app.maps.model import SemanticMap
+from app.maps.visibility import VisibilityGrid
 
 
 @dataclass(frozen=True)

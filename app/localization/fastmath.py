@@ -5,8 +5,8 @@ numpy's Gaussian sampler, one particle at a time; at 10,000 particles those call
 cost more than the whole sensor model. The two helpers here are branch-free
 polynomial and table forms that the compiler vectorizes:
 
-* :func:`sincos`: sine and cosine of any angle to about 1e-9 (Cody-Waite reduction
-  to [-pi/4, pi/4], Taylor polynomials of degree 9 and 10 there).
+* :func:`sincos`: sine and cosine of any angle within ``SINCOS_MAX_ERROR`` (Cody-Waite
+  reduction to [-pi/4, pi/4], Taylor polynomials of degree 9 and 10 there).
 * :func:`fill_normal`: standard-normal noise from raw 32-bit random words through a
   tabulated inverse CDF (``NORMAL_KNOTS`` intervals, linear interpolation). The tails
   are cut at ``NORMAL_TAIL_SIGMA`` standard deviations and the table is rescaled so
@@ -22,6 +22,8 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
+from app.maps.geometry import grid_cell as _grid_cell_arithmetic
+
 #: Compiler liberties every kernel takes: no signed zeros, reciprocals, fused
 #: multiply-add, fast approximate functions and reassociation (which vectorizes
 #: reductions). Never ``nnan``/``ninf``: -inf marks an impossible particle.
@@ -31,10 +33,15 @@ _HALF_PI_HI = 1.5707963267341256  # pi/2 split in two for an exact reduction
 _HALF_PI_LO = 6.077100506506192e-11
 _TWO_OVER_PI = 0.6366197723675814
 
+#: Absolute error bound of :func:`sincos` for |t| < 1e6: the first term the sine's
+#: polynomial leaves out, (pi/4)^11 / 11! = 1.76e-9 (the cosine's, (pi/4)^12 / 12!, is
+#: smaller), plus float64 rounding of the polynomial and the reduction (< 1e-13).
+SINCOS_MAX_ERROR = (math.pi / 4) ** 11 / math.factorial(11) + 1e-13
+
 
 @njit(cache=True, inline="always", fastmath=FAST)
 def sincos(t: float) -> tuple[float, float]:  # pragma: no cover - compiled
-    """(sin t, cos t), absolute error below 2e-9 for |t| < 1e6, branch-free."""
+    """(sin t, cos t), absolute error below ``SINCOS_MAX_ERROR`` for |t| < 1e6, branch-free."""
     k = np.floor(t * _TWO_OVER_PI + 0.5)
     r = (t - k * _HALF_PI_HI) - k * _HALF_PI_LO
     r2 = r * r
@@ -49,19 +56,9 @@ def sincos(t: float) -> tuple[float, float]:  # pragma: no cover - compiled
     return sin_t, cos_t
 
 
-@njit(cache=True, inline="always", error_model="numpy")
-def grid_cell(x, y, origin_x, origin_y, inv_res, rows, cols):  # fmt: skip  # pragma: no cover
-    """(row-major flat index of the cell holding (x, y), clipped onto the grid; inside?).
-
-    The compiled form of :meth:`VisibilityGrid.cells` / :meth:`FreeSpaceGrid.cell_index`
-    for one point, branch-free so that the loops calling it vectorize.
-    """
-    fc = np.floor((x - origin_x) * inv_res)
-    fr = np.floor((y - origin_y) * inv_res)
-    inside = (fc >= 0.0) & (fc < cols) & (fr >= 0.0) & (fr < rows)
-    c = min(max(fc, 0.0), cols - 1.0)
-    r = min(max(fr, 0.0), rows - 1.0)
-    return int(r * cols + c), inside
+#: The compiled form of :func:`app.maps.geometry.grid_cell` (the same function, so
+#: kernels and numpy callers agree on every cell). Branch-free: loops calling it vectorize.
+grid_cell = njit(cache=True, inline="always", error_model="numpy")(_grid_cell_arithmetic)
 
 
 #: Intervals of the tabulated inverse normal CDF (a power of two).
@@ -109,6 +106,14 @@ def fill_normal(rng: np.random.Generator, n: int) -> NDArray[np.float32]:
 
 #: Beyond this |z| the softplus correction log(1 + e^-|z|) is below 2.1e-9: dropped.
 SOFTPLUS_SPAN = 20.0
+#: Absolute error bound of :func:`softplus`: the dropped correction log1p(e^-SPAN)
+#: (2.06e-9), plus the atanh series cut after s^14 with s <= 1/3 (the rest is below
+#: 2 s^17 / 17 / (1 - s^2) = 1.03e-9), plus float64 rounding (< 1e-12). The e^x polynomial's cut,
+#: x^11 / 11! relative with |x| <= SPAN / 32 (32 times that after five squarings), is
+#: below 1e-15 absolute once multiplied by e^-t itself.
+SOFTPLUS_MAX_ERROR = (
+    math.log1p(math.exp(-SOFTPLUS_SPAN)) + 2 * (1 / 3) ** 17 / 17 / (1 - 1 / 9) + 1e-12
+)
 #: Taylor coefficients of e^x, highest degree first (Horner): 1/10!, ..., 1/1!, 1.
 _EXP_TAYLOR = tuple(1.0 / math.factorial(k) for k in range(10, -1, -1))
 #: atanh series: log1p(u) = 2 s (1 + s^2/3 + ... + s^14/15), s = u / (2 + u).
@@ -117,7 +122,7 @@ _ATANH_SERIES = tuple(1.0 / k for k in range(15, 0, -2))
 
 @njit(cache=True, inline="always", fastmath=FAST, error_model="numpy")
 def softplus(z: float) -> float:  # pragma: no cover - compiled
-    """log(1 + e^z), absolute error below 5e-9, branch-free.
+    """log(1 + e^z), absolute error below ``SOFTPLUS_MAX_ERROR`` (3.1e-9), branch-free.
 
     softplus(z) = max(z, 0) + log1p(e^-|z|). e^-t for t <= SOFTPLUS_SPAN is the Taylor
     polynomial of e^(-t/32) squared five times; log1p(u) = 2 atanh(u / (2 + u)), an

@@ -17,6 +17,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from app.localization import sensor_kernel
+from app.localization.compass import CompassReading, compass_log_likelihood
 from app.localization.config import FilterConfig
 from app.localization.estimate import (
     ConvergenceGate,
@@ -26,9 +27,7 @@ from app.localization.estimate import (
     with_alternatives,
 )
 from app.localization.evidence import EvidenceTracker
-from app.localization.geometry import wrap_angle
 from app.localization.kld import kld_sample_size
-from app.localization.map import SemanticMap
 from app.localization.motion import motion_log_penalty, sample_motion
 from app.localization.recovery import AugmentedMCL, sample_from_observation
 from app.localization.resampling import (
@@ -39,7 +38,8 @@ from app.localization.resampling import (
 )
 from app.localization.sensor import Observation, normalized_residuals, prepare_observation
 from app.localization.types import Detection, Estimate, InitialPose, Odometry
-from app.localization.visibility import visibility_grid
+from app.maps.geometry import wrap_angle
+from app.maps.model import SemanticMap
 
 #: Share of a global start's particles drawn from the first observation.
 SEED_SHARE = 0.9
@@ -77,7 +77,7 @@ class ParticleFilter:
         self.map = semantic_map
         self.config = config or FilterConfig()
         self.rng = rng
-        self._vis = visibility_grid(semantic_map) if self.config.visibility else None
+        self._vis = semantic_map.visibility if self.config.visibility else None
         self._recovery = AugmentedMCL(self.config.alpha_slow, self.config.alpha_fast)
         self._gate = ConvergenceGate()
         #: Alternative places and their evidence (None with ``config.evidence`` off).
@@ -235,14 +235,24 @@ class ParticleFilter:
             self.x[slots], self.y[slots], self.theta[slots] = nx, ny, nt
         return True
 
-    def step(self, odometry: Odometry | None, detections: Sequence[Detection]) -> Estimate:
+    def step(
+        self,
+        odometry: Odometry | None,
+        detections: Sequence[Detection],
+        heading: CompassReading | None = None,
+    ) -> Estimate:
         """One full filter step: predict, correct, estimate, resample when due.
+
+        ``heading``, a compass reading, weights the particles' headings too
+        (:mod:`~app.localization.compass`).
 
         The estimate summarizes the weighted particles before resampling: resampling
         only adds noise to what they say (and to what the injected particles say).
         """
         self.predict(odometry)
         inject = self.correct(detections)
+        if heading is not None:
+            self.log_w = self.log_w + compass_log_likelihood(self.theta, heading)
         w = self.weights
         ess = effective_sample_size(w)
         raw = estimate_pose(self.x, self.y, self.theta, w, ess=ess, rng=self.rng)
@@ -346,7 +356,7 @@ def warm_up() -> None:
     enough for the wall test), resampling, clustering, KLD-sampling and the residual
     check.
     """
-    from app.localization.map import parse_map
+    from app.maps.model import parse_map
 
     tiny = parse_map(
         {

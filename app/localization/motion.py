@@ -17,9 +17,9 @@ from numpy.typing import NDArray
 
 from app.localization.config import FilterConfig
 from app.localization.fastmath import FAST, fill_normal, grid_cell, sincos
-from app.localization.geometry import GEOMETRY_EPS
-from app.localization.map import WALL_CLEARANCE_M, SemanticMap
 from app.localization.types import Odometry
+from app.maps.geometry import GEOMETRY_EPS
+from app.maps.model import WALL_CLEARANCE_M, SemanticMap
 
 #: When a frame carries no odometry the person may still have moved: diffuse this much.
 NO_ODOMETRY_STD_M = 0.15
@@ -114,7 +114,7 @@ def _free_check(x0, y0, x1, y1, mask, ox, oy, res, long_sq, walls, eps, penalty)
     inv = 1.0 / res
     for i in range(x1.shape[0]):
         cell, inside = grid_cell(x1[i], y1[i], ox, oy, inv, rows, cols)
-        free = inside and flat[cell]
+        free = inside and flat[int(cell)]
         dx = x1[i] - x0[i]
         dy = y1[i] - y0[i]
         if free and dx * dx + dy * dy > long_sq:
@@ -143,3 +143,21 @@ def motion_log_penalty(
         walls, GEOMETRY_EPS, penalty,
     )  # fmt: skip
     return penalty
+
+
+def compose_odometry(first: Odometry | None, then: Odometry | None) -> Odometry | None:
+    """One odometry equal to moving by ``first`` and then by ``then`` (composition in SE(2)).
+
+    ``then`` is expressed in the body frame reached after ``first``, so it is rotated by
+    ``first``'s turn before the translations add up; the turns add (not wrapped, so a
+    long turn keeps its size for the motion noise). Unknown motion (None) on either side
+    makes the whole motion unknown.
+    """
+    if first is None or then is None:
+        return None
+    c, s = np.cos(first.turn_rad), np.sin(first.turn_rad)
+    return Odometry(
+        forward_m=float(first.forward_m + c * then.forward_m - s * then.left_m),
+        left_m=float(first.left_m + s * then.forward_m + c * then.left_m),
+        turn_rad=float(first.turn_rad + then.turn_rad),
+    )

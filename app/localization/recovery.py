@@ -21,9 +21,9 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from app.localization.geometry import wrap_angle
-from app.localization.map import SemanticMap
 from app.localization.sensor import Observation
+from app.maps.geometry import wrap_angle
+from app.maps.model import SemanticMap
 
 #: Never replace more than this share of the particles in one frame.
 MAX_INJECTION = 0.5

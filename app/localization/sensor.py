@@ -20,7 +20,7 @@ Bearings' additions, each switchable in :class:`FilterConfig`:
 
 * ``visibility``: only objects inside the field of view, within range and in line of
   sight of the particle can explain a detection (line of sight from the per-map
-  :mod:`visibility grid <app.localization.visibility>`).
+  :mod:`visibility grid <app.maps.visibility>`).
 * ``clutter``: each detection's likelihood is a mixture (1 - eps) vonMises + eps
   uniform, eps = ``clutter_prob``; a detection that nothing explains (a false
   positive) then costs a bounded amount instead of killing the right particle.
@@ -40,8 +40,8 @@ from numba import njit
 from numpy.typing import NDArray
 
 from app.localization.config import FilterConfig
-from app.localization.map import SemanticMap
 from app.localization.types import Detection
+from app.maps.model import SemanticMap
 
 
 def scaled_bessel_i0(kappa: float) -> float:
@@ -168,7 +168,8 @@ def candidate_mask(
     dy = semantic_map.object_xy[objects, 1][None, :] - y[:, None]
     if config.fov_deg < 360.0:
         dist = np.hypot(dx, dy) + 1e-12
-        forward = (np.cos(theta)[:, None] * dx + np.sin(theta)[:, None] * dy) / dist
+        centre = theta + np.radians(config.fov_centre_deg)  # the field's middle
+        forward = (np.cos(centre)[:, None] * dx + np.sin(centre)[:, None] * dy) / dist
         ok &= forward >= np.cos(np.radians(config.fov_deg) / 2.0)
     if config.max_range_m is not None:
         ok &= dx * dx + dy * dy <= config.max_range_m**2
@@ -217,11 +218,11 @@ def log_likelihood_reference(
 
 @njit(cache=True, nogil=True, error_model="numpy")
 def _residuals(
-    x, y, theta, visible, check_fov, cos_half_fov, max_range_sq,
+    x, y, theta, visible, check_fov, cos_half_fov, fov_centre, max_range_sq,
     obj_xy, det_bearing, det_group, group_kappa, member_start, members, out,
 ):  # fmt: skip  # pragma: no cover - compiled
-    c = np.cos(theta)
-    s = np.sin(theta)
+    c = np.cos(theta + fov_centre)
+    s = np.sin(theta + fov_centre)
     two_pi = 2.0 * np.pi
     for k in range(det_bearing.shape[0]):
         g = det_group[k]
@@ -271,6 +272,7 @@ def normalized_residuals(
     _residuals(
         float(x), float(y), float(theta), visible, check_fov,
         float(np.cos(np.radians(config.fov_deg) / 2.0)),
+        float(np.radians(config.fov_centre_deg)),
         np.inf if max_range is None else float(max_range) ** 2,
         semantic_map.object_xy.reshape(-1, 2),
         obs.det_bearing, obs.det_group, obs.group_kappa, obs.member_start, obs.members, out,

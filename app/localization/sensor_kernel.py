@@ -8,10 +8,11 @@ bearing geometry needs no more) with an offset that pushes an invisible object o
 reach; every detection of the object's class keeps its best match (eq. 3, the cosine
 of the bearing error is a dot product); then the class-weighted, score-tempered
 log-likelihoods are summed (eq. 2). Inner loops run over particles and are branch-free
-so that they vectorize. The result matches the float64 reference within 1e-3 in
-log-likelihood wherever weights matter (float32 leaves a relative error near 1e-6 on
-hopeless particles). Compiled code is cached on disk; :func:`warm_up` compiles it at
-start-up so no request waits.
+so that they vectorize. The result differs from the float64 reference by float32
+rounding only, within the bound that
+:func:`app.localization.tolerances.log_likelihood_tolerance` derives (a few 1e-3 in
+log-likelihood where weights matter). Compiled code is cached on disk;
+:func:`warm_up` compiles it at start-up so no request waits.
 """
 
 from __future__ import annotations
@@ -22,9 +23,9 @@ from numpy.typing import NDArray
 
 from app.localization.config import FilterConfig
 from app.localization.fastmath import FAST, grid_cell, sincos, softplus
-from app.localization.map import SemanticMap
 from app.localization.sensor import Observation
-from app.localization.visibility import VisibilityGrid
+from app.maps.model import SemanticMap
+from app.maps.visibility import VisibilityGrid
 
 #: Particles per block: the block's working set (unit vectors, best matches of up to
 #: ~20 detections) stays within a 32 KB first-level cache.
@@ -37,7 +38,7 @@ HIDDEN = -4.0
 
 @njit(cache=True, fastmath=FAST, nogil=True, error_model="numpy")
 def _kernel(
-    x, y, theta, use_vis, grid, vis_bits, cos_half_fov, check_fov, max_range_sq,
+    x, y, theta, use_vis, grid, vis_bits, cos_half_fov, check_fov, fov_cos, fov_sin, max_range_sq,
     obj_xy, det_cos, det_sin, det_score, det_group,
     group_kappa, group_weight, group_log_floor, group_log_keep, member_start, members, out,
 ):  # fmt: skip  # pragma: no cover - compiled
@@ -51,6 +52,9 @@ def _kernel(
     check_range = max_range_sq < np.inf
     range_sq = f32(max_range_sq) if check_range else f32(0.0)
     half_fov = f32(cos_half_fov)
+    # The field of view's centre direction in the body frame (cos, sin).
+    fc = f32(fov_cos)
+    fs = f32(fov_sin)
     xs = np.empty(BLOCK, dtype=f32)
     ys = np.empty(BLOCK, dtype=f32)
     ct = np.empty(BLOCK, dtype=f32)
@@ -75,7 +79,7 @@ def _kernel(
             st[i] = f32(s)
         if use_vis:
             for i in range(m):  # the particle's grid cell, clipped onto the grid
-                cell[i] = grid_cell(bx[i], by[i], gx, gy, g_inv, g_rows, g_cols)[0]
+                cell[i] = int(grid_cell(bx[i], by[i], gx, gy, g_inv, g_rows, g_cols)[0])
             for w in range(n_words):
                 b_bits = bits[w]
                 for i in range(m):
@@ -102,7 +106,8 @@ def _kernel(
                         off[i] = f32(HIDDEN) * f32(one - ((b_bits[i] >> shift) & one))
                     if check_fov:
                         for i in range(m):
-                            off[i] = off[i] if fx[i] >= half_fov else f32(HIDDEN)
+                            inside = fx[i] * fc + fy[i] * fs >= half_fov
+                            off[i] = off[i] if inside else f32(HIDDEN)
                     if check_range:
                         for i in range(m):
                             dx = ox - xs[i]
@@ -184,6 +189,8 @@ def log_likelihood(
         vis_bits,
         float(np.cos(np.radians(config.fov_deg) / 2.0)),
         check_fov,
+        float(np.cos(np.radians(config.fov_centre_deg))),
+        float(np.sin(np.radians(config.fov_centre_deg))),
         float(max_range_sq),
         semantic_map.object_xy.reshape(-1, 2),
         obs.det_cos,

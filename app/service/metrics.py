@@ -25,3 +25,13 @@ class Metrics:
         self.sessions_created = Counter(
             "bearings_sessions_created", "Sessions created", registry=self.registry
         )
+        self.frames_merged = Counter(
+            "bearings_frames_merged",
+            "Frames merged into a waiting frame because the session was busy",
+            registry=self.registry,
+        )
+        self.frames_refused = Counter(
+            "bearings_frames_refused",
+            "Frames refused by a key's rate quota",
+            registry=self.registry,
+        )

@@ -1,62 +1,118 @@
 """Live sessions: each owns one particle filter and one narrator.
 
-Frames of one session run strictly in order, one at a time (an asyncio lock per
-session), and the filter work runs in a worker thread so the event loop, other
-sessions and ``/healthz`` stay responsive. A WebSocket disconnect does not end a
-session; ``DELETE`` or the idle timeout does.
+Frames of one session run strictly in order, one step at a time: a session's frames
+wait in a short queue that merges them when they come faster than the filter runs
+(:mod:`app.service.queueing`), and one task per busy session feeds them to the step
+threads, which are shared fairly between clients (:mod:`app.service.scheduler`). The
+event loop, other sessions and ``/healthz`` stay responsive. A session belongs to the
+principal (API key) that created it; to any other it does not exist. A WebSocket
+disconnect does not end a session; ``DELETE``, the idle timeout or a restart does.
 """
 
 from __future__ import annotations
 
 import asyncio
+import hashlib
+import hmac
 import json
 import logging
 import os
 import secrets
 import threading
 import time
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 
 import numpy as np
 
-from app.api.schemas import Frame, FrameResult, SessionCreate, SessionOut
 from app.config import Settings
-from app.feedback import FeedbackOptions, Narrator
+from app.feedback import Feedback, Narrator
+from app.feedback.guidance import GuidanceSpeaker
+from app.guidance import DestinationSpec, Guidance, Plan, Target, Unreachable, guide, plan_for
+from app.localization.camera import Camera
 from app.localization.config import FilterConfig
 from app.localization.filter import ParticleFilter
-from app.localization.map import SemanticMap
-from app.localization.types import Detection, Estimate, InitialPose, Pose
-from app.service.convert import detections_of, frame_result, odometry_of, truth_of
+from app.localization.types import Detection, Estimate, Pose
+from app.maps.model import SemanticMap
+from app.service.access import OPEN, Principal, TokenBucket
 from app.service.metrics import Metrics
+from app.service.queueing import FrameQueue, merged_warning
+from app.service.scheduler import FairExecutor
+from app.service.types import FrameInput, FrameOutcome, SessionSpec
 
 log = logging.getLogger("bearings.sessions")
 
+#: When this process started: a session id unknown to it may have ended with a restart.
+STARTED_AT = time.monotonic()
+#: Per-process secret of :func:`session_tag` (so a tag cannot be traced back to an id).
+_TAG_KEY = secrets.token_bytes(16)
+
+
+def session_tag(session_id: str) -> str:
+    """A short handle for logs and the view: a keyed hash, not a piece of the id."""
+    return hmac.new(_TAG_KEY, session_id.encode(), hashlib.sha256).hexdigest()[:8]
+
 
 class SessionNotFound(KeyError):
-    """No live session has that id."""
+    """No live session has that id for this caller (another key's session counts as none)."""
 
     def __init__(self, session_id: str) -> None:
         super().__init__(session_id)
-        self.message = f"no session {session_id!r}: it never existed, was deleted or expired"
+        up = time.monotonic() - STARTED_AT
+        self.message = (
+            f"no session {session_id!r}: it never existed, was deleted, expired, or ended "
+            f"when the service restarted (this server started {up:.0f} s ago); "
+            "create a new session"
+        )
 
     def __str__(self) -> str:
         return self.message
 
 
 class LimitReached(RuntimeError):
-    """A service limit was hit; ``status`` is the HTTP status to answer with."""
+    """A service limit was hit; ``code`` names the limit in a machine-readable word.
 
-    def __init__(self, message: str, status: int = 429, code: str = "limit") -> None:
+    ``retry_after_s`` says when trying again may succeed (None: it never will as asked).
+    """
+
+    def __init__(
+        self, message: str, code: str = "limit", retry_after_s: float | None = None
+    ) -> None:
         super().__init__(message)
-        self.status = status
         self.code = code
+        self.retry_after_s = retry_after_s
+
+
+class CapacityReached(LimitReached):
+    """The whole service is full now (sessions, step threads, or it is restarting)."""
+
+
+class QuotaReached(LimitReached):
+    """One client's own quota (sessions, particles, frames per second) is used up now."""
+
+
+class RequestTooLarge(LimitReached):
+    """One request asks for more than the service ever allows (particles, detections)."""
+
+
+class InvalidSessionSpec(ValueError):
+    """A session cannot be built as asked (e.g. a start pose outside the free space)."""
 
 
 class UnknownMap(LookupError):
     def __init__(self, name: str, known: list[str]) -> None:
         super().__init__(f"no map {name!r}; known maps: {', '.join(known) or 'none'}")
+
+
+def unknown_class_warnings(
+    detections: tuple[Detection, ...], semantic_map: SemanticMap
+) -> list[str]:
+    """A warning for each detected class the map lacks (those detections are ignored)."""
+    unknown = sorted({d.cls for d in detections} - set(semantic_map.classes))
+    return [
+        f"class {c!r} is not on map {semantic_map.name!r}; its detections were ignored"
+        for c in unknown
+    ]
 
 
 def log_event(event: str, **fields: object) -> None:
@@ -79,6 +135,8 @@ class SessionSnapshot:
     estimate: Estimate | None
     detections: list[Detection]
     truth: Pose | None
+    #: The path to the destination from the estimate (metres, (P, 2)), or None.
+    route: np.ndarray | None = None
 
 
 @dataclass
@@ -91,29 +149,66 @@ class Session:
     narrator: Narrator
     particles: int
     created_at: datetime
+    owner: str | None = None
+    shared: bool = False
+    queue_limit: int = 2
     last_active: float = field(default_factory=time.monotonic)
     frames: int = 0
-    last_result: FrameResult | None = None
+    last_outcome: FrameOutcome | None = None
     last_detections: list[Detection] = field(default_factory=list)
     truth: Pose | None = None
     version: int = 0
     last_timestamp: float | None = None
-    order: asyncio.Lock = field(default_factory=asyncio.Lock)
     state_lock: threading.Lock = field(default_factory=threading.Lock)
+    camera: Camera | None = None
+    #: The destination's plan (None: no destination) and what was said about the way.
+    destination: Plan | None = None
+    speaker: GuidanceSpeaker = field(default_factory=GuidanceSpeaker)
+    last_guidance: Guidance | None = None
 
-    def public(self) -> SessionOut:
-        return SessionOut(
-            id=self.id,
-            map=self.map.name,
-            particles=self.particles,
-            created_at=self.created_at,
-            frames=self.frames,
-            last_result=self.last_result,
-        )
+    def set_destination(self, plan: Plan | None) -> None:
+        """Guide to ``plan``'s target from the next frame on (None: stop guiding)."""
+        with self.state_lock:
+            self.destination = plan
+            self.speaker.reset()
+            self.last_guidance = None
 
-    def process_sync(self, frame: Frame) -> FrameResult:
-        """Run one frame through the filter and the narrator (worker thread)."""
-        detections, warnings = detections_of(frame, self.map)
+    def _guide(
+        self, estimate: Estimate, now: float, warnings: list[str]
+    ) -> tuple[Guidance | None, str]:
+        """Directions from the estimate (only when converged) and what to say of them."""
+        if self.destination is None:
+            return None, ""
+        if not estimate.converged:
+            return None, self.speaker.update(None, False, now, estimate.x, estimate.y)
+        try:
+            guidance = guide(self.destination, estimate.x, estimate.y, estimate.theta_rad)
+        except Unreachable as exc:
+            warnings.append(f"guidance: {exc}")
+            return None, self.speaker.no_way(self.destination.target.name, now)
+        return guidance, self.speaker.update(guidance, True, now, estimate.x, estimate.y)
+
+    queue: FrameQueue = field(init=False)
+    pump: asyncio.Task[None] | None = None
+
+    def __post_init__(self) -> None:
+        self.queue = FrameQueue(self.queue_limit)
+
+    @property
+    def tag(self) -> str:
+        return session_tag(self.id)
+
+    @property
+    def busy(self) -> bool:
+        """A step is running or frames are waiting."""
+        return self.pump is not None
+
+    def process_sync(self, frame: FrameInput, merged: int = 1) -> FrameOutcome:
+        """Run one frame (``merged`` frames merged into one) through the filter and narrator."""
+        detections = list(frame.detections)
+        warnings = unknown_class_warnings(frame.detections, self.map)
+        if merged > 1:
+            warnings.append(merged_warning(merged))
         if (
             frame.timestamp is not None
             and self.last_timestamp is not None
@@ -124,19 +219,33 @@ class Session:
                 f"{self.last_timestamp}; frames are processed in the order received"
             )
         with self.state_lock:
-            estimate = self.filter.step(odometry_of(frame), detections)
+            estimate = self.filter.step(frame.odometry, detections, frame.heading)
             feedback = self.narrator.update(
                 estimate,
                 detections,
                 timestamp_s=frame.timestamp,
                 describe=frame.describe,
                 fov_deg=self.filter.config.fov_deg,
+                fov_centre_deg=self.filter.config.fov_centre_deg,
             )
+            now = time.monotonic() if frame.timestamp is None else frame.timestamp
+            guidance, said = self._guide(estimate, now, warnings)
+            if said:
+                joined = f"{feedback.text} {said}" if feedback.text else said
+                feedback = Feedback(joined, feedback.items)
+            self.last_guidance = guidance
             self.frames += 1
-            result = frame_result(self.frames, estimate, feedback, self.map, warnings)
-            self.last_result = result
+            result = FrameOutcome(
+                seq=self.frames,
+                estimate=estimate,
+                feedback=feedback,
+                warnings=tuple(warnings),
+                regions=tuple(self.map.region_at(h.x, h.y) for h in estimate.hypotheses),
+                guidance=guidance,
+            )
+            self.last_outcome = result
             self.last_detections = detections
-            self.truth = truth_of(frame)
+            self.truth = frame.truth
             if frame.timestamp is not None:
                 self.last_timestamp = frame.timestamp
             self.version += 1
@@ -158,71 +267,145 @@ class Session:
                 estimate=pf.estimate if self.frames else None,
                 detections=list(self.last_detections),
                 truth=self.truth,
+                route=None if self.last_guidance is None else self.last_guidance.path.copy(),
             )
 
 
 class SessionManager:
-    """Creates, finds, feeds and expires sessions, within the service's limits."""
+    """Creates, finds, feeds and expires sessions, within the service's limits and quotas."""
 
     def __init__(self, maps: dict[str, SemanticMap], settings: Settings, metrics: Metrics) -> None:
         self.maps = maps
         self.settings = settings
         self.metrics = metrics
         self._sessions: dict[str, Session] = {}
+        self._buckets: dict[str, TokenBucket] = {}
+        #: Set by :meth:`shutdown`: no new sessions or frames are taken.
+        self.closing = False
         # Filter steps are CPU-bound and release the GIL inside their kernels: one
         # thread per core runs them, so they never crowd out the event loop's thread
-        # (a larger default pool measured higher latency under load, same throughput).
-        self._steps = ThreadPoolExecutor(max_workers=os.cpu_count() or 1, thread_name_prefix="step")
+        # (a larger pool measured higher latency under load, same throughput), taking
+        # turns between clients, and one key uses at most all threads but one, so that
+        # another key's step finds a thread at once (benchmarks/abuse.py).
+        workers = os.cpu_count() or 1
+        per_key = settings.steps_per_key or max(1, workers - 1)
+        self._steps = FairExecutor(
+            workers, max_per_owner=per_key if settings.fair_steps else None, name="step"
+        )
 
     def close(self) -> None:
-        """Stop the step threads (at shutdown); frames still queued are dropped."""
+        """Stop the step threads (at shutdown); steps not started are dropped."""
         self._steps.shutdown(wait=False, cancel_futures=True)
+
+    async def shutdown(self) -> None:
+        """Take no new sessions or frames, and answer every frame already accepted.
+
+        Returns once every session's queue is empty and its last step answered. Whatever
+        must outlive the process (a checkpoint of each session) can run after this.
+        """
+        self.closing = True
+        pumps = [s.pump for s in self._sessions.values() if s.pump is not None]
+        if pumps:
+            await asyncio.gather(*pumps, return_exceptions=True)
 
     def sessions(self) -> list[Session]:
         """Live sessions, oldest first."""
         return list(self._sessions.values())
 
-    def get(self, session_id: str) -> Session:
-        try:
-            return self._sessions[session_id]
-        except KeyError:
-            raise SessionNotFound(session_id) from None
+    def get(self, session_id: str, owner: Principal | None = None) -> Session:
+        """The session, if ``owner`` may see it (None: the service itself, which sees all)."""
+        session = self._sessions.get(session_id)
+        if session is None or (
+            owner is not None and owner.name is not None and session.owner != owner.name
+        ):
+            raise SessionNotFound(session_id)
+        return session
 
-    def _build(self, request: SessionCreate) -> Session:
-        if request.map not in self.maps:
-            raise UnknownMap(request.map, sorted(self.maps))
-        semantic_map = self.maps[request.map]
+    def _refuse_when_closing(self) -> None:
+        if self.closing:
+            raise CapacityReached(
+                "the service is restarting; reconnect in a moment", "restarting", 1.0
+            )
+
+    def _next_expiry_s(self, sessions: list[Session]) -> float:
+        """Seconds until the first of ``sessions`` would expire if it stays idle."""
+        now = time.monotonic()
+        limit = self.settings.session_idle_timeout_s
+        return max(1.0, min((limit - (now - s.last_active) for s in sessions), default=1.0))
+
+    def _check_room(self, owner: Principal, particles: int) -> None:
+        """Raise if the service or ``owner``'s quota has no room for one more session."""
+        self._refuse_when_closing()
+        if owner.max_particles is not None and particles > owner.max_particles:
+            raise RequestTooLarge(
+                f"particles: {particles} is more than this key's quota of "
+                f"{owner.max_particles} particles",
+                code="too_many_particles",
+            )
+        mine = [s for s in self._sessions.values() if s.owner == owner.name]
+        if owner.max_sessions is not None and len(mine) >= owner.max_sessions:
+            raise QuotaReached(
+                f"this key already has its quota of {owner.max_sessions} sessions; "
+                "delete one or try again when one has expired",
+                "session_quota",
+                self._next_expiry_s(mine),
+            )
+        held = sum(s.particles for s in mine)
+        if owner.max_particles is not None and held + particles > owner.max_particles:
+            raise QuotaReached(
+                f"this key's sessions already hold {held} of its {owner.max_particles} "
+                f"particles, so {particles} more do not fit; delete a session or ask for fewer",
+                "particle_quota",
+                self._next_expiry_s(mine),
+            )
+        if len(self._sessions) >= self.settings.max_sessions:
+            raise CapacityReached(
+                f"the service already runs its maximum of {self.settings.max_sessions} "
+                "sessions; try again later",
+                "too_many_sessions",
+                self._next_expiry_s(list(self._sessions.values())),
+            )
+        if self._steps.waiting >= self.settings.max_waiting_steps:
+            raise CapacityReached(
+                f"the service is at capacity ({self._steps.waiting} filter steps are waiting "
+                "for a thread); try again shortly",
+                "busy",
+                1.0,
+            )
+
+    def _build(self, request: SessionSpec) -> Session:
+        if request.map_name not in self.maps:
+            raise UnknownMap(request.map_name, sorted(self.maps))
+        semantic_map = self.maps[request.map_name]
         particles = request.particles or self.settings.default_particles
         if particles > self.settings.max_particles:
-            raise LimitReached(
+            raise RequestTooLarge(
                 f"particles: {particles} is more than this service allows "
                 f"({self.settings.max_particles})",
-                status=422,
                 code="too_many_particles",
             )
         sensor = request.sensor
+        camera = request.camera
         config = FilterConfig(
             particles=particles,
             bearing_std_deg=sensor.bearing_std_deg,
             class_bearing_std_deg=dict(sensor.class_bearing_std_deg),
-            fov_deg=sensor.fov_deg,
+            # A camera fixes the field of view (and where its middle points).
+            fov_deg=sensor.fov_deg if camera is None else camera.fov_deg,
+            fov_centre_deg=0.0 if camera is None else camera.fov_centre_deg,
         )
         seed = request.seed if request.seed is not None else secrets.randbits(63)
-        initial = None
-        if request.initial_pose is not None:
-            p = request.initial_pose
-            initial = InitialPose(
-                p.x,
-                p.y,
-                float(np.radians(p.theta_deg)),
-                p.std_xy_m,
-                float(np.radians(p.std_theta_deg)),
+        initial = request.initial_pose
+        if initial is not None and not bool(semantic_map.free_space.is_free(initial.x, initial.y)):
+            raise InvalidSessionSpec(
+                f"initial_pose: ({initial.x:g}, {initial.y:g}) is not in the free space of map "
+                f"{semantic_map.name!r} (inside a wall, outside the building or off the map); "
+                "give a pose where a person can stand, or null for a global start"
             )
         pf = ParticleFilter(
             semantic_map, config, rng=np.random.default_rng(seed), initial_pose=initial
         )
-        fb = request.feedback
-        narrator = Narrator(semantic_map, FeedbackOptions(fb.style, fb.units, fb.max_items))
+        narrator = Narrator(semantic_map, request.feedback)
         return Session(
             id=secrets.token_urlsafe(24),  # 192 random bits
             map=semantic_map,
@@ -230,72 +413,151 @@ class SessionManager:
             narrator=narrator,
             particles=particles,
             created_at=datetime.now(UTC),
+            camera=camera,
+            speaker=GuidanceSpeaker(request.feedback.style, request.feedback.units),
+            shared=request.share_view,
+            queue_limit=self.settings.max_queued_frames,
         )
 
-    async def create(self, request: SessionCreate) -> Session:
-        """A new session; the filter is built off the event loop."""
-        if len(self._sessions) >= self.settings.max_sessions:
-            raise LimitReached(
-                f"the service already runs its maximum of {self.settings.max_sessions} sessions; "
-                "delete one or try again later",
-                status=429,
-                code="too_many_sessions",
-            )
+    async def create(self, request: SessionSpec, owner: Principal = OPEN) -> Session:
+        """A new session owned by ``owner``; the filter is built off the event loop."""
+        particles = request.particles or self.settings.default_particles
+        self._check_room(owner, particles)
         session = await asyncio.to_thread(self._build, request)
-        if len(self._sessions) >= self.settings.max_sessions:  # raced with another create
-            raise LimitReached(
-                f"the service already runs its maximum of {self.settings.max_sessions} sessions",
-                status=429,
-                code="too_many_sessions",
-            )
+        self._check_room(owner, particles)  # another create may have won the race
+        session.owner = owner.name
         self._sessions[session.id] = session
         self.metrics.active_sessions.set(len(self._sessions))
         self.metrics.sessions_created.inc()
         log_event(
             "session_created",
-            session=session.id[:8],
+            tag=session.tag,
             map=session.map.name,
             particles=session.particles,
             global_start=request.initial_pose is None,
+            shared=session.shared,
         )
         return session
 
-    async def process(self, session_id: str, frame: Frame) -> FrameResult:
-        """Run one frame, strictly after the session's previous ones."""
-        session = self.get(session_id)
+    def _bucket(self, owner: Principal) -> TokenBucket | None:
+        if owner.name is None or owner.max_frames_per_s is None:
+            return None
+        bucket = self._buckets.get(owner.name)
+        if bucket is None:
+            bucket = self._buckets[owner.name] = TokenBucket(owner.max_frames_per_s)
+        return bucket
+
+    def submit(
+        self, session_id: str, frame: FrameInput, owner: Principal | None = None
+    ) -> asyncio.Future[FrameOutcome]:
+        """Accept one frame now (in order) and return the future of its result.
+
+        Raises at once when the frame is refused: unknown session, too many detections,
+        the owner's frame rate used up, or the service restarting.
+        """
+        session = self.get(session_id, owner)
         if len(frame.detections) > self.settings.max_detections:
-            raise LimitReached(
+            raise RequestTooLarge(
                 f"detections: {len(frame.detections)} detections in one frame; the limit is "
                 f"{self.settings.max_detections}",
-                status=422,
                 code="too_many_detections",
             )
-        async with session.order:
-            if session_id not in self._sessions:
-                raise SessionNotFound(session_id)
-            started = time.perf_counter()
-            loop = asyncio.get_running_loop()
-            result = await loop.run_in_executor(self._steps, session.process_sync, frame)
-            self.metrics.step_seconds.observe(time.perf_counter() - started)
-            self.metrics.frames.inc()
-            session.last_active = time.monotonic()
-            return result
+        self._refuse_when_closing()
+        bucket = self._bucket(owner) if owner is not None else None
+        if bucket is not None:
+            wait = bucket.take()
+            if wait > 0:
+                self.metrics.frames_refused.inc()
+                raise QuotaReached(
+                    f"this key may send {owner.max_frames_per_s:g} frames per second "  # type: ignore[union-attr]
+                    "over all its sessions; slow down",
+                    "rate_limited",
+                    wait,
+                )
+        waiter: asyncio.Future[FrameOutcome] = asyncio.get_running_loop().create_future()
+        if session.queue.put(frame, waiter):
+            self.metrics.frames_merged.inc()
+        if session.pump is None:
+            session.pump = asyncio.create_task(self._pump(session))
+        return waiter
 
-    async def delete(self, session_id: str, *, reason: str = "deleted") -> None:
-        session = self._sessions.pop(session_id, None)
-        if session is None:
-            raise SessionNotFound(session_id)
+    async def set_destination(
+        self, session_id: str, spec: DestinationSpec, owner: Principal | None = None
+    ) -> Target:
+        """Guide the session to ``spec`` (the plan is built off the event loop).
+
+        Raises:
+            SessionNotFound, UnknownDestination (nothing by that name: says what the
+            map has), Unreachable (no walkable path leads there).
+        """
+        session = self.get(session_id, owner)
+        plan = await asyncio.to_thread(plan_for, session.map, spec)
+        session.set_destination(plan)
+        log_event("destination_set", tag=session.tag, kind=spec.kind)
+        return plan.target
+
+    def clear_destination(self, session_id: str, owner: Principal | None = None) -> None:
+        """Stop guiding the session."""
+        self.get(session_id, owner).set_destination(None)
+
+    async def process(
+        self, session_id: str, frame: FrameInput, owner: Principal | None = None
+    ) -> FrameOutcome:
+        """Run one frame, strictly after the session's previous ones (maybe merged with others)."""
+        return await self.submit(session_id, frame, owner)
+
+    def _turn_of(self, session: Session) -> str | None:
+        """Whose turn a step counts for: its key, or (open service) the session itself."""
+        if not self.settings.fair_steps:
+            return None  # one queue: arrival order
+        return session.owner if session.owner is not None else session.id
+
+    async def _pump(self, session: Session) -> None:
+        """Feed the session's waiting frames to the step threads, one step at a time."""
+        try:
+            while (item := session.queue.pop()) is not None:
+                live = [w for w in item.waiters if not w.done()]
+                if self._sessions.get(session.id) is not session:
+                    for w in live:
+                        w.set_exception(SessionNotFound(session.id))
+                    continue
+                started = time.perf_counter()
+                job = self._steps.submit(
+                    self._turn_of(session),
+                    session.process_sync,
+                    item.frame,
+                    item.count,
+                )
+                try:
+                    result = await asyncio.wrap_future(job)
+                except Exception as exc:
+                    for w in item.waiters:
+                        if not w.done():
+                            w.set_exception(exc)
+                    continue
+                self.metrics.step_seconds.observe(time.perf_counter() - started)
+                self.metrics.frames.inc(item.count)
+                session.last_active = time.monotonic()
+                for w in item.waiters:
+                    if not w.done():
+                        w.set_result(result)
+        finally:
+            session.pump = None
+
+    async def delete(
+        self, session_id: str, *, reason: str = "deleted", owner: Principal | None = None
+    ) -> None:
+        session = self.get(session_id, owner)
+        del self._sessions[session_id]
         self.metrics.active_sessions.set(len(self._sessions))
-        log_event(f"session_{reason}", session=session_id[:8], frames=session.frames)
+        log_event(f"session_{reason}", tag=session.tag, frames=session.frames)
 
     async def expire_idle(self) -> int:
         """Remove sessions idle longer than the timeout; return how many."""
         limit = self.settings.session_idle_timeout_s
         now = time.monotonic()
         stale = [
-            s.id
-            for s in self._sessions.values()
-            if now - s.last_active > limit and not s.order.locked()
+            s.id for s in self._sessions.values() if now - s.last_active > limit and not s.busy
         ]
         for sid in stale:
             await self.delete(sid, reason="expired")

@@ -12,10 +12,24 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from app.localization.geometry import wrap_angle
-from app.localization.map import SemanticMap
+from app.localization.camera import Camera
 from app.localization.types import Detection, Odometry, Pose
+from app.maps.geometry import wrap_angle
+from app.maps.model import SemanticMap
 from app.simulation.camera import CameraModel, visible_objects
+
+#: Plausible widths of objects (metres) for simulated pixel boxes; others get the default.
+OBJECT_WIDTH_M = {"door": 0.9, "window": 1.2, "table": 1.4, "plant": 0.5, "printer": 0.6}
+DEFAULT_OBJECT_WIDTH_M = 0.6
+
+
+@dataclass(frozen=True)
+class CompassBias:
+    """From ``start_s`` to ``end_s`` the compass reads ``bias_deg`` off (indoor steel)."""
+
+    start_s: float
+    end_s: float
+    bias_deg: float
 
 
 @dataclass(frozen=True)
@@ -58,6 +72,13 @@ class SimulationConfig:
     kidnap_pose: tuple[float, float, float] | None = None
     #: Stop after this long even if the path is not finished (None: walk to the end).
     duration_s: float | None = None
+    #: A phone camera: its field of view replaces ``fov_deg`` (turned by its yaw and
+    #: principal point), and :meth:`SimFrame.to_contract` can give pixel boxes.
+    camera: Camera | None = None
+    #: Compass noise std (degrees); None: the frames carry no compass heading.
+    compass_std_deg: float | None = None
+    #: Intervals when the compass is biased (magnetic disturbance).
+    compass_biases: tuple[CompassBias, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -69,9 +90,26 @@ class SimFrame:
     odometry: Odometry | None
     detections: list[Detection] = field(default_factory=list)
     blocked: bool = False
+    #: Angular width of each detection's object as seen (degrees), for pixel boxes.
+    widths_deg: tuple[float, ...] = ()
+    #: The compass reading (radians, CCW from +x) and its std (degrees), or None.
+    compass_rad: float | None = None
+    compass_std_deg: float | None = None
 
-    def to_contract(self) -> dict[str, object]:
-        """CONTRACT.md's ``Frame`` JSON, with the ground truth as the extra ``truth``."""
+    def boxes(self, camera: Camera) -> list[tuple[float, float] | None]:
+        """Each detection as a pixel box ``(u_min, u_max)`` of ``camera``, None out of view."""
+        widths = self.widths_deg or (5.0,) * len(self.detections)
+        return [
+            camera.box_of(float(np.degrees(d.bearing_rad)), w)
+            for d, w in zip(self.detections, widths, strict=True)
+        ]
+
+    def to_contract(self, camera: Camera | None = None) -> dict[str, object]:
+        """CONTRACT.md's ``Frame`` JSON, with the ground truth as the extra ``truth``.
+
+        With ``camera``, detections give pixel boxes (rounded to 0.1 pixel) instead of
+        bearings; with a compass reading, the frame carries ``heading``.
+        """
         odo = None
         if self.odometry is not None:
             odo = {
@@ -79,17 +117,22 @@ class SimFrame:
                 "left_m": round(self.odometry.left_m, 5),
                 "turn_deg": round(float(np.degrees(self.odometry.turn_rad)), 4),
             }
-        return {
+        dets: list[dict[str, object]] = []
+        boxes = self.boxes(camera) if camera is not None else [None] * len(self.detections)
+        for d, box in zip(self.detections, boxes, strict=True):
+            if camera is None:
+                where: dict[str, object] = {
+                    "bearing_deg": round(float(np.degrees(d.bearing_rad)), 3)
+                }
+            elif box is None:
+                continue
+            else:
+                where = {"box": {"u_min_px": round(box[0], 1), "u_max_px": round(box[1], 1)}}
+            dets.append({"class": d.cls, **where, "score": round(d.score, 3)})
+        out: dict[str, object] = {
             "timestamp": round(self.t, 3),
             "odometry": odo,
-            "detections": [
-                {
-                    "class": d.cls,
-                    "bearing_deg": round(float(np.degrees(d.bearing_rad)), 3),
-                    "score": round(d.score, 3),
-                }
-                for d in self.detections
-            ],
+            "detections": dets,
             "describe": False,
             "truth": {
                 "x": round(self.truth.x, 4),
@@ -97,6 +140,12 @@ class SimFrame:
                 "theta_deg": round(float(np.degrees(self.truth.theta_rad)), 3),
             },
         }
+        if self.compass_rad is not None:
+            out["heading"] = {
+                "heading_deg": round(float(np.degrees(self.compass_rad)), 3),
+                "std_deg": self.compass_std_deg,
+            }
+        return out
 
 
 def _corners(semantic_map: SemanticMap) -> np.ndarray:
@@ -193,7 +242,8 @@ def _detections(
     cfg: SimulationConfig,
     camera: CameraModel,
     rng: np.random.Generator,
-) -> list[Detection]:
+) -> tuple[list[Detection], list[float]]:
+    """Noisy detections and each one's angular width (degrees)."""
     idx, bearing = visible_objects(semantic_map, pose, camera)
     keep = np.ones(idx.size, dtype=bool)
     if blocked:
@@ -205,19 +255,33 @@ def _detections(
     noisy = wrap_angle(bearing + rng.normal(0.0, np.radians(cfg.bearing_noise_deg), idx.size))
     lo, hi = cfg.score_range
     scores = rng.uniform(lo, hi, idx.size) if hi > lo else np.full(idx.size, lo)
-    dets = [
-        Detection(semantic_map.class_of(int(i)), float(b), float(sc))
-        for i, b, sc, k in zip(idx, noisy, scores, keep, strict=True)
-        if k
-    ]
+    dist = np.hypot(*(semantic_map.object_xy[idx] - np.array([pose.x, pose.y])).T)
+    dets, widths = [], []
+    for i, b, sc, k, d in zip(idx, noisy, scores, keep, dist, strict=True):
+        if k:
+            cls = semantic_map.class_of(int(i))
+            dets.append(Detection(cls, float(b), float(sc)))
+            size = OBJECT_WIDTH_M.get(cls, DEFAULT_OBJECT_WIDTH_M)
+            widths.append(float(np.degrees(2.0 * np.arctan2(size / 2.0, max(d, 0.3)))))
     n_false = int(rng.poisson(cfg.false_rate)) if cfg.false_rate > 0 else 0
-    half = np.radians(min(cfg.fov_deg, 360.0)) / 2.0
+    half = np.radians(min(camera.fov_deg, 360.0)) / 2.0
+    centre = np.radians(camera.fov_centre_deg)
     for _ in range(n_false):
         cls = semantic_map.classes[int(rng.integers(len(semantic_map.classes)))]
-        b = float(wrap_angle(rng.uniform(-half, half)))
+        b = float(wrap_angle(centre + rng.uniform(-half, half)))
         dets.append(Detection(cls, b, float(rng.uniform(*cfg.false_score_range))))
+        widths.append(float(rng.uniform(5.0, 30.0)))
     order = rng.permutation(len(dets))
-    return [dets[i] for i in order]
+    return [dets[i] for i in order], [widths[i] for i in order]
+
+
+def _compass(t: float, pose: Pose, cfg: SimulationConfig, rng: np.random.Generator) -> float | None:
+    """The compass reading at ``t``: truth plus noise plus any bias then (radians)."""
+    if cfg.compass_std_deg is None:
+        return None
+    bias = sum(b.bias_deg for b in cfg.compass_biases if b.start_s <= t < b.end_s)
+    noise = rng.normal(0.0, cfg.compass_std_deg)
+    return float(wrap_angle(pose.theta_rad + np.radians(bias + noise)))
 
 
 def simulate(
@@ -229,12 +293,27 @@ def simulate(
     right after a kidnap (the person was carried; no motion was measured).
     """
     camera = CameraModel(config.fov_deg, config.max_range_m)
+    if config.camera is not None:
+        camera = CameraModel(
+            config.camera.fov_deg, config.max_range_m, config.camera.fov_centre_deg
+        )
     truth = _truth_poses(config, semantic_map)
     frames: list[SimFrame] = []
     dt = 1.0 / config.rate_hz
     for i, (pose, blocked, jumped) in enumerate(truth):
         t = i * dt
         odo = None if i == 0 or jumped else _odometry(truth[i - 1][0], pose, config, rng)
-        dets = _detections(semantic_map, pose, blocked, config, camera, rng)
-        frames.append(SimFrame(round(t, 6), pose, odo, dets, blocked))
+        dets, widths = _detections(semantic_map, pose, blocked, config, camera, rng)
+        frames.append(
+            SimFrame(
+                round(t, 6),
+                pose,
+                odo,
+                dets,
+                blocked,
+                tuple(widths),
+                _compass(t, pose, config, rng),
+                config.compass_std_deg,
+            )
+        )
     return frames

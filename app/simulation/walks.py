@@ -6,8 +6,8 @@ from dataclasses import replace
 
 import numpy as np
 
-from app.localization.geometry import segments_cross_walls
-from app.localization.map import SemanticMap
+from app.maps.geometry import segments_cross_walls
+from app.maps.model import SemanticMap
 from app.simulation.scenarios import PAPER_PATH, paper_config
 from app.simulation.simulator import CornerVisit, SimulationConfig
 

@@ -1,5 +1,11 @@
 """The view's GUI panel: which session to watch, and demo controls.
 
+The view is private: its list holds only the sessions their creators shared
+(``share_view``) and the view's own demo walks, each under a short label ("walk 1",
+or the map's name and a tag that cannot be traced back to the id), never an id. A demo
+walk started here belongs to the viewer who started it: it ends when that viewer's
+browser disconnects, or after ``demo_walk_max_s`` (10 minutes by default).
+
 viser runs GUI callbacks on its own threads; anything that touches sessions is sent
 to the service's event loop with ``asyncio.run_coroutine_threadsafe``.
 """
@@ -14,6 +20,7 @@ from typing import TYPE_CHECKING, Any
 from app.demo import DemoSettings, DemoWalk
 
 if TYPE_CHECKING:
+    from app.service.sessions import Session
     from app.viz.view import LiveView
 
 NONE = "(none)"
@@ -29,11 +36,13 @@ class ViewControls:
         assert server is not None
         gui = server.gui
         self.walks: dict[str, DemoWalk] = {}
+        self._walk_viewer: dict[str, int | None] = {}  # session id -> viser client id
+        self._walk_labels: dict[str, str] = {}
+        self._walks_started = 0
+        self._labels: dict[str, str] = {}  # label shown -> session id
         self._known: tuple[str, ...] = ()
         self.session = gui.add_dropdown("Watch session", (NONE,), initial_value=NONE)
-        self.session.on_update(
-            lambda _: view.watch(None if self.session.value == NONE else self.session.value)
-        )
+        self.session.on_update(lambda _: view.watch(self._labels.get(self.session.value)))
         self.status = gui.add_markdown("No session yet.")
         with gui.add_folder("Demo: simulated walk"):
             maps = tuple(sorted(view.manager.maps))
@@ -49,9 +58,10 @@ class ViewControls:
             self.start_button = gui.add_button("Start walk")
             self.kidnap_button = gui.add_button("Kidnap now")
             self.reset_button = gui.add_button("Reset walk")
-        self.start_button.on_click(lambda _: self._submit(self.start_walk()))
+        self.start_button.on_click(lambda e: self._submit(self.start_walk(e.client_id)))
         self.kidnap_button.on_click(lambda _: self.kidnap())
-        self.reset_button.on_click(lambda _: self._submit(self.reset_walk()))
+        self.reset_button.on_click(lambda e: self._submit(self.reset_walk(e.client_id)))
+        server.on_client_disconnect(lambda client: self.viewer_left(client.client_id))
 
     def _submit(self, coro: Any) -> Future[Any] | None:
         loop = self.view.loop
@@ -67,18 +77,24 @@ class ViewControls:
             occlusion=bool(self.occlusion.value),
             missing=bool(self.missing.value),
             particles=int(self.particles.value),
+            max_duration_s=self.view.manager.settings.demo_walk_max_s,
         )
 
-    async def start_walk(self) -> str:
-        """Start a simulated walk with the panel's settings and watch it."""
+    async def start_walk(self, viewer: int | None = None) -> str:
+        """Start a simulated walk with the panel's settings, for ``viewer``, and watch it."""
         walk = DemoWalk(self.view.manager, self.settings())
         walk.start()
         for _ in range(200):  # the session exists once the walk created it
-            if walk.session_id is not None:
+            if walk.session_id is not None or walk.finished:
                 break
             await asyncio.sleep(0.01)
-        assert walk.session_id is not None
+        assert walk.session_id is not None, "the demo walk could not create its session"
+        self._walks_started += 1
         self.walks[walk.session_id] = walk
+        self._walk_viewer[walk.session_id] = viewer
+        self._walk_labels[walk.session_id] = (
+            f"walk {self._walks_started} ({walk.settings.map_name})"
+        )
         self.view.watch(walk.session_id)
         return walk.session_id
 
@@ -87,29 +103,59 @@ class ViewControls:
         if walk is not None:
             walk.kidnap()
 
-    async def reset_walk(self) -> str:
-        walk = self.walks.pop(self.view.watched or "", None)
+    async def stop_walk(self, session_id: str) -> None:
+        walk = self.walks.pop(session_id, None)
+        self._walk_viewer.pop(session_id, None)
+        self._walk_labels.pop(session_id, None)
         if walk is not None:
             await walk.stop()
-        return await self.start_walk()
+
+    async def reset_walk(self, viewer: int | None = None) -> str:
+        await self.stop_walk(self.view.watched or "")
+        return await self.start_walk(viewer)
+
+    def viewer_left(self, client_id: int) -> None:
+        """The viewer's browser disconnected: end the walks it started."""
+        for sid, viewer in list(self._walk_viewer.items()):
+            if viewer == client_id:
+                self._submit(self.stop_walk(sid))
+
+    def label(self, session: Session) -> str:
+        """What the list shows for a session: never its id."""
+        own = self._walk_labels.get(session.id)
+        return own if own is not None else f"{session.map.name} · {session.tag}"
+
+    def visible(self) -> list[Session]:
+        """The sessions this view may show: shared ones and its own demo walks."""
+        for sid in [sid for sid, walk in self.walks.items() if walk.finished]:
+            self._submit(self.stop_walk(sid))  # ended by its time limit
+        return [s for s in self.view.manager.sessions() if s.shared or s.id in self._walk_labels]
+
+    @property
+    def visible_ids(self) -> tuple[str, ...]:
+        """Ids of the sessions listed at the last :meth:`sync_sessions`."""
+        return self._known
 
     def sync_sessions(self) -> None:
-        """Keep the session dropdown in step with the live sessions (view thread)."""
-        ids = tuple(s.id for s in self.view.manager.sessions())
+        """Keep the session dropdown in step with the visible sessions (view thread)."""
+        sessions = self.visible()
+        ids = tuple(s.id for s in sessions)
         if ids != self._known:
             self._known = ids
-            self.session.options = (NONE, *ids) if ids else (NONE,)
+            self._labels = {self.label(s): s.id for s in sessions}
+            self.session.options = (NONE, *self._labels) if ids else (NONE,)
             if self.view.watched not in ids:
                 self.view.watch(ids[-1] if ids else None)
         watched = self.view.watched
-        value = watched if watched in ids else NONE
+        shown = {sid: label for label, sid in self._labels.items()}
+        value = shown.get(watched, NONE) if watched is not None else NONE
         if self.session.value != value:
             self.session.value = value
         if watched is not None:
             with contextlib.suppress(Exception):
                 s = self.view.manager.get(watched)
-                r = s.last_result
-                state = "converged" if r is not None and r.converged else "searching"
+                r = s.last_outcome
+                state = "converged" if r is not None and r.estimate.converged else "searching"
                 text = f"**{s.map.name}**, {s.frames} frames, {state}"
                 if r is not None and r.feedback.text:
                     text += f"\n\n_{r.feedback.text}_"
@@ -120,3 +166,5 @@ class ViewControls:
         for walk in list(self.walks.values()):
             self._submit(walk.stop())
         self.walks.clear()
+        self._walk_viewer.clear()
+        self._walk_labels.clear()

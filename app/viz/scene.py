@@ -7,7 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 import viser
 
-from app.localization.map import SemanticMap
+from app.maps.model import SemanticMap
 
 #: Colours per class (RGB 0-255); unknown classes cycle through the palette.
 CLASS_COLOURS: dict[str, tuple[int, int, int]] = {

@@ -1,5 +1,8 @@
 """LiveView: a viser server in the service's process, showing one session at a time.
 
+It listens on loopback unless told otherwise (``--viser-host``) and shows only the
+sessions shared with it and its own demo walks (:mod:`app.viz.gui`).
+
 The view never touches the filter directly: a background thread wakes at most
 ``max_rate_hz`` times a second, takes a snapshot of the watched session (copies made
 under the session's lock) and redraws only when the session's version changed. So
@@ -33,7 +36,7 @@ class LiveView:
         manager: SessionManager,
         *,
         port: int = 8080,
-        host: str = "0.0.0.0",
+        host: str = "127.0.0.1",
         max_rate_hz: float = 10.0,
     ) -> None:
         self.manager = manager
@@ -45,6 +48,8 @@ class LiveView:
         self.controls: ViewControls | None = None
         self.watched: str | None = None
         self.frames_drawn = 0
+        #: The drawn path to the destination (hidden without one).
+        self.route: viser.LineSegmentsHandle | None = None
         self._last_version = -1
         self._stop = threading.Event()
         self._draw_lock = threading.Lock()
@@ -113,6 +118,9 @@ class LiveView:
         sid = self.watched
         if sid is None:
             return False
+        if self.controls is not None and sid not in self.controls.visible_ids:
+            self.watch(None)  # never draw a session the view may not show
+            return False
         try:
             snap = self.manager.get(sid).snapshot()
         except SessionNotFound:
@@ -165,6 +173,16 @@ class LiveView:
                     thickness=0.02,
                     visible=bool(rays.size),
                 )
+            # The way to the destination, when one is set and the person is located.
+            route = snap.route
+            legs = np.zeros((1, 2, 3), np.float32)
+            if route is not None and len(route) >= 2:
+                legs = np.zeros((len(route) - 1, 2, 3), np.float32)
+                legs[:, 0, :2], legs[:, 1, :2] = route[:-1], route[1:]
+                legs[:, :, 2] = 0.08
+            self.route = scene.add_line_segments(
+                "/session/route", legs, (0, 120, 255), thickness=0.05, visible=route is not None
+            )
             if snap.truth is not None:
                 t = snap.truth
                 scene.add_arrows(

@@ -8,6 +8,7 @@ from pathlib import Path
 from fastapi.testclient import TestClient
 
 from app.main import create_app
+from app.resources import bundled_maps_dir
 from tests.api.conftest import make_settings
 
 
@@ -25,7 +26,7 @@ def test_list_maps_has_summaries(client: TestClient) -> None:
 
 def test_get_map_returns_the_file(client: TestClient) -> None:
     body = client.get("/maps/paper_office").json()
-    on_disk = json.loads(Path("maps/paper_office.json").read_text())
+    on_disk = json.loads((bundled_maps_dir() / "paper_office.json").read_text())
     assert body["name"] == on_disk["name"]
     assert body["objects"][-1] == on_disk["objects"][-1]
     assert body["objects"][0]["class"] == "window"

@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 from fastapi.testclient import TestClient
 
-from app.localization.map import bundled_maps_dir, load_map
+from app.maps.model import load_map
+from app.resources import bundled_maps_dir
 from app.simulation.scenarios import paper_config
 from app.simulation.simulator import simulate
 
@@ -42,13 +43,16 @@ def test_frame_result_matches_the_contract(client: TestClient, session_id: str) 
     res = r.json()
     assert set(res) == {
         "seq",
+        "protection_m",
         "pose",
         "uncertainty",
         "converged",
         "hypotheses",
         "feedback",
         "warnings",
+        "guidance",
     }
+    assert res["guidance"] is None  # no destination set
     assert res["seq"] == 1
     assert set(res["pose"]) == {"x", "y", "theta_deg"}
     assert set(res["uncertainty"]) == {"std_x_m", "std_y_m", "std_theta_deg"}
@@ -152,6 +156,16 @@ def test_raw_nan_in_json_is_refused(client: TestClient, session_id: str) -> None
         ({"map": "paper_office", "feedback": {"style": "poetry"}}, 422, "style"),
         ({"map": "paper_office", "feedback": {"units": "cubits"}}, 422, "units"),
         ({"map": "paper_office", "initial_pose": {"x": 1}}, 422, "initial_pose"),
+        (
+            {"map": "paper_office", "initial_pose": {"x": 500, "y": 500, "theta_deg": 0}},
+            422,
+            "not in the free space",
+        ),
+        (
+            {"map": "paper_office", "initial_pose": {"x": -0.5, "y": 3, "theta_deg": 0}},
+            422,
+            "initial_pose",
+        ),
     ],
 )
 def test_bad_session_requests(client: TestClient, body, status, words) -> None:
@@ -179,14 +193,15 @@ def test_initial_pose_is_used(client: TestClient) -> None:
     assert abs(res["pose"]["x"] - 2.0) < 0.3 and abs(res["pose"]["theta_deg"] - 90) < 15
 
 
-def test_session_limit_is_429(client: TestClient) -> None:
+def test_session_limit_is_503_with_retry_after(client: TestClient) -> None:
     for _ in range(5):
         assert (
             client.post("/sessions", json={"map": "paper_office", "particles": 100}).status_code
             == 201
         )
     r = client.post("/sessions", json={"map": "paper_office", "particles": 100})
-    assert r.status_code == 429 and "maximum" in r.json()["message"]
+    assert r.status_code == 503 and "maximum" in r.json()["message"]
+    assert int(r.headers["retry-after"]) >= 1
 
 
 def test_detection_limit(client: TestClient, session_id: str) -> None:

@@ -12,8 +12,8 @@ import pytest
 from app.experiments import cli
 from app.experiments.figures import single_frame_crlb_m
 from app.experiments.protocol import PAPER_RESULTS, cells
-from app.localization.map import parse_map
 from app.localization.types import Pose
+from app.maps.model import parse_map
 
 ROW_KEYS = {
     "table", "scenario", "fov_deg", "config", "mean_m", "std_m", "mean_deg", "std_deg",
@@ -101,7 +101,8 @@ def test_pcrb_single_step_by_hand() -> None:
 def test_pcrb_on_the_paper_walk_is_below_the_single_frame_bound() -> None:
     """Odometry only adds information: the PCRB lies under one frame's bound."""
     from app.experiments.pcrb import pcrb_position_m
-    from app.localization.map import bundled_maps_dir, load_map
+    from app.maps.model import load_map
+    from app.resources import bundled_maps_dir
     from app.simulation.scenarios import paper_config
     from app.simulation.simulator import simulate
 
@@ -113,3 +114,24 @@ def test_pcrb_on_the_paper_walk_is_below_the_single_frame_bound() -> None:
     assert bound[0] == pytest.approx(single[0], rel=1e-6)
     assert np.all(bound[1:] <= single[1:] * (1 + 1e-9))
     assert 0.0 < bound[-1] < bound[0]
+
+
+def test_building_suite_walks_both_wings_and_recovers_from_the_kidnap(tmp_path) -> None:
+    from app.experiments import building
+    from app.experiments.metrics import first_right_fix_s
+
+    runs = [building.run_condition(c, 0, 3000) for c in ("nominal-360", "kidnap-360")]
+    for r in runs:
+        # The walk reaches the east wing, and the filter follows it there.
+        assert r.truth_xy[:, 0].max() > 30.0 and r.truth_xy[:, 0].min() < 5.0
+        assert np.isfinite(first_right_fix_s(r))
+        assert r.err_m[-25:].max() < 0.5
+    kidnap = runs[1]
+    jumped = np.hypot(*np.diff(kidnap.truth_xy, axis=0).T).max()
+    assert jumped > 15.0  # carried from the east corridor to the west one
+    rows = building.summarize(runs)
+    assert [r["condition"] for r in rows] == ["nominal-360", "kidnap-360"]
+    assert np.isfinite(rows[1]["median_recovery_s"])
+    text = building.markdown(rows, seconds=1.0, particles=3000, seeds=1)
+    assert "| kidnap-360 |" in text
+    assert building.figure(runs, tmp_path).is_file()

@@ -7,8 +7,8 @@ import math
 import pytest
 
 from app.feedback import FeedbackOptions, Narrator
-from app.localization.map import SemanticMap, parse_map
 from app.localization.types import Detection, Estimate, Hypothesis
+from app.maps.model import SemanticMap, parse_map
 
 TWO_OFFICES = parse_map(
     {
@@ -170,7 +170,8 @@ def test_hedging_when_less_certain() -> None:
 
 
 def paper_map() -> SemanticMap:
-    from app.localization.map import bundled_maps_dir, load_map
+    from app.maps.model import load_map
+    from app.resources import bundled_maps_dir
 
     return load_map(bundled_maps_dir() / "paper_office.json")
 

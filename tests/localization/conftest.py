@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import pytest
 
-from app.localization.map import SemanticMap, bundled_maps_dir, load_map, parse_map
+from app.maps.model import SemanticMap, load_map, parse_map
+from app.resources import bundled_maps_dir
 
 
 def room(objects: list[dict], walls: list[dict] | None = None, name: str = "room") -> SemanticMap:

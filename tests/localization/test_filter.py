@@ -9,9 +9,9 @@ import numpy as np
 from app.localization.config import FilterConfig
 from app.localization.estimate import estimate_pose
 from app.localization.filter import ParticleFilter
-from app.localization.geometry import wrap_angle
-from app.localization.map import SemanticMap
 from app.localization.types import InitialPose
+from app.maps.geometry import wrap_angle
+from app.maps.model import SemanticMap
 from app.simulation.scenarios import paper_config
 from app.simulation.simulator import SimulationConfig, simulate
 

@@ -6,7 +6,7 @@ import numpy as np
 from hypothesis import given
 from hypothesis import strategies as st
 
-from app.localization.geometry import (
+from app.maps.geometry import (
     points_in_polygon,
     segments_cross_walls,
     wrap_angle,

@@ -8,7 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from app.localization.map import MapError, bundled_maps_dir, load_map, load_map_dir, parse_map
+from app.maps.model import MapError, load_map, load_map_dir, parse_map
+from app.resources import bundled_maps_dir
 
 ROOM = {
     "name": "room",

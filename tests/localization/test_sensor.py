@@ -9,8 +9,6 @@ from hypothesis import strategies as st
 
 from app.bench import generated_map
 from app.localization.config import FilterConfig
-from app.localization.geometry import wrap_angle
-from app.localization.map import SemanticMap, parse_map
 from app.localization.sensor import (
     candidate_mask,
     log_likelihood_reference,
@@ -18,8 +16,14 @@ from app.localization.sensor import (
     prepare_observation,
 )
 from app.localization.sensor_kernel import log_likelihood
+from app.localization.tolerances import (
+    U64,
+    candidate_flip_mask,
+    log_likelihood_tolerance,
+)
 from app.localization.types import Detection, Pose
-from app.localization.visibility import visibility_grid
+from app.maps.geometry import wrap_angle
+from app.maps.model import SemanticMap, parse_map
 from app.simulation.camera import CameraModel, visible_objects
 from tests.localization.conftest import room
 
@@ -38,10 +42,32 @@ def loglik(m, cfg, x, y, th, dets, *, kernel: bool = True) -> np.ndarray:
     x, y, th = (np.atleast_1d(np.asarray(v, dtype=float)) for v in (x, y, th))
     obs = prepare_observation(dets, m, cfg)
     if kernel:
-        grid = visibility_grid(m) if cfg.visibility else None
+        grid = m.visibility if cfg.visibility else None
         return log_likelihood(x, y, th, obs, m, cfg, grid)
-    rows = visibility_grid(m).visible(x, y) if cfg.visibility else None
+    rows = m.visibility.visible(x, y) if cfg.visibility else None
     return log_likelihood_reference(x, y, th, obs, m, cfg, rows)
+
+
+def tol(m, cfg, x, y, th, dets, value) -> np.ndarray:
+    """How far the kernel's ``value`` may be from the exact log-likelihood (derived)."""
+    x, y, th = (np.atleast_1d(np.asarray(v, dtype=float)) for v in (x, y, th))
+    return log_likelihood_tolerance(x, y, th, prepare_observation(dets, m, cfg), m, cfg, value)
+
+
+def agree(m, cfg, x, y, th, a_dets, b_dets, a, b) -> bool:
+    """Two kernel results the exact arithmetic makes equal, each within its bound."""
+    a_tol, b_tol = tol(m, cfg, x, y, th, a_dets, a), tol(m, cfg, x, y, th, b_dets, b)
+    return bool((np.abs(a - b) <= a_tol + b_tol).all())
+
+
+def bearing_tolerance(m: SemanticMap, x: float, y: float, obs, cfg: FilterConfig) -> float:
+    """float64 residuals (compiled and numpy): two bearings' rounding, in class sigmas."""
+    objs = m.object_xy[np.unique(obs.members)]
+    distance = np.hypot(objs[:, 0] - x, objs[:, 1] - y).min()
+    coordinate = np.hypot(x, y) + np.hypot(objs[:, 0], objs[:, 1]).max()
+    # atan2 within an ulp or two, and the wrap of an angle up to 3 pi: 4 roundings of 2 pi.
+    bearing = U64 * (coordinate + distance) / distance + 4 * U64 * 2 * np.pi
+    return float(2 * bearing / min(cfg.bearing_std_rad(c) for c in obs.classes))
 
 
 @pytest.mark.parametrize("cfg", [FilterConfig(), FilterConfig.paper()], ids=["bearings", "paper"])
@@ -53,13 +79,15 @@ def test_likelihood_peaks_at_the_true_pose(small_room: SemanticMap, cfg: FilterC
     th = rng.uniform(-np.pi, np.pi, 3000)
     others = loglik(small_room, cfg, pts[:, 0], pts[:, 1], th, dets)
     at_truth = loglik(small_room, cfg, *truth, dets)[0]
-    assert at_truth >= others.max() - 1e-9
-    # Small displacements are worse than the truth as well.
+    truth_tol = tol(small_room, cfg, *truth, dets, at_truth)[0]
+    # Exactly, nothing beats the truth; computed, within both results' rounding bounds.
+    others_tol = tol(small_room, cfg, pts[:, 0], pts[:, 1], th, dets, others)
+    assert (others - others_tol <= at_truth + truth_tol).all()
+    # Small displacements are worse than the truth as well, by more than the rounding.
     for dx, dy, dth in [(0.2, 0, 0), (0, -0.2, 0), (0, 0, 0.05)]:
-        assert (
-            loglik(small_room, cfg, truth[0] + dx, truth[1] + dy, truth[2] + dth, dets)[0]
-            < at_truth
-        )
+        moved = (truth[0] + dx, truth[1] + dy, truth[2] + dth)
+        worse = loglik(small_room, cfg, *moved, dets)[0]
+        assert worse + tol(small_room, cfg, *moved, dets, worse)[0] < at_truth - truth_tol
 
 
 @settings(max_examples=25, deadline=None)
@@ -95,7 +123,10 @@ def test_moving_world_and_person_together_changes_nothing(angle, shift, px, py, 
     a = loglik(m1, cfg, px, py, pth, dets)[0]
     qx, qy = tf(px, py)
     b = loglik(m2, cfg, qx, qy, pth + angle, dets)[0]
-    assert np.isclose(a, b, rtol=1e-6, atol=1e-6)
+    # Exactly equal; each computed value within its own bound (float32 rounds positions
+    # far from the origin more coarsely, so the bound follows the shift).
+    a_tol, b_tol = tol(m1, cfg, px, py, pth, dets, a), tol(m2, cfg, qx, qy, pth + angle, dets, b)
+    assert abs(a - b) <= a_tol[0] + b_tol[0]
 
 
 def test_score_zero_detection_changes_nothing(small_room: SemanticMap) -> None:
@@ -105,10 +136,9 @@ def test_score_zero_detection_changes_nothing(small_room: SemanticMap) -> None:
     th = rng.uniform(-np.pi, np.pi, 500)
     base = [Detection("door", 0.5), Detection("window", -2.0)]
     with_zero = [*base, Detection("table", 1.0, 0.0), Detection("window", 0.1, 0.0)]
-    assert np.allclose(
-        loglik(small_room, cfg, pts[:, 0], pts[:, 1], th, base),
-        loglik(small_room, cfg, pts[:, 0], pts[:, 1], th, with_zero),
-    )
+    a = loglik(small_room, cfg, pts[:, 0], pts[:, 1], th, base)
+    b = loglik(small_room, cfg, pts[:, 0], pts[:, 1], th, with_zero)
+    assert agree(small_room, cfg, pts[:, 0], pts[:, 1], th, base, with_zero, a, b)
 
 
 def test_unknown_class_is_ignored(small_room: SemanticMap) -> None:
@@ -116,11 +146,10 @@ def test_unknown_class_is_ignored(small_room: SemanticMap) -> None:
     obs = prepare_observation([Detection("sofa", 0.3), Detection("door", 0.1)], small_room, cfg)
     assert obs.ignored == ("sofa",)
     assert obs.classes == ("door",)
-    a = loglik(small_room, cfg, [2, 3], [2, 1], [0, 1], [Detection("door", 0.1)])
-    b = loglik(
-        small_room, cfg, [2, 3], [2, 1], [0, 1], [Detection("door", 0.1), Detection("sofa", 2)]
-    )
-    assert np.allclose(a, b)
+    door, with_sofa = [Detection("door", 0.1)], [Detection("door", 0.1), Detection("sofa", 2)]
+    a = loglik(small_room, cfg, [2, 3], [2, 1], [0, 1], door)
+    b = loglik(small_room, cfg, [2, 3], [2, 1], [0, 1], with_sofa)
+    assert agree(small_room, cfg, [2, 3], [2, 1], [0, 1], door, with_sofa, a, b)
 
 
 def test_each_class_is_weighted_by_one_over_its_count() -> None:
@@ -134,18 +163,21 @@ def test_each_class_is_weighted_by_one_over_its_count() -> None:
     )
     cfg = FilterConfig.paper()
     x, y, th = np.array([3.0, 2.0]), np.array([2.0, 1.0]), np.array([0.3, -0.5])
-    one = loglik(m, cfg, x, y, th, [Detection("window", -0.9)])
-    two = loglik(m, cfg, x, y, th, [Detection("window", -0.9), Detection("window", -0.9)])
-    assert np.allclose(one, two)
+    w1, w2, d = Detection("window", -0.9), Detection("window", -2.4), Detection("door", 0.2)
+
+    def ll(dets: list[Detection]) -> tuple[np.ndarray, np.ndarray]:
+        value = loglik(m, cfg, x, y, th, dets)
+        return value, tol(m, cfg, x, y, th, dets, value)
+
+    (one, t_one), (two, t_two) = ll([w1]), ll([w1, w1])
+    assert (np.abs(one - two) <= t_one + t_two).all()
     # Numerically: with two different windows, the class term is the mean of the two.
-    a = loglik(m, cfg, x, y, th, [Detection("window", -0.9)])
-    b = loglik(m, cfg, x, y, th, [Detection("window", -2.4)])
-    both = loglik(m, cfg, x, y, th, [Detection("window", -0.9), Detection("window", -2.4)])
-    assert np.allclose(both, (a + b) / 2)
+    (a, t_a), (b, t_b), (both, t_both) = ll([w1]), ll([w2]), ll([w1, w2])
+    assert (np.abs(both - (a + b) / 2) <= t_both + (t_a + t_b) / 2).all()
     # Classes multiply (logs add), eq. (2).
-    door = loglik(m, cfg, x, y, th, [Detection("door", 0.2)])
-    mixed = loglik(m, cfg, x, y, th, [Detection("window", -0.9), Detection("door", 0.2)])
-    assert np.allclose(mixed, a + door)
+    (door, t_door), (mixed, t_mixed) = ll([d]), ll([w1, d])
+    assert (np.abs(mixed - (a + door)) <= t_mixed + t_a + t_door).all()
+    assert np.abs(mixed - a).min() > 1.0  # the door really adds something
 
 
 def test_door_behind_a_wall_cannot_be_matched() -> None:
@@ -161,7 +193,8 @@ def test_door_behind_a_wall_cannot_be_matched() -> None:
     floor = loglik(m, FilterConfig(), 4.5, 2.0, towards_door, dets)
     assert np.isfinite(floor[0]) and floor[0] < -3  # only the clutter floor explains it
     paper = loglik(m, FilterConfig.paper(), 4.5, 2.0, towards_door, dets)
-    assert paper[0] > -1e-6  # the paper's model ignores walls and matches it perfectly
+    # The paper's model ignores walls and matches it perfectly: 0 up to float32 rounding.
+    assert paper[0] >= -tol(m, FilterConfig.paper(), 4.5, 2.0, towards_door, dets, paper)[0]
 
 
 def test_field_of_view_limits_candidates(small_room: SemanticMap) -> None:
@@ -189,13 +222,31 @@ def test_compiled_kernel_matches_the_numpy_reference(paper_office: SemanticMap, 
     th = rng.uniform(-np.pi, np.pi, 400)
     dets = observe(paper_office, 3.0, 2.0, 0.7, 270)
     dets += [Detection("table", 2.0, 0.4), Detection("door", -1.0, 0.6)]
-    fast = loglik(paper_office, cfg, pts[:, 0], pts[:, 1], th, dets)
-    ref = loglik(paper_office, cfg, pts[:, 0], pts[:, 1], th, dets, kernel=False)
+    assert_kernel_matches_reference(paper_office, cfg, pts[:, 0], pts[:, 1], th, dets)
+
+
+def assert_kernel_matches_reference(m, cfg, x, y, th, dets) -> None:
+    """The float32 kernel within its derived bound of the float64 reference, per particle.
+
+    Particles with an object within rounding of the field-of-view or range edge may
+    see a different candidate set; they are left out, and must be rare.
+    """
+    fast = loglik(m, cfg, x, y, th, dets)
+    ref = loglik(m, cfg, x, y, th, dets, kernel=False)
+    obs = prepare_observation(dets, m, cfg)
+    sure = ~candidate_flip_mask(x, y, th, obs, m, cfg)
+    assert np.count_nonzero(~sure) <= max(1, x.size // 100)
     finite = np.isfinite(ref)
-    assert np.array_equal(finite, np.isfinite(fast))
-    # The kernel works in float32 (with polynomial sine, cosine and softplus): its
-    # log-likelihoods match the float64 reference within 1e-3 (weights within 0.1 %).
-    assert np.abs(fast[finite] - ref[finite]).max() < 1e-3
+    assert np.array_equal(finite[sure], np.isfinite(fast[sure]))
+    ok = sure & finite
+    bound = log_likelihood_tolerance(x[ok], y[ok], th[ok], obs, m, cfg, ref[ok])
+    assert (np.abs(fast[ok] - ref[ok]) <= bound).all()
+    # The bound is tight enough to mean something: where weights matter (within 20 of
+    # the best log-likelihood) it keeps them within 5 % (1 % for a typical particle;
+    # more only right next to an object, where float32 directions really are coarse).
+    near_best = ref[ok] > ref[ok].max() - 20.0
+    assert bound[near_best].max() < 0.05 and np.median(bound[near_best]) < 0.01
+    assert np.ptp(ref[finite]) > 1.0  # the particles really differ
 
 
 @pytest.mark.parametrize(
@@ -210,16 +261,7 @@ def test_compiled_kernel_matches_the_reference_on_a_map_of_many_objects(cfg) -> 
     pts = m.free_space.sample(1000, rng)
     th = rng.uniform(-np.pi, np.pi, 1000)
     dets = observe(m, 7.3, 4.1, -2.0) + [Detection(c, b, 0.7) for c, b in CLASS_BEARINGS]
-    fast = loglik(m, cfg, pts[:, 0], pts[:, 1], th, dets)
-    ref = loglik(m, cfg, pts[:, 0], pts[:, 1], th, dets, kernel=False)
-    finite = np.isfinite(ref)
-    assert np.array_equal(finite, np.isfinite(fast))
-    # Within 1e-3 where weights matter; float32 cosines leave a relative error of about
-    # 1e-6 on hopeless particles (log-likelihood -900: weight e^-900 either way).
-    err = np.abs(fast[finite] - ref[finite])
-    assert (err <= 1e-3 + 1e-5 * np.abs(ref[finite])).all()
-    assert err[ref[finite] > ref[finite].max() - 20.0].max() < 1e-3
-    assert np.ptp(ref[finite]) > 1.0  # the particles really differ
+    assert_kernel_matches_reference(m, cfg, pts[:, 0], pts[:, 1], th, dets)
 
 
 @pytest.mark.parametrize(
@@ -239,11 +281,12 @@ def test_residuals_are_bearing_errors_to_the_best_visible_object(
         Detection("table", -0.2),
     ]
     obs = prepare_observation(dets, small_room, cfg)
-    grid = visibility_grid(small_room)
+    grid = small_room.visibility
     pts = small_room.free_space.sample(200, rng)
     for (x, y), th in zip(pts, rng.uniform(-np.pi, np.pi, 200), strict=True):
         row = grid.visible(x, y)[0]
         got = normalized_residuals(x, y, th, obs, small_room, cfg, row)
+        within = bearing_tolerance(small_room, x, y, obs, cfg)
         for k in range(len(dets)):  # in the observation's (grouped) order
             cls, bearing = obs.classes[obs.det_group[k]], obs.det_bearing[k]
             objs = small_room.class_members[cls]
@@ -253,7 +296,7 @@ def test_residuals_are_bearing_errors_to_the_best_visible_object(
             rel = small_room.object_xy[objs[ok]] - [x, y]
             err = np.abs(wrap_angle(bearing - (np.arctan2(rel[:, 1], rel[:, 0]) - th)))
             want = err.min() / cfg.bearing_std_rad(cls) if ok.any() else np.inf
-            assert got[k] == pytest.approx(want, rel=1e-9, abs=1e-9)
+            assert got[k] == pytest.approx(want, rel=0, abs=within)
 
 
 def test_residuals_are_zero_at_the_true_pose_and_three_for_a_three_sigma_error(
@@ -263,7 +306,8 @@ def test_residuals_are_zero_at_the_true_pose_and_three_for_a_three_sigma_error(
     truth = (2.5, 1.5, 0.4)
     dets = observe(small_room, *truth)
     obs = prepare_observation(dets, small_room, cfg)
-    assert np.allclose(normalized_residuals(*truth, obs, small_room, cfg), 0.0, atol=1e-9)
+    within = bearing_tolerance(small_room, *truth[:2], obs, cfg)
+    assert np.abs(normalized_residuals(*truth, obs, small_room, cfg)).max() <= within
     off = [Detection(d.cls, d.bearing_rad + 3 * cfg.bearing_std_rad(d.cls)) for d in dets[:1]]
     r = normalized_residuals(*truth, prepare_observation(off, small_room, cfg), small_room, cfg)
-    assert r[0] == pytest.approx(3.0, abs=1e-6)
+    assert r[0] == pytest.approx(3.0, rel=0, abs=within)

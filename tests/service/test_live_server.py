@@ -12,8 +12,9 @@ import numpy as np
 import pytest
 import websockets
 
-from app.localization.map import bundled_maps_dir, load_map
 from app.main import create_app
+from app.maps.model import load_map
+from app.resources import bundled_maps_dir
 from app.simulation.scenarios import paper_config
 from app.simulation.simulator import simulate
 from tests.api.conftest import make_settings
@@ -49,9 +50,9 @@ async def stream_session(
     seqs = []
     last: dict = {}
     async with websockets.connect(f"ws://{url}/sessions/{sid}/stream") as ws:
+        # One frame at a time, as a phone at a steady rate would: nothing is merged.
         for frame in FRAMES[:n_frames]:
             await ws.send(json.dumps(frame))
-        for _ in range(n_frames):
             last = json.loads(await ws.recv())
             seqs.append(last["seq"])
     return sid, seqs, last

@@ -4,11 +4,17 @@ from __future__ import annotations
 
 import asyncio
 
-from app.api.schemas import Frame, SessionCreate
-from app.localization.map import bundled_maps_dir, load_map_dir
+from app.localization.types import Detection
+from app.maps.model import load_map_dir
+from app.resources import bundled_maps_dir
 from app.service.metrics import Metrics
 from app.service.sessions import SessionManager, SessionNotFound
+from app.service.types import FrameInput, SessionSpec
 from tests.api.conftest import make_settings
+
+
+def make_manager(**overrides: object) -> SessionManager:
+    return SessionManager(load_map_dir(bundled_maps_dir()), make_settings(**overrides), Metrics())
 
 
 def test_idle_sessions_expire() -> None:
@@ -16,11 +22,11 @@ def test_idle_sessions_expire() -> None:
         manager = SessionManager(
             load_map_dir(bundled_maps_dir()), make_settings(session_idle_timeout_s=0.2), Metrics()
         )
-        idle = await manager.create(SessionCreate(map="paper_office", particles=200))
-        busy = await manager.create(SessionCreate(map="paper_office", particles=200))
+        idle = await manager.create(SessionSpec(map_name="paper_office", particles=200))
+        busy = await manager.create(SessionSpec(map_name="paper_office", particles=200))
         for _ in range(4):
             await asyncio.sleep(0.1)
-            await manager.process(busy.id, Frame())
+            await manager.process(busy.id, FrameInput())
         assert await manager.expire_idle() == 1
         try:
             manager.get(idle.id)
@@ -36,10 +42,10 @@ def test_idle_sessions_expire() -> None:
 def test_snapshot_is_a_copy() -> None:
     async def main() -> None:
         manager = SessionManager(load_map_dir(bundled_maps_dir()), make_settings(), Metrics())
-        s = await manager.create(SessionCreate(map="paper_office", particles=300))
+        s = await manager.create(SessionSpec(map_name="paper_office", particles=300))
         snap = s.snapshot()
         assert snap.estimate is None and snap.frames == 0
-        await manager.process(s.id, Frame(detections=[{"class": "door", "bearing_deg": 3}]))
+        await manager.process(s.id, FrameInput(detections=(Detection("door", 0.05, 1.0),)))
         later = s.snapshot()
         assert later.version == snap.version + 1 and later.frames == 1
         assert not np.shares_memory(later.x, s.filter.x)

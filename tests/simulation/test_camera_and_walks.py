@@ -9,9 +9,10 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from app.localization.geometry import wrap_angle
-from app.localization.map import bundled_maps_dir, load_map, parse_map
 from app.localization.types import Pose
+from app.maps.geometry import wrap_angle
+from app.maps.model import load_map, parse_map
+from app.resources import bundled_maps_dir
 from app.simulation import CameraModel, paper_config, simulate, visible_objects
 from app.simulation.scenarios import PAPER_PATH
 from app.simulation.simulator import CornerVisit, SimulationConfig

@@ -9,10 +9,12 @@ import numpy as np
 import pytest
 import viser
 
-from app.api.schemas import Frame, SessionCreate
-from app.localization.map import bundled_maps_dir, load_map, load_map_dir
+from app.demo import frame_input_of
+from app.maps.model import load_map, load_map_dir
+from app.resources import bundled_maps_dir
 from app.service.metrics import Metrics
 from app.service.sessions import SessionManager
+from app.service.types import FrameInput, SessionSpec
 from app.simulation.scenarios import paper_config
 from app.simulation.simulator import simulate
 from app.viz.particles import MAX_DRAWN, detection_rays, sample_particles
@@ -60,10 +62,10 @@ def make_manager() -> SessionManager:
 def test_particles_are_sampled_by_weight_and_capped() -> None:
     async def main():
         manager = make_manager()
-        s = await manager.create(SessionCreate(map="paper_office", particles=8000, seed=1))
+        s = await manager.create(SessionSpec(map_name="paper_office", particles=8000, seed=1))
         frames = simulate(OFFICE, paper_config("nominal", 360), np.random.default_rng(1))[:3]
         for f in frames:
-            await manager.process(s.id, Frame.model_validate(f.to_contract()))
+            await manager.process(s.id, frame_input_of(f))
         return s.snapshot()
 
     snap = asyncio.run(main())
@@ -82,18 +84,21 @@ def test_live_view_draws_the_watched_session() -> None:
         view = LiveView(manager, port=free_port(), host="127.0.0.1")
         view.start()
         try:
-            s = await manager.create(SessionCreate(map="paper_office", particles=2000, seed=2))
+            s = await manager.create(
+                SessionSpec(map_name="paper_office", particles=2000, seed=2, share_view=True)
+            )
             frames = simulate(OFFICE, paper_config("nominal", 360), np.random.default_rng(2))[:5]
             for f in frames:
-                await manager.process(s.id, Frame.model_validate(f.to_contract()))
+                await manager.process(s.id, frame_input_of(f))
             deadline = time.time() + 10
             while view._last_version != s.version and time.time() < deadline:
                 await asyncio.sleep(0.05)
             assert view.watched == s.id  # the newest session is watched by default
             assert view.controls is not None
-            assert s.id in view.controls.session.options
+            assert s.id not in view.controls.session.options  # a label, never the id
+            assert view.controls.label(s) in view.controls.session.options
             assert view.refresh() is False  # nothing new: nothing redrawn
-            await manager.process(s.id, Frame())
+            await manager.process(s.id, FrameInput())
             assert view.refresh() is True
             # The GUI's demo button starts a simulated walk and watches it.
             sid = await view.controls.start_walk()
@@ -107,3 +112,39 @@ def test_live_view_draws_the_watched_session() -> None:
 
     view = asyncio.run(main())
     assert view.frames_drawn >= 1
+
+
+def test_the_view_draws_the_way_to_the_destination() -> None:
+    from app.guidance import DestinationSpec
+
+    async def main():
+        manager = make_manager()
+        view = LiveView(manager, port=free_port(), host="127.0.0.1")
+        view.start()
+        try:
+            from app.localization.types import InitialPose
+
+            s = await manager.create(
+                SessionSpec(
+                    map_name="paper_office",
+                    particles=2000,
+                    seed=3,
+                    initial_pose=InitialPose(1.5, 1.2, 0.0, 0.3, 0.2),
+                )
+            )
+            await manager.set_destination(s.id, DestinationSpec("label", "main entrance"))
+            frames = simulate(OFFICE, paper_config("nominal", 360), np.random.default_rng(3))
+            for f in frames[:15]:
+                await manager.process(s.id, frame_input_of(f))
+            snap = s.snapshot()
+            view.draw(snap)
+            return snap, view.route
+        finally:
+            view.stop()
+
+    snap, route = asyncio.run(main())
+    assert snap.route is not None and route is not None and route.visible
+    assert route.points.shape == (len(snap.route) - 1, 2, 3)
+    # From the estimate to the door at (10, 5.5).
+    assert route.points[-1, 1, :2] == pytest.approx((10.0, 5.5))
+    assert route.points[0, 0, :2] == pytest.approx((snap.estimate.x, snap.estimate.y), abs=1e-4)

@@ -3,13 +3,15 @@
 from __future__ import annotations
 
 import asyncio
+from dataclasses import replace
 
 import numpy as np
 from fastapi import APIRouter, Request
 from pydantic import Field
 
+from app.api.convert import camera_of
 from app.api.deps import ManagerDep
-from app.api.schemas import _In
+from app.api.schemas import CameraIn, _In
 from app.service.sessions import UnknownMap
 from app.simulation.simulator import simulate
 from app.simulation.walks import demo_config
@@ -25,6 +27,12 @@ class SimulationRequest(_In):
     false_rate: float = Field(0.0, ge=0, le=5, description="false detections per frame (mean)")
     bearing_noise_deg: float = Field(2.0, ge=0, le=45, description="bearing noise std, degrees")
     seed: int = Field(0, ge=0, le=2**32 - 1, description="random seed")
+    camera: CameraIn | None = Field(
+        None, description="give detections as this camera's pixel boxes (its field of view)"
+    )
+    compass_std_deg: float | None = Field(
+        None, gt=0, le=90, description="give each frame a compass heading with this noise"
+    )
 
 
 @router.post("/simulations", summary="Simulated frames of a looping walk (with ground truth)")
@@ -45,7 +53,9 @@ async def simulations(body: SimulationRequest, manager: ManagerDep) -> dict[str,
             false_rate=body.false_rate,
             bearing_noise_deg=body.bearing_noise_deg,
         )
-        return [f.to_contract() for f in simulate(semantic_map, cfg, rng)]
+        camera = camera_of(body.camera)
+        cfg = replace(cfg, camera=camera, compass_std_deg=body.compass_std_deg)
+        return [f.to_contract(camera) for f in simulate(semantic_map, cfg, rng)]
 
     frames = await asyncio.to_thread(make)
     return {"map": body.map, "rate_hz": 5.0, "frames": frames}

@@ -4,27 +4,33 @@ A map file (see CONTRACT.md) holds walls, semantic objects (class, position, opt
 label) and optional named regions. :func:`load_map` validates a file with pydantic and
 refuses anything invalid with a message that names the field and the reason;
 :class:`SemanticMap` is the validated map as numpy arrays plus the derived, cached
-structures the filter needs (free space, line of sight).
+structures the filter needs (free space and visibility grids, see
+:mod:`app.maps.prepare`).
 """
 
 from __future__ import annotations
 
-import json
 import re
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
-from app.localization.geometry import (
+from app.maps.geometry import (
+    grid_cells,
     point_segment_distance,
     points_in_polygon,
     segments_cross_walls,
 )
+from app.resources import bundled_maps_dir as bundled_maps_dir  # re-exported for old imports
+
+if TYPE_CHECKING:
+    from app.maps.prepare import PreparedMap
+    from app.maps.visibility import VisibilityGrid
 
 #: An object class is a lower-case word: letters, digits, '_' or '-', starting with a letter.
 CLASS_PATTERN = re.compile(r"^[a-z][a-z0-9_-]*$")
@@ -103,15 +109,40 @@ class MapFile(_Strict):
 
 
 class MapError(ValueError):
-    """A map file that cannot be used; the message says which field and why."""
+    """A map file that cannot be used; the message says which field and why.
+
+    ``fields`` holds each (field, reason) pair when there are several.
+    """
+
+    def __init__(self, message: str, fields: list[tuple[str, str]] | None = None) -> None:
+        super().__init__(message)
+        self.fields = fields or [("(file)", message)]
 
 
-def _format_validation_error(source: str, error: ValidationError) -> str:
-    parts = []
+def _validation_error(source: str, error: ValidationError) -> MapError:
+    fields = []
     for item in error.errors():
         where = ".".join(str(p) for p in item["loc"]) or "(file)"
-        parts.append(f"{where}: {item['msg']}")
-    return f"{source}: " + "; ".join(parts)
+        fields.append((where, str(item["msg"])))
+    return MapError(f"{source}: " + "; ".join(f"{f}: {m}" for f, m in fields), fields)
+
+
+def validate_spec(
+    data: object, *, source: str = "map", expected_name: str | None = None
+) -> MapFile:
+    """Validate already-decoded JSON against the file schema.
+
+    Raises:
+        MapError: naming the offending field and the reason.
+    """
+    try:
+        spec = MapFile.model_validate(data)
+    except ValidationError as exc:
+        raise _validation_error(source, exc) from None
+    if expected_name is not None and spec.name != expected_name:
+        reason = f"{spec.name!r} must equal the file name without .json ({expected_name!r})"
+        raise MapError(f"{source}: name: {reason}", [("name", reason)])
+    return spec
 
 
 def parse_map(
@@ -122,41 +153,33 @@ def parse_map(
     Raises:
         MapError: naming the offending field and the reason.
     """
-    try:
-        spec = MapFile.model_validate(data)
-    except ValidationError as exc:
-        raise MapError(_format_validation_error(source, exc)) from None
-    if expected_name is not None and spec.name != expected_name:
-        raise MapError(
-            f"{source}: name: {spec.name!r} must equal the file name without .json "
-            f"({expected_name!r})"
-        )
-    return SemanticMap(spec)
+    return SemanticMap(validate_spec(data, source=source, expected_name=expected_name))
 
 
 def load_map(path: str | Path) -> SemanticMap:
-    """Load and validate one map file; its ``name`` must match the file name."""
-    p = Path(path)
-    try:
-        data = json.loads(p.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise MapError(f"{p}: no such map file") from None
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise MapError(f"{p}: not valid JSON ({exc})") from None
-    return parse_map(data, source=str(p), expected_name=p.stem)
+    """Load and check one map file (:func:`app.maps.check.check_file`).
+
+    Its ``name`` must match the file name. Warnings are dropped (their fixes, such as
+    an object snapped onto a wall, are applied).
+
+    Raises:
+        MapError: with every error found, each naming its field.
+    """
+    from app.maps.check import check_file
+
+    result = check_file(path)
+    if result.map is None:
+        errors = result.errors
+        raise MapError("; ".join(str(p) for p in errors), [(p.field, p.message) for p in errors])
+    return result.map
 
 
 def load_map_dir(directory: str | Path) -> dict[str, SemanticMap]:
-    """Load every ``*.json`` map in a directory, keyed by name (sorted)."""
+    """Load every ``*.json`` map in a directory, keyed by name (sorted); any error raises."""
     d = Path(directory)
     if not d.is_dir():
         raise MapError(f"{d}: not a directory of maps")
     return {m.name: m for m in (load_map(p) for p in sorted(d.glob("*.json")))}
-
-
-def bundled_maps_dir() -> Path:
-    """The repository's ``maps/`` folder shipped with Bearings."""
-    return Path(__file__).resolve().parents[2] / "maps"
 
 
 @dataclass(frozen=True)
@@ -174,13 +197,11 @@ class FreeSpaceGrid:
     free_cells: NDArray[np.int64] = field(repr=False)  # flat indices of free cells
 
     def cell_index(self, x: ArrayLike, y: ArrayLike) -> tuple[NDArray[np.int64], NDArray[np.bool_]]:
-        """Row-major flat cell index for each point and whether it is on the grid."""
-        rows, cols = self.mask.shape
-        c = np.floor((np.asarray(x) - self.origin_x) / self.resolution_m).astype(np.int64)
-        r = np.floor((np.asarray(y) - self.origin_y) / self.resolution_m).astype(np.int64)
-        inside = (c >= 0) & (c < cols) & (r >= 0) & (r < rows)
-        flat = np.where(inside, np.clip(r, 0, rows - 1) * cols + np.clip(c, 0, cols - 1), 0)
-        return flat, inside
+        """Row-major flat cell index for each point and whether it is on the grid.
+
+        Points off the grid get the nearest edge cell (see :func:`grid_cells`).
+        """
+        return grid_cells(x, y, self.origin_x, self.origin_y, self.resolution_m, self.mask.shape)
 
     def is_free(self, x: ArrayLike, y: ArrayLike) -> NDArray[np.bool_]:
         """Whether each point lies in a free cell (False off the grid)."""
@@ -237,6 +258,7 @@ class SemanticMap:
         else:
             self.mounted_walls = np.zeros((len(spec.objects), 0), dtype=bool)
         self._grid_resolution_m = grid_resolution_m
+        self._prepared: PreparedMap | None = None
 
     def __repr__(self) -> str:
         return (
@@ -300,56 +322,37 @@ class SemanticMap:
         i = int(self.region_index([[x, y]])[0])
         return self.region_names[i] if i >= 0 else None
 
-    @cached_property
+    @property
+    def grid_resolution_m(self) -> float | None:
+        """The free-space grid's cell side asked for, or None for the automatic one."""
+        return self._grid_resolution_m
+
+    @property
+    def prepared_or_none(self) -> PreparedMap | None:
+        """The map's grids if it was prepared (:mod:`app.maps.prepare`), else None."""
+        return self._prepared
+
+    def attach(self, prepared: PreparedMap) -> None:
+        """Hold grids built (or read from the cache) for this map."""
+        self._prepared = prepared
+
+    @property
     def free_space(self) -> FreeSpaceGrid:
-        """Cells enclosed by walls in all four axis directions, wholly >= 0.1 m from walls.
+        """Where a person can stand (:func:`app.maps.prepare.build_free_space`).
 
-        Every point of a free cell is at least ``WALL_CLEARANCE_M`` from every wall (the
-        cell centre is tested with the half-diagonal added), which the motion model
-        relies on to skip ray tests for short moves.
-
-        A map without walls is free everywhere within its bounds plus one metre.
-        Computed once per map and cached.
+        Built when the map is prepared; a map never prepared builds it on first use.
         """
-        min_x, min_y, max_x, max_y = self.bounds
-        margin = 1.0 if self.walls.shape[0] == 0 else 0.0
-        min_x, min_y, max_x, max_y = min_x - margin, min_y - margin, max_x + margin, max_y + margin
-        area = max((max_x - min_x) * (max_y - min_y), 1e-6)
-        res = self._grid_resolution_m or max(0.05, float(np.sqrt(area / 200_000.0)))
-        cols = max(1, int(np.ceil((max_x - min_x) / res)))
-        rows = max(1, int(np.ceil((max_y - min_y) / res)))
-        cx = min_x + (np.arange(cols) + 0.5) * res
-        cy = min_y + (np.arange(rows) + 0.5) * res
-        gx, gy = np.meshgrid(cx, cy)
-        centres = np.column_stack([gx.ravel(), gy.ravel()])
-        if self.walls.shape[0] == 0:
-            mask = np.ones(centres.shape[0], dtype=bool)
-        else:
-            mask = np.ones(centres.shape[0], dtype=bool)
-            reach = 2.0 * (max_x - min_x + max_y - min_y) + 1.0
-            for dx, dy in ((1, 0), (-1, 0), (0, 1), (0, -1)):
-                far = centres + reach * np.array([dx, dy], dtype=np.float64)
-                mask &= _chunked_cross(centres, far, self.walls)
-            clear = np.ones_like(mask)
-            for start in range(0, centres.shape[0], 20_000):
-                part = centres[start : start + 20_000]
-                clear[start : start + 20_000] = point_segment_distance(part, self.walls).min(
-                    axis=1
-                ) >= WALL_CLEARANCE_M + res * np.sqrt(0.5)
-            mask &= clear
-        mask2d = mask.reshape(rows, cols)
-        return FreeSpaceGrid(min_x, min_y, res, mask2d, np.flatnonzero(mask))
+        from app.maps.prepare import prepared_of
+
+        return prepared_of(self).free_space
+
+    @property
+    def visibility(self) -> VisibilityGrid:
+        """Which objects each cell sees (:func:`app.maps.prepare.build_visibility`)."""
+        from app.maps.prepare import prepared_of
+
+        return prepared_of(self).visibility
 
     def to_json(self) -> dict[str, object]:
         """The map file's JSON (with ``class`` spelled as in the file)."""
         return self.spec.model_dump(by_alias=True, exclude_none=False)
-
-
-def _chunked_cross(
-    start: NDArray[np.float64], end: NDArray[np.float64], walls: NDArray[np.float64]
-) -> NDArray[np.bool_]:
-    out = np.empty(start.shape[0], dtype=bool)
-    step = max(1, 2_000_000 // max(1, walls.shape[0]))
-    for i in range(0, start.shape[0], step):
-        out[i : i + step] = segments_cross_walls(start[i : i + step], end[i : i + step], walls)
-    return out

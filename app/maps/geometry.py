@@ -112,3 +112,41 @@ def points_in_polygon(points: ArrayLike, polygon: ArrayLike) -> NDArray[np.bool_
     x_cross = x1 + (y - y1) * (x2 - x1) / dy
     crossings = straddles & (x < x_cross)
     return (np.count_nonzero(crossings, axis=1) % 2) == 1
+
+
+def grid_cell(x, y, origin_x, origin_y, inv_res, rows, cols):  # fmt: skip
+    """(row-major flat index of the cell holding (x, y) as a float, on the grid?).
+
+    The one grid-cell lookup. Points off the grid get the nearest edge cell (the flag
+    says they are off it); a point on a cell boundary belongs to the cell above and to
+    the right. Plain numpy arithmetic that works on scalars and arrays alike, so the
+    compiled kernels compile this very function
+    (:data:`app.localization.fastmath.grid_cell`) and every caller puts a point into
+    the same cell; :func:`grid_cells` is the array form.
+    """
+    fc = np.floor((x - origin_x) * inv_res)
+    fr = np.floor((y - origin_y) * inv_res)
+    inside = (fc >= 0.0) & (fc < cols) & (fr >= 0.0) & (fr < rows)
+    c = np.minimum(np.maximum(fc, 0.0), cols - 1.0)
+    r = np.minimum(np.maximum(fr, 0.0), rows - 1.0)
+    return r * cols + c, inside
+
+
+def grid_cells(
+    x: ArrayLike,
+    y: ArrayLike,
+    origin_x: float,
+    origin_y: float,
+    resolution_m: float,
+    shape: tuple[int, int],
+) -> tuple[NDArray[np.int64], NDArray[np.bool_]]:
+    """:func:`grid_cell` for arrays of points: (flat cell index, on the grid?).
+
+    Both outputs have the broadcast shape of ``x`` and ``y`` (shape (1,) for scalars).
+    """
+    shape_out = np.broadcast_shapes(np.shape(x), np.shape(y)) or (1,)
+    xs = np.broadcast_to(np.asarray(x, dtype=np.float64), shape_out)
+    ys = np.broadcast_to(np.asarray(y, dtype=np.float64), shape_out)
+    rows, cols = shape
+    flat, inside = grid_cell(xs, ys, origin_x, origin_y, 1.0 / resolution_m, rows, cols)
+    return flat.astype(np.int64), inside

@@ -1,0 +1,230 @@
+"""Between the wire models (JSON, degrees) and the service's own types (radians).
+
+The one place where a request body becomes a :class:`~app.service.types.SessionSpec`
+or :class:`~app.service.types.FrameInput`, and a
+:class:`~app.service.types.FrameOutcome` becomes the ``FrameResult`` of docs/API.md.
+"""
+
+from __future__ import annotations
+
+import math
+
+from app.api.schemas import (
+    CameraIn,
+    DestinationIn,
+    DestinationOut,
+    FeedbackItemOut,
+    FeedbackOut,
+    Frame,
+    FrameResult,
+    GuidanceOut,
+    HypothesisOut,
+    NextTurnOut,
+    PoseOut,
+    SessionCreate,
+    SessionOut,
+    Uncertainty,
+)
+from app.feedback import FeedbackOptions, clock_from_bearing_deg
+from app.guidance import DestinationSpec, Guidance, Target
+from app.localization.camera import BoxError, Camera
+from app.localization.compass import CompassReading
+from app.localization.types import Detection, InitialPose, Odometry, Pose
+from app.maps.geometry import wrap_deg
+from app.service.sessions import Session
+from app.service.types import FrameInput, FrameOutcome, SensorSpec, SessionSpec
+
+
+def camera_of(body: CameraIn | None) -> Camera | None:
+    """The session's camera model, or None."""
+    if body is None:
+        return None
+    if body.model == "pinhole":
+        return Camera("pinhole", body.width_px, body.fx_px, body.cx_px, body.yaw_offset_deg)
+    return Camera("equirectangular", body.width_px, yaw_offset_deg=body.yaw_offset_deg)
+
+
+def session_spec(body: SessionCreate) -> SessionSpec:
+    """The service's description of the session a ``SessionCreate`` asks for."""
+    initial = None
+    if body.initial_pose is not None:
+        p = body.initial_pose
+        initial = InitialPose(
+            p.x, p.y, math.radians(p.theta_deg), p.std_xy_m, math.radians(p.std_theta_deg)
+        )
+    s = body.sensor
+    fb = body.feedback
+    return SessionSpec(
+        map_name=body.map,
+        particles=body.particles,
+        seed=body.seed,
+        initial_pose=initial,
+        sensor=SensorSpec(
+            bearing_std_deg=s.bearing_std_deg,
+            fov_deg=s.fov_deg,
+            class_bearing_std_deg=dict(s.class_bearing_std_deg),
+        ),
+        feedback=FeedbackOptions(fb.style, fb.units, fb.max_items),
+        camera=camera_of(body.camera),
+        share_view=body.share_view,
+    )
+
+
+def _bearing_deg(frame: Frame, camera: Camera | None) -> list[float]:
+    """Each detection's bearing in degrees: as given, or from its box through ``camera``.
+
+    Raises:
+        BoxError: a box without a session camera, or one that does not fit the image;
+            the message names the detection.
+    """
+    out = []
+    for i, d in enumerate(frame.detections):
+        if d.box is None:
+            out.append(float(d.bearing_deg))  # type: ignore[arg-type]  # validated: one of two
+            continue
+        if camera is None:
+            raise BoxError(
+                f"detections.{i}.box: this session has no camera, so a pixel box cannot be "
+                "turned into a bearing; create the session with a camera (e.g. "
+                '{"model": "equirectangular", "width_px": 3840}) or send bearing_deg'
+            )
+        try:
+            out.append(camera.box_bearing_deg(d.box.u_min_px, d.box.u_max_px))
+        except BoxError as exc:
+            raise BoxError(f"detections.{i}.{exc}") from None
+    return out
+
+
+def frame_input(frame: Frame, camera: Camera | None = None) -> FrameInput:
+    """A ``Frame`` in the service's units: radians, bearings wrapped to (-pi, pi].
+
+    Pixel boxes become bearings through the session's ``camera`` (raises
+    :class:`~app.localization.camera.BoxError` when that cannot be done).
+    """
+    odometry = None
+    if frame.odometry is not None:
+        o = frame.odometry
+        odometry = Odometry(o.forward_m, o.left_m, math.radians(o.turn_deg))
+    truth = None
+    if frame.truth is not None:
+        t = frame.truth
+        truth = Pose(t.x, t.y, math.radians(t.theta_deg))
+    heading = None
+    if frame.heading is not None:
+        heading = CompassReading(
+            math.radians(wrap_deg(frame.heading.heading_deg)), math.radians(frame.heading.std_deg)
+        )
+    return FrameInput(
+        timestamp=frame.timestamp,
+        odometry=odometry,
+        detections=tuple(
+            Detection(d.cls, math.radians(wrap_deg(b)), d.score)
+            for d, b in zip(frame.detections, _bearing_deg(frame, camera), strict=True)
+        ),
+        describe=frame.describe,
+        truth=truth,
+        heading=heading,
+    )
+
+
+def _deg(rad: float) -> float:
+    return round(wrap_deg(math.degrees(rad)), 3)
+
+
+def destination_spec(body: DestinationIn) -> DestinationSpec:
+    """The service's description of a destination request."""
+    if body.label is not None:
+        return DestinationSpec("label", body.label)
+    if body.cls is not None:
+        return DestinationSpec("class", body.cls)
+    if body.region is not None:
+        return DestinationSpec("region", body.region)
+    return DestinationSpec("point", x=float(body.x), y=float(body.y))  # type: ignore[arg-type]
+
+
+def destination_out(target: Target) -> DestinationOut:
+    return DestinationOut(
+        target=target.name,
+        kind=target.kind,
+        points=[(round(float(x), 4), round(float(y), 4)) for x, y in target.points],
+    )
+
+
+def guidance_out(g: Guidance | None) -> GuidanceOut | None:
+    """The ``guidance`` of docs/API.md: clock directions from the bearings."""
+    if g is None:
+        return None
+    turn = None
+    if g.next is not None:
+        turn = NextTurnOut(
+            clock=clock_from_bearing_deg(g.next.bearing_deg),
+            bearing_deg=g.next.bearing_deg,
+            distance_m=g.next.distance_m,
+            then_clock=clock_from_bearing_deg(g.next.then_deg),
+        )
+    return GuidanceOut(
+        target=g.target,
+        clock=clock_from_bearing_deg(g.bearing_deg),
+        bearing_deg=g.bearing_deg,
+        distance_m=g.distance_m,
+        path_m=g.path_m,
+        next=turn,
+        arrived=g.arrived,
+    )
+
+
+def frame_result(outcome: FrameOutcome) -> FrameResult:
+    """Shape one step's outcome as the ``FrameResult`` of docs/API.md."""
+    estimate = outcome.estimate
+    feedback = outcome.feedback
+    return FrameResult(
+        seq=outcome.seq,
+        pose=PoseOut(
+            x=round(estimate.x, 4), y=round(estimate.y, 4), theta_deg=_deg(estimate.theta_rad)
+        ),
+        uncertainty=Uncertainty(
+            std_x_m=round(min(estimate.std_x_m, 1e6), 4),
+            std_y_m=round(min(estimate.std_y_m, 1e6), 4),
+            std_theta_deg=round(math.degrees(estimate.std_theta_rad), 3),
+        ),
+        converged=estimate.converged,
+        protection_m=None if estimate.protection_m is None else round(estimate.protection_m, 3),
+        hypotheses=[
+            HypothesisOut(
+                x=round(h.x, 4),
+                y=round(h.y, 4),
+                theta_deg=_deg(h.theta_rad),
+                weight=round(h.weight, 4),
+                region=region,
+            )
+            for h, region in zip(estimate.hypotheses[:3], outcome.regions, strict=False)
+        ],
+        feedback=FeedbackOut(
+            text=feedback.text,
+            items=[
+                FeedbackItemOut(
+                    cls=i.cls,
+                    label=i.label,
+                    clock=i.clock,
+                    bearing_deg=None if i.bearing_deg is None else round(i.bearing_deg, 1),
+                    distance_m=None if i.distance_m is None else round(i.distance_m, 2),
+                )
+                for i in feedback.items
+            ],
+        ),
+        warnings=list(outcome.warnings),
+        guidance=guidance_out(outcome.guidance),
+    )
+
+
+def session_out(session: Session) -> SessionOut:
+    """The public view of a session, with its latest result."""
+    last = session.last_outcome
+    return SessionOut(
+        id=session.id,
+        map=session.map.name,
+        particles=session.particles,
+        created_at=session.created_at,
+        frames=session.frames,
+        last_result=None if last is None else frame_result(last),
+    )

@@ -1,0 +1,405 @@
+"""Shortest walkable paths to a target through the map's free space.
+
+Once per map and target, a :class:`Plan` runs Dijkstra's algorithm (scipy's compiled
+``csgraph.dijkstra``) over the map's free-space grid, from the target outwards: every
+walkable cell learns its walking distance to the target and the next cell towards it.
+Cells closer than ``CLEARANCE_M`` to a wall are left out so that paths keep a little
+room from walls and door frames (a map whose passages are narrower falls back to the
+whole free space). A target point in a wall (a door) is joined to the walkable cells
+around it that see it.
+
+Per frame, :meth:`Plan.route` follows those next-cell links from the person's cell and
+straightens the staircase of cells into the few straight legs a person would walk
+(a leg goes on as long as the straight line stays walkable), so the first leg's end
+is the next turn. No search runs per frame.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+from collections import OrderedDict
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+from numpy.typing import NDArray
+from scipy import ndimage
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import dijkstra
+
+from app.guidance.targets import DestinationSpec, Target, resolve
+from app.maps.geometry import points_in_polygon, segments_cross_walls, wrap_deg
+from app.maps.model import SemanticMap
+
+#: Paths keep at least about this much room from walls where the map allows (metres).
+CLEARANCE_M = 0.3
+#: A target point joins the walkable cells within this distance that see it (metres).
+JOIN_RADIUS_M = 1.0
+#: ... or, when none is that close, within this distance.
+MAX_JOIN_RADIUS_M = 3.0
+#: A pose off the walkable cells (estimate near a wall) snaps to one within this (metres).
+MAX_SNAP_M = 1.5
+#: A bend of the path smaller than this is no turn worth a word (degrees).
+MIN_TURN_DEG = 15.0
+#: Plans kept per map (least recently used dropped first).
+CACHE_SIZE = 16
+
+_lock = threading.Lock()
+
+
+class Unreachable(ValueError):
+    """No walkable path leads to the target (or from the given pose)."""
+
+
+@dataclass(frozen=True)
+class Route:
+    """The straightened shortest path from a pose to the target.
+
+    Attributes:
+        points: the pose, each turn, and the end point, shape (P, 2), metres.
+        length_m: walking length of the polyline, metres.
+        end_object: the map object reached (-1 for a point or a region).
+    """
+
+    points: NDArray[np.float64]
+    length_m: float
+    end_object: int
+
+
+class Plan:
+    """Walking distances to one target over one map's free space (built once)."""
+
+    def __init__(self, semantic_map: SemanticMap, target: Target) -> None:
+        self.map = semantic_map
+        self.target = target
+        fs = semantic_map.free_space
+        self.res = fs.resolution_m
+        self.origin = np.array([fs.origin_x, fs.origin_y])
+        self.shape = fs.mask.shape
+        free = fs.mask
+        # Distance from each free cell centre to the nearest cell that is not free; the
+        # free space already keeps WALL_CLEARANCE_M (0.1 m) plus half a cell from walls.
+        room = ndimage.distance_transform_edt(free) * self.res
+        roomy = free & (room >= max(CLEARANCE_M - 0.1, 0.0))
+        for walkable in (roomy, free):
+            try:
+                self._build(walkable)
+                return
+            except Unreachable:
+                continue
+        raise Unreachable(f"no walkable path leads to {target.name} on map {semantic_map.name!r}")
+
+    # ------------------------------------------------------------------ build
+    def _centres(self, flat: NDArray[np.int64]) -> NDArray[np.float64]:
+        r, c = np.divmod(flat, self.shape[1])
+        return self.origin + (np.column_stack([c, r]) + 0.5) * self.res
+
+    def _build(self, walkable: NDArray[np.bool_]) -> None:
+        rows, cols = self.shape
+        cells = np.flatnonzero(walkable)
+        n = cells.size
+        node = np.full(rows * cols, -1, dtype=np.int64)
+        node[cells] = np.arange(n)
+        r, c = np.divmod(cells, cols)
+        src, dst, wt = [], [], []
+        # Right, up, and both diagonals (the graph is undirected); a diagonal step only
+        # where both cells beside it are walkable, so no path cuts a wall's corner.
+        for dr, dc in ((0, 1), (1, 0), (1, 1), (1, -1)):
+            rr, cc = r + dr, c + dc
+            ok = (rr >= 0) & (rr < rows) & (cc >= 0) & (cc < cols)
+            ok[ok] &= walkable[rr[ok], cc[ok]]
+            if dr and dc:
+                ok[ok] &= walkable[r[ok] + dr, c[ok]] & walkable[r[ok], c[ok] + dc]
+            src.append(np.arange(n)[ok])
+            dst.append(node[rr[ok] * cols + cc[ok]])
+            wt.append(np.full(int(ok.sum()), self.res * float(np.hypot(dr, dc))))
+        seeds, seed_w, seed_src = self._seeds(cells)
+        k = max(len(self.target.points), 1)
+        # Node n + j is target point j (a region has one virtual node, n).
+        src.append(seed_src + n)
+        dst.append(node[seeds])
+        wt.append(seed_w)
+        s = np.concatenate(src)
+        d = np.concatenate(dst)
+        w = np.concatenate(wt) + 1e-9  # csgraph treats an explicit 0 as no edge
+        graph = coo_matrix((np.r_[w, w], (np.r_[s, d], np.r_[d, s])), shape=(n + k, n + k))
+        dist, pred, source = dijkstra(
+            graph.tocsr(),
+            directed=True,
+            indices=np.arange(n, n + k),
+            return_predecessors=True,
+            min_only=True,
+        )
+        reach = np.isfinite(dist[:n])
+        if not reach.any():
+            raise Unreachable(f"nothing walkable reaches {self.target.name}")
+        self.walkable = walkable
+        self.node = node
+        self.cells = cells
+        self.dist = dist
+        self.pred = pred
+        self.source = source
+        self.n = n
+        # For every grid cell, the nearest reachable walkable cell (for snapping).
+        reachable = np.zeros(rows * cols, dtype=bool)
+        reachable[cells[reach]] = True
+        _, (ir, ic) = ndimage.distance_transform_edt(
+            ~reachable.reshape(rows, cols), return_indices=True
+        )
+        self.nearest = (ir * cols + ic).reshape(-1)
+
+    def _seeds(
+        self, cells: NDArray[np.int64]
+    ) -> tuple[NDArray[np.int64], NDArray[np.float64], NDArray[np.int64]]:
+        """Walkable cells joined to the target: (cells, distance to the target, which point)."""
+        t = self.target
+        centres = self._centres(cells)
+        if t.kind == "region":
+            inside = points_in_polygon(centres, self.map.region_polygons[t.region])
+            if not inside.any():
+                raise Unreachable(f"no walkable part of region {t.name}")
+            found = cells[inside]
+            return found, np.zeros(found.size), np.zeros(found.size, dtype=np.int64)
+        out_c, out_w, out_s = [], [], []
+        for j, (point, obj) in enumerate(zip(t.points, t.objects, strict=True)):
+            d = np.hypot(*(centres - point).T)
+            for radius in (JOIN_RADIUS_M, MAX_JOIN_RADIUS_M):
+                near = np.flatnonzero(d <= radius)
+                if near.size == 0:
+                    continue
+                if obj >= 0:
+                    sees = self.map.line_of_sight(centres[near], [int(obj)])[:, 0]
+                else:
+                    ends = np.broadcast_to(point, (near.size, 2))
+                    sees = ~segments_cross_walls(centres[near], ends, self.map.walls)
+                near = near[sees]
+                if near.size:
+                    out_c.append(cells[near])
+                    out_w.append(d[near])
+                    out_s.append(np.full(near.size, j, dtype=np.int64))
+                    break
+        if not out_c:
+            raise Unreachable(f"no walkable place near {t.name}")
+        return np.concatenate(out_c), np.concatenate(out_w), np.concatenate(out_s)
+
+    # -------------------------------------------------------------- per frame
+    def _cell_of(self, x: float, y: float) -> int:
+        rows, cols = self.shape
+        c = int(np.clip(np.floor((x - self.origin[0]) / self.res), 0, cols - 1))
+        r = int(np.clip(np.floor((y - self.origin[1]) / self.res), 0, rows - 1))
+        return r * cols + c
+
+    def _clear(self, a: NDArray[np.float64], b: NDArray[np.float64], relax_m: float) -> bool:
+        """Whether the straight line a -> b stays walkable (see :func:`_line_clear`)."""
+        return bool(_line_clear(a[0], a[1], b[0], b[1], *self._grid_args(relax_m)))
+
+    def _grid_args(self, relax_m: float) -> tuple[object, ...]:
+        rows, cols = self.shape
+        return (
+            self.walkable.reshape(-1),
+            self.map.free_space.mask.reshape(-1),
+            float(self.origin[0]),
+            float(self.origin[1]),
+            1.0 / self.res,
+            rows,
+            cols,
+            0.5 * self.res,
+            relax_m,
+        )
+
+    def route(self, x: float, y: float) -> Route:
+        """The straightened shortest path from (x, y) to the target.
+
+        Raises:
+            Unreachable: the pose is not within ``MAX_SNAP_M`` of any cell that leads
+                to the target (outside the building, or in a walled-off part).
+        """
+        start = np.array([x, y], dtype=np.float64)
+        flat = self._cell_of(x, y)
+        node = self.node[flat]
+        relax = 0.0
+        if node < 0 or not np.isfinite(self.dist[node]):
+            snap = int(self.nearest[flat])
+            relax = float(np.hypot(*(self._centres(np.array([snap]))[0] - start)))
+            if relax > MAX_SNAP_M:
+                raise Unreachable(f"no walkable path from here to {self.target.name}")
+            node = self.node[snap]
+            relax += self.res
+        chain = [int(node)]
+        while chain[-1] < self.n and self.pred[chain[-1]] >= 0:
+            chain.append(int(self.pred[chain[-1]]))
+        cell_nodes = np.array([c for c in chain if c < self.n], dtype=np.int64)
+        pts = self._centres(self.cells[cell_nodes])
+        end_object = -1
+        if self.target.kind != "region":
+            j = int(self.source[int(cell_nodes[0])]) - self.n  # which target point
+            pts = np.vstack([pts, self.target.points[j]])
+            end_object = int(self.target.objects[j])
+        legs = self._merge_small_bends(
+            self._straighten(start, pts, end_object, relax), end_object, relax
+        )
+        return Route(legs, _length(legs), end_object)
+
+    def _merge_small_bends(
+        self, points: NDArray[np.float64], end_object: int, relax_m: float
+    ) -> NDArray[np.float64]:
+        """Drop inner points where the path bends by less than ``MIN_TURN_DEG`` (no turn
+        worth a word), where the straight line past them stays walkable too."""
+        keep = [points[0]]
+        last = len(points) - 1
+        for k in range(1, last):
+            into = _heading_deg(keep[-1], points[k])
+            out = _heading_deg(points[k], points[k + 1])
+            if abs(wrap_deg(out - into)) < MIN_TURN_DEG:
+                relax = relax_m if len(keep) == 1 else 0.0
+                if k + 1 == last and self.target.kind != "region":
+                    clear = self._sees_end(keep[-1], points[k + 1], end_object, relax)
+                else:
+                    clear = self._clear(keep[-1], points[k + 1], relax)
+                if clear:
+                    continue
+            keep.append(points[k])
+        keep.append(points[-1])
+        return np.array(keep)
+
+    def _straighten(
+        self,
+        start: NDArray[np.float64],
+        chain: NDArray[np.float64],
+        end_object: int,
+        relax_m: float = 0.0,
+    ) -> NDArray[np.float64]:
+        """Legs from ``start`` along ``chain``: each goes on while the line stays clear.
+
+        A leg ends at the last chain point before the first one its start cannot see in
+        a straight walkable line. The final point of a door or other object target may
+        sit in a wall and is tested by :meth:`_sees_end` instead.
+        """
+        out = [start]
+        anchor = start
+        i, last = 0, chain.shape[0] - 1
+        special_end = self.target.kind != "region"
+        while i < last:
+            stop = last - 1 if special_end else last
+            reach = int(_reach(anchor[0], anchor[1], chain, i + 1, stop, *self._grid_args(relax_m)))
+            if (
+                reach == stop
+                and special_end
+                and self._sees_end(anchor, chain[last], end_object, relax_m)
+            ):
+                reach = last
+            reach = max(reach, i + 1)  # at least one step of progress
+            anchor = chain[reach]
+            out.append(anchor)
+            i = reach
+            relax_m = 0.0  # only the person's own first leg may start off the cells
+        return np.array(out)
+
+    def _sees_end(
+        self, a: NDArray[np.float64], end: NDArray[np.float64], obj: int, relax_m: float = 0.0
+    ) -> bool:
+        """Whether the final point (maybe in a wall) is reachable in a straight line:
+        walkable until ``JOIN_RADIUS_M`` before it, then no wall crossed."""
+        d = end - a
+        length = float(np.hypot(*d))
+        if length < 1e-9:
+            return True
+        cut = max(length - JOIN_RADIUS_M, 0.0)
+        if cut > 0 and not self._clear(a, a + d * (cut / length), relax_m):
+            return False
+        ignore = self.map.mounted_walls[obj] if obj >= 0 and self.map.walls.shape[0] else None
+        return not segments_cross_walls(a[None], end[None], self.map.walls, ignore=ignore)[0]
+
+
+@njit(cache=True, nogil=True)
+def _line_clear(
+    ax, ay, bx, by, walkable, free, ox, oy, inv_res, rows, cols, step, relax
+):  # pragma: no cover - compiled
+    """Whether the line a -> b stays on walkable cells, sampled every ``step`` metres; the
+    first ``relax`` metres need only be in the free space."""
+    dx, dy = bx - ax, by - ay
+    length = np.sqrt(dx * dx + dy * dy)
+    n = max(int(np.ceil(length / step)), 1)
+    for s in range(n + 1):
+        f = s / n
+        c = min(max(int(np.floor((ax + f * dx - ox) * inv_res)), 0), cols - 1)
+        r = min(max(int(np.floor((ay + f * dy - oy) * inv_res)), 0), rows - 1)
+        k = r * cols + c
+        if walkable[k] or (f * length <= relax and free[k]):
+            continue
+        return False
+    return True
+
+
+@njit(cache=True, nogil=True)
+def _reach(
+    ax, ay, chain, start, stop, walkable, free, ox, oy, inv_res, rows, cols, step, relax
+):  # pragma: no cover - compiled
+    """The last index j in start..stop with every chain[start..j] clear from a (start - 1
+    when chain[start] is not)."""
+    for j in range(start, stop + 1):
+        if not _line_clear(
+            ax,
+            ay,
+            chain[j, 0],
+            chain[j, 1],
+            walkable,
+            free,
+            ox,
+            oy,
+            inv_res,
+            rows,
+            cols,
+            step,
+            relax,
+        ):
+            return j - 1
+    return stop
+
+
+def warm_up() -> None:
+    """Compile the line tests now (or load them from the disk cache), so that no frame
+    waits for the compiler."""
+    cells = np.ones(4, dtype=np.bool_)
+    chain = np.zeros((2, 2))
+    _reach(0.0, 0.0, chain, 0, 1, cells, cells, 0.0, 0.0, 1.0, 2, 2, 0.5, 0.0)
+    _line_clear(0.0, 0.0, 1.0, 1.0, cells, cells, 0.0, 0.0, 1.0, 2, 2, 0.5, 0.0)
+
+
+def _heading_deg(a: NDArray[np.float64], b: NDArray[np.float64]) -> float:
+    return math.degrees(math.atan2(b[1] - a[1], b[0] - a[0]))
+
+
+def _length(points: NDArray[np.float64]) -> float:
+    return float(np.hypot(*np.diff(points, axis=0).T).sum()) if len(points) > 1 else 0.0
+
+
+def plan_for(semantic_map: SemanticMap, spec: DestinationSpec) -> Plan:
+    """The map's plan for ``spec``, built on first use and cached (thread-safe).
+
+    Raises:
+        UnknownDestination: the map has nothing by that name.
+        Unreachable: nothing walkable leads there.
+    """
+    target = resolve(semantic_map, spec)
+    with _lock:
+        cache: OrderedDict[tuple[object, ...], Plan] | None = getattr(
+            semantic_map, "_guidance_plans", None
+        )
+        if cache is None:
+            cache = OrderedDict()
+            semantic_map._guidance_plans = cache  # type: ignore[attr-defined]
+        plan = cache.get(spec.key)
+        if plan is not None:
+            cache.move_to_end(spec.key)
+            return plan
+    plan = Plan(semantic_map, target)
+    with _lock:
+        cache[spec.key] = plan
+        while len(cache) > CACHE_SIZE:
+            cache.popitem(last=False)
+    return plan
+
+
+__all__ = ["Plan", "Route", "Unreachable", "plan_for"]

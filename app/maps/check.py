@@ -1,0 +1,412 @@
+"""Check map files before they are served: limits, coordinates, walls, objects, free space.
+
+Every problem is a :class:`Problem` naming the file and the field (``walls[3].x2``,
+``objects[12]``) and saying what is wrong. Errors make a file unusable; warnings leave
+it usable (and say what was done about them, e.g. an object snapped onto a wall). The
+service skips a file with errors and serves the others (:func:`load_map_dirs`);
+``bearings map check`` prints the same messages.
+
+Limits keep loading bounded in time and memory whatever a file holds: its size, the
+number of walls, objects, regions and polygon vertices, the magnitude of every
+coordinate and the map's extent.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+from collections.abc import Iterable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Literal
+
+import numpy as np
+
+from app.maps.geometry import point_segment_distance, segments_cross_walls
+from app.maps.model import (
+    MOUNT_TOLERANCE_M,
+    MapError,
+    MapFile,
+    SemanticMap,
+    parse_map,
+    validate_spec,
+)
+
+log = logging.getLogger("bearings.maps")
+
+#: Largest map file read, bytes (a floor of 250 walls and 130 objects is ~40 kB).
+MAX_FILE_BYTES = 8_000_000
+MAX_WALLS = 10_000
+MAX_OBJECTS = 2_000
+MAX_REGIONS = 1_000
+MAX_REGION_VERTICES = 5_000
+#: Largest absolute coordinate, metres.
+MAX_COORDINATE_M = 100_000.0
+#: Largest side of the map's bounding box, metres.
+MAX_EXTENT_M = 2_000.0
+#: An object outside the walls but this close to one is moved onto it (mounted).
+SNAP_M = 0.1
+#: Collinear walls sharing more than this length are reported as overlapping.
+OVERLAP_M = 0.01
+
+#: New positions of snapped objects, by object index.
+Fixes = dict[int, tuple[float, float]]
+
+
+@dataclass(frozen=True)
+class Problem:
+    """One thing wrong with a map file."""
+
+    source: str
+    field: str
+    message: str
+    severity: Literal["error", "warning"] = "error"
+
+    def __str__(self) -> str:
+        tag = "" if self.severity == "error" else " (warning)"
+        return f"{self.source}: {self.field}: {self.message}{tag}"
+
+
+@dataclass
+class CheckResult:
+    """A checked file: the usable map (None if any error) and every problem found."""
+
+    source: str
+    map: SemanticMap | None
+    problems: list[Problem]
+
+    @property
+    def errors(self) -> list[Problem]:
+        return [p for p in self.problems if p.severity == "error"]
+
+    @property
+    def ok(self) -> bool:
+        return self.map is not None and not self.problems
+
+
+# --------------------------------------------------------------------- raw JSON
+def _count_problems(source: str, data: object) -> list[Problem]:
+    """Limits on the decoded JSON, before anything is built from it."""
+    if not isinstance(data, dict):
+        return [Problem(source, "(file)", "must be a JSON object with walls and objects")]
+    out = []
+    for key, limit in (("walls", MAX_WALLS), ("objects", MAX_OBJECTS), ("regions", MAX_REGIONS)):
+        items = data.get(key)
+        if isinstance(items, list) and len(items) > limit:
+            out.append(
+                Problem(source, key, f"{len(items):,} entries; at most {limit:,} are accepted")
+            )
+    regions = data.get("regions")
+    if isinstance(regions, list) and len(regions) <= MAX_REGIONS:
+        for i, r in enumerate(regions):
+            poly = r.get("polygon") if isinstance(r, dict) else None
+            if isinstance(poly, list) and len(poly) > MAX_REGION_VERTICES:
+                out.append(
+                    Problem(
+                        source,
+                        f"regions[{i}].polygon",
+                        f"{len(poly):,} vertices; at most {MAX_REGION_VERTICES:,} are accepted",
+                    )
+                )
+    return out
+
+
+def _coordinate_problems(source: str, spec: MapFile) -> list[Problem]:
+    """Coordinates beyond ``MAX_COORDINATE_M`` (reported per field, first few)."""
+    out: list[Problem] = []
+    limit = MAX_COORDINATE_M
+
+    def far(values: Iterable[tuple[str, float]]) -> None:
+        for where, v in values:
+            if abs(v) > limit and len(out) < 20:
+                out.append(
+                    Problem(
+                        source,
+                        where,
+                        f"{v:g} m is too far from the origin (at most {limit:,.0f} m either way)",
+                    )
+                )
+
+    for i, w in enumerate(spec.walls):
+        far((f"walls[{i}].{k}", getattr(w, k)) for k in ("x1", "y1", "x2", "y2"))
+    for i, o in enumerate(spec.objects):
+        far((f"objects[{i}].{k}", getattr(o, k)) for k in ("x", "y"))
+    for i, r in enumerate(spec.regions):
+        for j, (x, y) in enumerate(r.polygon):
+            far(((f"regions[{i}].polygon[{j}]", x), (f"regions[{i}].polygon[{j}]", y)))
+    return out
+
+
+def _extent_problems(source: str, m: SemanticMap) -> list[Problem]:
+    """A bounding box wider than ``MAX_EXTENT_M`` (a grid over it would be useless)."""
+    out = []
+    x0, y0, x1, y1 = m.bounds
+    if max(x1 - x0, y1 - y0) > MAX_EXTENT_M:
+        out.append(
+            Problem(
+                source,
+                "(extent)",
+                f"the map spans {x1 - x0:,.1f} m x {y1 - y0:,.1f} m; at most {MAX_EXTENT_M:,.0f} m "
+                "a side is accepted (are the coordinates in metres?)",
+            )
+        )
+    return out
+
+
+# --------------------------------------------------------------------- geometry
+def _overlapping_walls(source: str, walls: np.ndarray) -> list[Problem]:
+    """Pairs of collinear walls that share a stretch (duplicated or overlapping walls)."""
+    out: list[Problem] = []
+    n = walls.shape[0]
+    if n < 2:
+        return out
+    a = walls[:, 0:2]
+    d = walls[:, 2:4] - a
+    length = np.hypot(d[:, 0], d[:, 1])
+    u = d / np.maximum(length, 1e-12)[:, None]
+    # Group by direction (folded to [0, pi)) and offset of the supporting line.
+    ang = np.mod(np.arctan2(u[:, 1], u[:, 0]), np.pi)
+    normal = np.column_stack([-np.sin(ang), np.cos(ang)])
+    offset = np.sum(a * normal, axis=1)
+    key_a = np.round(ang / 1e-3).astype(np.int64)
+    key_o = np.round(offset / 1e-3).astype(np.int64)
+    order = np.lexsort((key_o, key_a))
+    groups: dict[tuple[int, int], list[int]] = {}
+    for i in order:
+        groups.setdefault((int(key_a[i]), int(key_o[i])), []).append(int(i))
+    for members in groups.values():
+        if len(members) < 2:
+            continue
+        direction = np.array([np.cos(ang[members[0]]), np.sin(ang[members[0]])])
+        spans = []
+        for i in members:
+            s = sorted((float(a[i] @ direction), float(walls[i, 2:4] @ direction)))
+            spans.append((s[0], s[1], i))
+        spans.sort()
+        reach_end, reach_i = spans[0][1], spans[0][2]
+        for lo, hi, i in spans[1:]:
+            shared = min(hi, reach_end) - lo
+            if shared > OVERLAP_M and len(out) < 20:
+                j, k = sorted((reach_i, i))
+                out.append(
+                    Problem(
+                        source,
+                        f"walls[{k}]",
+                        f"overlaps walls[{j}] along {shared:.2f} m (a duplicated wall?)",
+                        "warning",
+                    )
+                )
+            if hi > reach_end:
+                reach_end, reach_i = hi, i
+    return out
+
+
+def _region_problems(source: str, m: SemanticMap) -> list[Problem]:
+    """Regions whose outline crosses itself (which room a point is in becomes ambiguous)."""
+    import shapely
+
+    out = []
+    for i, poly in enumerate(m.region_polygons):
+        shape = shapely.Polygon(poly)
+        if not shape.is_valid:
+            reason = shapely.is_valid_reason(shape)
+            out.append(
+                Problem(
+                    source,
+                    f"regions[{i}].polygon",
+                    f"region {m.region_names[i]!r} is not a simple polygon ({reason})",
+                    "warning",
+                )
+            )
+    return out
+
+
+def _enclosed(points: np.ndarray, walls: np.ndarray) -> np.ndarray:
+    """Whether an axis ray from each point hits a wall in all four directions."""
+    if walls.shape[0] == 0:
+        return np.ones(points.shape[0], dtype=bool)
+    reach = 4.0 * float(np.abs(walls).max() + np.abs(points).max() + 1.0)
+    inside = np.ones(points.shape[0], dtype=bool)
+    for d in ((1.0, 0.0), (-1.0, 0.0), (0.0, 1.0), (0.0, -1.0)):
+        inside &= segments_cross_walls(points, points + reach * np.array(d), walls)
+    return inside
+
+
+def _object_fixes(source: str, m: SemanticMap) -> tuple[Fixes, list[Problem]]:
+    """Objects outside the walls: snapped onto a wall when close, else a warning."""
+    walls = m.walls
+    if walls.shape[0] == 0:
+        return {}, []
+    fixes: Fixes = {}
+    out: list[Problem] = []
+    xy = m.object_xy
+    dist = np.vstack(
+        [point_segment_distance(xy[i : i + 256], walls) for i in range(0, xy.shape[0], 256)]
+    )
+    nearest = dist.argmin(axis=1)
+    near = dist[np.arange(xy.shape[0]), nearest]
+    mounted = near < MOUNT_TOLERANCE_M
+    candidates = np.flatnonzero(~mounted)
+    outside = candidates[~_enclosed(xy[candidates], walls)] if candidates.size else candidates
+    for i in outside:
+        i = int(i)
+        label = m.object_labels[i]
+        what = f"{m.class_of(i)}" + (f" {label!r}" if label else "")
+        if near[i] <= SNAP_M:
+            w = walls[nearest[i]]
+            d = w[2:4] - w[0:2]
+            t = float(np.clip(np.dot(xy[i] - w[0:2], d) / max(float(d @ d), 1e-12), 0.0, 1.0))
+            p = w[0:2] + t * d
+            fixes[i] = (float(p[0]), float(p[1]))
+            out.append(
+                Problem(
+                    source,
+                    f"objects[{i}]",
+                    f"{what} at ({xy[i, 0]:.2f}, {xy[i, 1]:.2f}) lies {near[i] * 100:.0f} cm "
+                    f"outside walls[{int(nearest[i])}]; moved onto it at ({p[0]:.2f}, {p[1]:.2f})",
+                    "warning",
+                )
+            )
+        else:
+            out.append(
+                Problem(
+                    source,
+                    f"objects[{i}]",
+                    f"{what} at ({xy[i, 0]:.2f}, {xy[i, 1]:.2f}) is outside the walls "
+                    f"({near[i]:.2f} m from the nearest); nobody inside can stand near it",
+                    "warning",
+                )
+            )
+    return fixes, out
+
+
+def _free_space_problem(source: str, m: SemanticMap) -> Problem | None:
+    from app.maps.model import WALL_CLEARANCE_M
+    from app.maps.prepare import build_free_space
+
+    fs = build_free_space(m, m.grid_resolution_m)
+    if fs.free_cells.size:
+        return None
+    return Problem(
+        source,
+        "walls",
+        "the map has no free space: no place is enclosed by walls on all four sides and "
+        f"at least {WALL_CLEARANCE_M} m from every wall",
+    )
+
+
+# --------------------------------------------------------------------- entry points
+def check_data(
+    data: object, *, source: str = "map", expected_name: str | None = None
+) -> CheckResult:
+    """Check already-decoded JSON; the map (with fixes applied) when there is no error."""
+    problems = _count_problems(source, data)
+    if problems:
+        return CheckResult(source, None, problems)
+    try:
+        spec = validate_spec(data, source=source, expected_name=expected_name)
+    except MapError as exc:
+        return CheckResult(
+            source, None, [Problem(source, field, text) for field, text in exc.fields]
+        )
+    problems = _coordinate_problems(source, spec)
+    if problems:
+        return CheckResult(source, None, problems)
+    m = SemanticMap(spec)
+    problems = _extent_problems(source, m)
+    if problems:
+        return CheckResult(source, None, problems)
+    problems += _overlapping_walls(source, m.walls)
+    problems += _region_problems(source, m)
+    fixes, object_problems = _object_fixes(source, m)
+    problems += object_problems
+    if fixes:
+        fixed = m.to_json()
+        for i, (x, y) in fixes.items():
+            fixed["objects"][i]["x"], fixed["objects"][i]["y"] = x, y  # type: ignore[index]
+        m = parse_map(fixed, source=source, expected_name=expected_name)
+    empty = _free_space_problem(source, m)
+    if empty is not None:
+        return CheckResult(source, None, [*problems, empty])
+    return CheckResult(source, m, problems)
+
+
+def check_file(path: str | Path) -> CheckResult:
+    """Check one map file: it must exist, be small enough, be JSON and pass every check."""
+    p = Path(path)
+    source = str(p)
+    if p.is_symlink() and not p.exists():
+        target = os.readlink(p)
+        return CheckResult(
+            source, None, [Problem(source, "(file)", f"broken symbolic link to {target!r}")]
+        )
+    if not p.is_file():
+        return CheckResult(source, None, [Problem(source, "(file)", "no such map file")])
+    size = p.stat().st_size
+    if size > MAX_FILE_BYTES:
+        return CheckResult(
+            source,
+            None,
+            [
+                Problem(
+                    source,
+                    "(file)",
+                    f"{size:,} bytes; map files of at most {MAX_FILE_BYTES:,} bytes are accepted",
+                )
+            ],
+        )
+    try:
+        with p.open("rb") as f:
+            raw = f.read(MAX_FILE_BYTES + 1)
+        data = json.loads(raw.decode("utf-8"), parse_constant=_refuse_constant)
+    except OSError as exc:
+        return CheckResult(source, None, [Problem(source, "(file)", f"cannot read it ({exc})")])
+    except (json.JSONDecodeError, UnicodeDecodeError, ValueError) as exc:
+        return CheckResult(source, None, [Problem(source, "(file)", f"not valid JSON ({exc})")])
+    return check_data(data, source=source, expected_name=p.stem)
+
+
+def _refuse_constant(name: str) -> float:
+    raise ValueError(f"{name} is not a number JSON allows")
+
+
+def load_map_dirs(
+    directories: Iterable[str | Path], *, cache_dir: Path | None = None
+) -> tuple[dict[str, SemanticMap], list[Problem]]:
+    """Every usable ``*.json`` map in the directories, prepared, keyed by name.
+
+    A file with errors is skipped and its problems logged as errors; warnings are
+    logged and the map is served. Later directories win on a name clash. Returns the
+    maps and every problem found.
+    """
+    from app.maps.prepare import prepare
+
+    maps: dict[str, SemanticMap] = {}
+    problems: list[Problem] = []
+    for directory in directories:
+        d = Path(directory)
+        if not d.is_dir():
+            problem = Problem(str(d), "(directory)", "not a directory of maps; skipped")
+            log.error("%s", problem)
+            problems.append(problem)
+            continue
+        for path in sorted(d.glob("*.json")):
+            result = check_file(path)
+            problems += result.problems
+            if result.map is None:
+                log.error("map file skipped: %s", "; ".join(str(p) for p in result.problems))
+                continue
+            for p in result.problems:
+                log.warning("%s", p)
+            prepared = prepare(result.map, cache_dir)
+            log.info(
+                "map %s: %d walls, %d objects; grids %s in %.3f s",
+                result.map.name,
+                result.map.walls.shape[0],
+                result.map.object_count,
+                "read from the cache" if prepared.from_cache else "built",
+                prepared.seconds,
+            )
+            maps[result.map.name] = result.map
+    return maps, problems

@@ -1,0 +1,1 @@
+"""Importers: real floor plans (ROS occupancy grids, GeoJSON) into Bearings map files."""

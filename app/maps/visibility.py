@@ -1,0 +1,58 @@
+"""Per-map visibility grid: which objects are in line of sight from each cell.
+
+Ray-testing every particle against every wall for every object would dominate a
+filter step, so each map gets a grid, built when the map is loaded
+(:mod:`app.maps.prepare`): for each cell of the free-space grid (coarsened for large
+maps), a boolean row saying which objects a person standing at the cell centre could
+see. Particles look up their cell's row. Objects mounted in a wall (doors, windows) are
+not hidden by it (see :meth:`SemanticMap.line_of_sight`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from app.maps.geometry import grid_cells
+
+
+@dataclass(frozen=True)
+class VisibilityGrid:
+    """Line-of-sight table over a regular grid.
+
+    Attributes:
+        origin_x, origin_y: lower-left corner of cell (0, 0), metres.
+        resolution_m: cell side, metres.
+        shape: (rows, cols).
+        table: ``table[cell, object]`` is True when the object is visible from the
+            cell centre, shape (rows * cols, N), row-major cells.
+    """
+
+    origin_x: float
+    origin_y: float
+    resolution_m: float
+    shape: tuple[int, int]
+    table: NDArray[np.bool_]
+    #: The same table packed in bits, shape (rows * cols, ceil(N / 64)): bit ``o % 64``
+    #: of word ``o // 64`` is object ``o``. One load per particle serves 64 objects.
+    bits: NDArray[np.uint64]
+
+    def cells(self, x: ArrayLike, y: ArrayLike) -> NDArray[np.int64]:
+        """Flat cell index per point, clipped onto the grid, shape (M,)."""
+        return grid_cells(x, y, self.origin_x, self.origin_y, self.resolution_m, self.shape)[0]
+
+    def visible(self, x: ArrayLike, y: ArrayLike) -> NDArray[np.bool_]:
+        """Visibility rows for each point, shape (M, N)."""
+        return self.table[self.cells(x, y)]
+
+
+def pack_bits(table: NDArray[np.bool_]) -> NDArray[np.uint64]:
+    """Pack a boolean (cells, N) table into (cells, ceil(N / 64)) little-endian words."""
+    cells, n = table.shape
+    words = max((n + 63) // 64, 1)
+    padded = np.zeros((cells, words * 64), dtype=bool)
+    padded[:, :n] = table
+    packed = np.packbits(padded.reshape(cells, words, 64), axis=2, bitorder="little")
+    return packed.view("<u8").reshape(cells, words).astype(np.uint64)

@@ -1,0 +1,241 @@
+"""Map loading and session figures (issue 13): preparation, cache, start-up, sessions, steps.
+
+    python benchmarks/maps.py            # everything, medians of --repeats runs
+    python benchmarks/maps.py --json
+
+Measures, on this machine:
+
+1. **Preparation** of each bundled map (free-space + visibility grids, no cache) and of a
+   denser synthetic floor the size of issue 13's (~250 walls, ~130 objects: the
+   bundled two-wing floor with desk partitions added), and reading them back from the
+   disk cache.
+2. **Session creation** at 10,000 particles on every bundled map (what
+   ``POST /sessions`` runs off the event loop: filter + narrator on a prepared map).
+3. **Server start to first session**: ``bearings serve`` in its own process, timed from
+   launch to the first ``201`` of ``POST /sessions`` on ``two_wing_office``; cold (empty
+   map cache) and warm (cache filled by the cold run). Compiled kernels come from
+   numba's own disk cache in both (as after a Docker build).
+4. **Filter step** median on a simulated walk with 10,000 particles (adaptive count off,
+   so both maps do the same work per step): the paper office (paper path) against the
+   two-wing floor (the building suite's walk).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import httpx
+import numpy as np
+
+from app.config import Settings
+from app.localization.config import FilterConfig
+from app.localization.filter import ParticleFilter, warm_up
+from app.maps.model import SemanticMap, load_map, parse_map
+from app.maps.prepare import build, prepare
+from app.resources import bundled_maps_dir
+from app.service.metrics import Metrics
+from app.service.sessions import SessionManager
+from app.service.types import SessionSpec
+from app.simulation.simulator import SimulationConfig, simulate
+
+
+def dense_floor() -> SemanticMap:
+    """The two-wing floor plus desk partitions: ~250 walls and ~130 objects."""
+    data = load_map(bundled_maps_dir() / "two_wing_office.json").to_json()
+    walls = list(data["walls"])  # type: ignore[arg-type]
+    objects = list(data["objects"])  # type: ignore[arg-type]
+    rng = np.random.default_rng(3)
+    # Partitions 1.2 m long in rows across every room (not touching the room walls).
+    for x0 in (0.0, 21.0):
+        for i in range(3):
+            a = x0 + i * 17.0 / 3.0
+            for y0, y1 in ((1.5, 9.5), (14.5, 22.5)):
+                for y in np.arange(y0, y1, 1.3):
+                    for xa in (a + 0.9, a + 3.2):
+                        xa += float(rng.uniform(-0.1, 0.1))
+                        walls.append({"x1": xa, "y1": float(y), "x2": xa + 1.2, "y2": float(y)})
+    while len(objects) < 133:
+        objects.append(
+            {"class": "chair", "x": float(rng.uniform(1, 37)), "y": float(rng.uniform(11.4, 12.6))}
+        )
+    data.update(name="dense_floor", walls=walls, objects=objects)
+    return parse_map(data)
+
+
+def median_time(fn: Callable[[], object], repeats: int) -> float:
+    times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - t0)
+    return statistics.median(times)
+
+
+def bench_prepare(repeats: int) -> list[dict[str, object]]:
+    rows = []
+    maps = {p.stem: (lambda p=p: load_map(p)) for p in sorted(bundled_maps_dir().glob("*.json"))}
+    maps["dense_floor (issue-13 size)"] = dense_floor
+    build(dense_floor())  # compile the kernels (numba caches them on disk)
+    for name, make in maps.items():
+        m = make()
+        fresh = iter([make() for _ in range(repeats)])
+        built = median_time(lambda fresh=fresh: build(next(fresh)), repeats)
+        with tempfile.TemporaryDirectory() as tmp:
+            prepare(m, Path(tmp))
+            again = iter([make() for _ in range(repeats)])
+            cached = median_time(
+                lambda again=again, tmp=tmp: prepare(next(again), Path(tmp)), repeats
+            )
+        fs = m.free_space
+        rows.append(
+            {
+                "map": name,
+                "walls": int(m.walls.shape[0]),
+                "objects": m.object_count,
+                "free_m2": round(float(fs.free_cells.size * fs.resolution_m**2), 1),
+                "grid_cells": int(fs.mask.size),
+                "build_s": round(built, 3),
+                "cached_s": round(cached, 4),
+            }
+        )
+    return rows
+
+
+def bench_sessions(repeats: int) -> list[dict[str, object]]:
+    from app.main import load_maps
+
+    with tempfile.TemporaryDirectory() as tmp:
+        settings = Settings(viser=False, cache_dir=Path(tmp))
+        maps = load_maps(settings)
+        manager = SessionManager(maps, settings, Metrics())
+        rows = []
+        for name in maps:
+            spec = SessionSpec(map_name=name, particles=10_000, seed=1)
+            manager._build(spec)  # the work of POST /sessions, off the loop
+            t = median_time(lambda spec=spec: manager._build(spec), repeats)
+            rows.append({"map": name, "create_ms": round(1e3 * t, 2)})
+        manager.close()
+    return rows
+
+
+def _start_to_first_session(cache_dir: Path) -> float:
+    from tests.support import free_port
+
+    port = free_port()
+    env = {**os.environ, "BEARINGS_CACHE_DIR": str(cache_dir)}
+    t0 = time.perf_counter()
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "app.cli", "serve", "--port", str(port), "--no-viser",
+         "--log-level", "warning"],
+        env=env,
+    )  # fmt: skip
+    try:
+        deadline = t0 + 120
+        while time.perf_counter() < deadline:
+            try:
+                r = httpx.post(
+                    f"http://127.0.0.1:{port}/sessions",
+                    json={"map": "two_wing_office", "particles": 10_000},
+                    timeout=5,
+                )
+                if r.status_code == 201:
+                    return time.perf_counter() - t0
+            except httpx.TransportError:
+                pass
+            time.sleep(0.02)
+        raise RuntimeError("the server did not answer within 120 s")
+    finally:
+        proc.terminate()
+        proc.wait(timeout=30)
+
+
+def bench_startup(repeats: int) -> dict[str, object]:
+    cold, warm = [], []
+    for _ in range(repeats):
+        with tempfile.TemporaryDirectory() as tmp:
+            cold.append(_start_to_first_session(Path(tmp)))
+            warm.append(_start_to_first_session(Path(tmp)))
+    return {
+        "cold_s": round(statistics.median(cold), 2),
+        "warm_s": round(statistics.median(warm), 2),
+        "cold_runs": [round(v, 2) for v in cold],
+        "warm_runs": [round(v, 2) for v in warm],
+    }
+
+
+def _walk_steps_ms(semantic_map: SemanticMap, sim: SimulationConfig, seed: int) -> list[float]:
+    frames = simulate(semantic_map, sim, np.random.default_rng(seed))
+    config = FilterConfig(particles=10_000, adaptive=False)
+    pf = ParticleFilter(semantic_map, config, rng=np.random.default_rng(seed))
+    out = []
+    for f in frames:
+        t0 = time.perf_counter()
+        pf.step(f.odometry, f.detections)
+        out.append(1e3 * (time.perf_counter() - t0))
+    return out
+
+
+def bench_steps(seeds: int) -> dict[str, object]:
+    from app.experiments.building import simulation
+    from app.simulation.scenarios import paper_config
+
+    warm_up()
+    office = load_map(bundled_maps_dir() / "paper_office.json")
+    floor = load_map(bundled_maps_dir() / "two_wing_office.json")
+    a, b = [], []
+    for seed in range(seeds):  # interleaved, so both see the same machine load
+        a += _walk_steps_ms(office, paper_config("nominal", 360.0), seed)
+        b += _walk_steps_ms(floor, simulation("nominal-360"), seed)
+    pa, pb = statistics.median(a), statistics.median(b)
+    return {
+        "paper_office_ms": round(pa, 3),
+        "two_wing_office_ms": round(pb, 3),
+        "ratio": round(pb / pa, 2),
+        "paper_office_p99_ms": round(float(np.percentile(a, 99)), 2),
+        "two_wing_office_p99_ms": round(float(np.percentile(b, 99)), 2),
+        "two_wing_office_max_ms": round(max(b), 1),
+    }
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--repeats", type=int, default=5)
+    parser.add_argument("--seeds", type=int, default=2, help="walks per map for the step")
+    parser.add_argument("--skip-startup", action="store_true")
+    parser.add_argument("--json", action="store_true")
+    args = parser.parse_args()
+    out: dict[str, object] = {"prepare": bench_prepare(args.repeats)}
+    out["sessions"] = bench_sessions(max(args.repeats, 20))
+    if not args.skip_startup:
+        out["startup"] = bench_startup(max(1, args.repeats // 2))
+    out["steps"] = bench_steps(args.seeds)
+    if args.json:
+        print(json.dumps(out, indent=1))
+        return 0
+    print("preparation (free space + visibility), median s:")
+    for r in out["prepare"]:  # type: ignore[union-attr]
+        print(
+            f"  {r['map']:28s} {r['walls']:4d} walls {r['objects']:4d} objects "
+            f"{r['free_m2']:7.1f} m2 free: build {r['build_s']:.3f} s, cache {r['cached_s']:.4f} s"
+        )
+    print("session creation at 10,000 particles, median ms:")
+    for r in out["sessions"]:  # type: ignore[union-attr]
+        print(f"  {r['map']:28s} {r['create_ms']:.2f} ms")
+    if "startup" in out:
+        s = out["startup"]
+        print(f"server start to first session: {s}")
+    print(f"filter step, median ms: {out['steps']}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,216 @@
+"""Overload and restarts against a real server process: a flood of frames, an oversized
+message, SIGTERM with frames queued, and no id or key in any log line."""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import json
+import signal
+import time
+from pathlib import Path
+
+import httpx
+import websockets
+
+from tests.support import rss_kib, server_process
+
+KEY = "overload-key-0123456789abcdefgh"
+OTHER = "overload-other-key-0123456789abc"
+
+
+def keys_file(tmp_path: Path) -> Path:
+    path = tmp_path / "keys.txt"
+    path.write_text(f"flood {KEY} 5 200000 5000\nother {OTHER} 5 200000 50\n")
+    return path
+
+
+def frame(i: int) -> str:
+    return json.dumps(
+        {
+            "timestamp": i * 0.001,
+            "odometry": {"forward_m": 0.001, "left_m": 0.0, "turn_deg": 0.05},
+            "detections": [{"class": "door", "bearing_deg": 30.0}],
+        }
+    )
+
+
+async def flood(url: str, sid: str, rate: float, seconds: float) -> tuple[list[float], int, int]:
+    """Offer ``rate`` frames/s on one WebSocket for ``seconds``; latencies of every answer."""
+    sent: list[float] = []
+    latencies: list[float] = []
+    merged = 0
+    async with websockets.connect(
+        f"ws://{url}/sessions/{sid}/stream", additional_headers={"Authorization": f"Bearer {KEY}"}
+    ) as ws:
+
+        async def send() -> None:
+            start = time.perf_counter()
+            i = 0
+            while (now := time.perf_counter()) - start < seconds:
+                due = int((now - start) * rate) + 1
+                while i < due:  # catch up in a burst if the loop fell behind
+                    sent.append(time.perf_counter())
+                    await ws.send(frame(i))
+                    i += 1
+                await asyncio.sleep(0.001)
+
+        sender = asyncio.create_task(send())
+        errors = 0
+        while not (sender.done() and len(latencies) + errors == len(sent)):
+            reply = json.loads(await asyncio.wait_for(ws.recv(), 30))
+            if "error" in reply:
+                errors += 1
+                continue
+            latencies.append(time.perf_counter() - sent[len(latencies) + errors])
+            merged += any("merged" in w for w in reply["warnings"])
+        await sender
+    return latencies, merged, errors
+
+
+def test_a_flood_of_frames_is_merged_and_answers_stay_prompt(tmp_path: Path) -> None:
+    with server_process("--api-keys", str(keys_file(tmp_path))) as server:
+        r = httpx.post(
+            f"http://{server.url}/sessions",
+            json={"map": "paper_office", "particles": 20000, "seed": 3},
+            headers={"Authorization": f"Bearer {KEY}"},
+        )
+        sid = r.json()["id"]
+        latencies, merged, errors = asyncio.run(flood(server.url, sid, 1000, 10))
+    latencies.sort()
+    assert errors == 0
+    assert len(latencies) >= 9000  # every frame offered was answered
+    assert merged > 0  # the filter could not keep up with 1,000 frames/s: frames were merged
+    assert latencies[-1] < 1.0, f"worst answer {latencies[-1]:.3f} s"
+
+
+def test_a_one_megabyte_message_is_refused_before_it_is_buffered(tmp_path: Path) -> None:
+    big = "x" * 1_000_000
+
+    async def send_big(url: str, sid: str) -> int | None:
+        async with websockets.connect(
+            f"ws://{url}/sessions/{sid}/stream?key={KEY}", max_size=None
+        ) as ws:
+            await ws.send(big)
+            try:
+                await asyncio.wait_for(ws.recv(), 10)
+            except websockets.ConnectionClosed as exc:
+                return None if exc.rcvd is None else exc.rcvd.code
+        return None
+
+    with server_process("--api-keys", str(keys_file(tmp_path))) as server:
+        sid = httpx.post(
+            f"http://{server.url}/sessions",
+            json={"map": "paper_office", "particles": 500},
+            headers={"Authorization": f"Bearer {KEY}"},
+        ).json()["id"]
+        asyncio.run(send_big(server.url, sid))  # the first one warms up every code path
+        before = rss_kib(server.proc.pid)
+        codes = [asyncio.run(send_big(server.url, sid)) for _ in range(10)]
+        grown_kib = rss_kib(server.proc.pid) - before
+    assert codes == [1009] * 10  # "message too big", from the protocol layer
+    assert grown_kib < 4 * 1024, f"the server grew by {grown_kib} KiB"
+
+
+def test_sigterm_answers_every_frame_accepted_then_closes_with_1012(tmp_path: Path) -> None:
+    async def main(url: str, proc_pid: int, send_signal) -> tuple[int, int, object, list[int]]:
+        auth = {"Authorization": f"Bearer {KEY}"}
+        async with httpx.AsyncClient(base_url=f"http://{url}", headers=auth, timeout=60) as http:
+            sids = [
+                (
+                    await http.post("/sessions", json={"map": "paper_office", "particles": 100_000})
+                ).json()["id"]
+                for _ in range(2)
+            ]
+            ws = await websockets.connect(
+                f"ws://{url}/sessions/{sids[0]}/stream", additional_headers=auth
+            )
+            for i in range(100):
+                await ws.send(frame(i))
+            rest = [
+                asyncio.create_task(
+                    http.post(f"/sessions/{sids[1]}/frames", json=json.loads(frame(i)))
+                )
+                for i in range(20)
+            ]
+            await asyncio.sleep(0.5)  # every frame has reached the server
+            send_signal()
+            answered = 0
+            closed = None
+            try:
+                while True:
+                    reply = json.loads(await asyncio.wait_for(ws.recv(), 60))
+                    assert "seq" in reply, reply
+                    answered += 1
+            except websockets.ConnectionClosed as exc:
+                closed = exc.rcvd
+            statuses = [(await t).status_code for t in rest]
+        return answered, len(rest), closed, statuses
+
+    with server_process("--api-keys", str(keys_file(tmp_path))) as server:
+        answered, _, closed, statuses = asyncio.run(
+            main(server.url, server.proc.pid, lambda: server.proc.send_signal(signal.SIGTERM))
+        )
+        # uvicorn re-raises the signal once it has shut down gracefully.
+        assert server.proc.wait(timeout=60) in (0, -signal.SIGTERM)
+        log = server.output()
+    assert "Traceback" not in log and "Finished server process" in log
+    assert answered == 100  # one answer per frame sent before the signal
+    assert statuses == [200] * 20
+    assert closed is not None and closed.code == 1012 and "reconnect" in closed.reason
+
+
+def test_after_a_restart_an_unknown_session_says_it_may_have_ended_with_it(
+    tmp_path: Path,
+) -> None:
+    with server_process("--api-keys", str(keys_file(tmp_path))) as server:
+        r = httpx.get(
+            f"http://{server.url}/sessions/some-old-id-from-before",
+            headers={"Authorization": f"Bearer {KEY}"},
+        )
+    assert r.status_code == 404 and "restarted" in r.json()["message"]
+
+
+def test_no_log_line_holds_a_session_id_or_key(tmp_path: Path) -> None:
+    """Real traffic of every kind through a server logging at debug level."""
+    secrets = {KEY, OTHER}
+
+    async def traffic(url: str) -> None:
+        auth = {"Authorization": f"Bearer {KEY}"}
+        async with httpx.AsyncClient(base_url=f"http://{url}", headers=auth) as http:
+            for _ in range(2):
+                r = await http.post("/sessions", json={"map": "paper_office", "particles": 300})
+                sid = r.json()["id"]
+                secrets.add(sid)
+                await http.post(f"/sessions/{sid}/frames", json=json.loads(frame(0)))
+                await http.get(f"/sessions/{sid}")
+                await http.post(f"/sessions/{sid}/frames", content="{bad json")
+                await http.get(f"/sessions/{sid}", headers={"Authorization": f"Bearer {OTHER}"})
+                async with websockets.connect(f"ws://{url}/sessions/{sid}/stream?key={KEY}") as ws:
+                    await ws.send(frame(1))
+                    await ws.recv()
+                    await ws.send("{not json")
+                    await ws.recv()
+                with contextlib.suppress(Exception):
+                    async with websockets.connect(
+                        f"ws://{url}/sessions/{sid}/stream?key={KEY}",
+                        additional_headers={"Origin": "https://evil.example.com"},
+                    ):
+                        pass
+                with contextlib.suppress(Exception):
+                    async with websockets.connect(f"ws://{url}/sessions/{sid}/stream?key=wrong"):
+                        pass
+                await http.delete(f"/sessions/{sid}")
+                await http.get(f"/sessions/{sid}")  # 404 after delete
+                await http.get("/metrics")
+            await http.get("/sessions/x", headers={"Authorization": "Bearer not-the-right-key"})
+
+    with server_process("--api-keys", str(keys_file(tmp_path)), "--log-level", "debug") as server:
+        asyncio.run(traffic(server.url))
+        server.proc.send_signal(signal.SIGTERM)
+        server.proc.wait(timeout=60)
+        log = server.output()
+    assert "POST /sessions/{id}/frames" in log  # the access log was written, redacted
+    assert "key=***" in log
+    leaks = [s for s in secrets if s in log]
+    assert not leaks, f"{len(leaks)} secrets in the log"
