@@ -39,6 +39,8 @@ class HardMap:
     kidnap_pose: tuple[float, float, float]
     #: True when nothing but a few objects breaks a symmetry of the map.
     symmetric: bool
+    #: When the kidnapper strikes (s).
+    kidnap_at_s: float = 30.0
 
 
 def _box(x0: float, y0: float, x1: float, y1: float) -> list[dict[str, float]]:
@@ -201,6 +203,14 @@ def paper_office() -> HardMap:
     return HardMap(semantic_map, PAPER_PATH, (8.5, 5.0, 180.0), False)
 
 
+def building_floor() -> HardMap:
+    """The bundled two-wing office floor with the building suite's walk and kidnap."""
+    from app.experiments import building
+
+    semantic_map = load_map(bundled_maps_dir() / f"{building.MAP_NAME}.json")
+    return HardMap(semantic_map, building.WALK, building.KIDNAP_POSE, False, building.KIDNAP_AT_S)
+
+
 BUILDERS = {
     "paper_office": paper_office,
     "rotation_room": rotation_room,
@@ -208,6 +218,7 @@ BUILDERS = {
     "twin_offices": twin_offices,
     "door_corridor": door_corridor,
     "two_wings": two_wings,
+    "two_wing_office": building_floor,
 }
 
 _CACHE: dict[str, HardMap] = {}
