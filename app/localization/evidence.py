@@ -58,6 +58,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from app.localization import sensor_kernel
+from app.localization.compass import CompassReading, compass_log_likelihood
 from app.localization.config import FilterConfig
 from app.localization.motion import motion_log_penalty, sample_motion
 from app.localization.recovery import sample_from_observation
@@ -176,7 +177,7 @@ class EvidenceTracker:
         self._trail: deque[tuple[float, float]] = deque(maxlen=self.settings.trail)
         #: The anchor cloud of the main belief, rows x, y, theta; None until drawn.
         self._anchor: NDArray[np.float64] | None = None
-        self._history: deque[tuple[Odometry | None, Observation]] = deque(
+        self._history: deque[tuple[Odometry | None, Observation, CompassReading | None]] = deque(
             maxlen=self.settings.window
         )
         self._since_search = self.settings.search_every
@@ -248,6 +249,7 @@ class EvidenceTracker:
         main: Hypothesis | None,
         main_tight: bool,
         particles: tuple[NDArray[np.float64], ...],
+        heading: CompassReading | None = None,
     ) -> bool:
         """Move and weigh the alternatives, search when due; True if a swap is due.
 
@@ -258,13 +260,14 @@ class EvidenceTracker:
             main_tight: whether the main mode is tight enough to search against.
             particles: the filter's x, y, theta and normalized weights (to draw the
                 anchor from).
+            heading: this frame's compass reading, weighed like the filter does.
         """
         # Frames without detections are kept too: their odometry chains the window.
-        self._history.append((odometry, obs))
+        self._history.append((odometry, obs, heading))
         if self.searched_ago is not None:
             self.searched_ago += 1
         if self._anchor is not None:
-            self._track(odometry, obs)
+            self._track(odometry, obs, heading)
         if main is not None:
             self._follow_main(main, particles)
             self._forget_covered(main)
@@ -293,7 +296,9 @@ class EvidenceTracker:
             self._search(main)
         return bool(self.count and self.llr.max() >= self.settings.switch_llr)
 
-    def _track(self, odometry: Odometry | None, obs: Observation) -> None:
+    def _track(
+        self, odometry: Odometry | None, obs: Observation, heading: CompassReading | None
+    ) -> None:
         """Move the anchor by the odometry; weigh it and its carried copies."""
         assert self._anchor is not None
         x0, y0, t0 = self._anchor
@@ -314,6 +319,8 @@ class EvidenceTracker:
             log_w = log_w + sensor_kernel.log_likelihood(
                 fx, fy, ft, obs, self.map, self.config, self.grid
             )
+        if heading is not None:
+            log_w = log_w + compass_log_likelihood(ft, heading)
         log_w = log_w.reshape(a + 1, p)
         ev = _log_mean_exp_rows(log_w)
         if not np.isfinite(ev[0]):
@@ -437,11 +444,13 @@ class EvidenceTracker:
         stride = self.settings.window_stride
         frames = list(self._history)
         for k in range(len(frames) - 1, -1, -1):
-            odo, obs = frames[k]
+            odo, obs, heading = frames[k]
             if (len(frames) - 1 - k) % stride == 0:
                 total += sensor_kernel.log_likelihood(
                     x, y, theta, obs, self.map, self.config, self.grid
                 )
+                if heading is not None:
+                    total += compass_log_likelihood(theta, heading)
             if odo is None or k == 0:
                 break
             x, y, theta = chain_back(x, y, theta, odo)

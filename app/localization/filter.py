@@ -258,7 +258,7 @@ class ParticleFilter:
         raw = estimate_pose(self.x, self.y, self.theta, w, ess=ess, rng=self.rng)
         share, confirmed, searched_ago = 0.0, 0.0, 0
         if self.evidence is not None:
-            raw, w, ess = self._weigh_alternatives(odometry, raw, w, ess)
+            raw, w, ess = self._weigh_alternatives(odometry, raw, w, ess, heading)
             share, searched_ago = self.evidence.alternative_share, self.evidence.searched_ago
             confirmed = self.evidence.confirmed_share
         self._update_fit(raw)
@@ -290,14 +290,20 @@ class ParticleFilter:
         return self.estimate
 
     def _weigh_alternatives(
-        self, odometry: Odometry | None, raw: Estimate, w: NDArray[np.float64], ess: float
+        self,
+        odometry: Odometry | None,
+        raw: Estimate,
+        w: NDArray[np.float64],
+        ess: float,
+        heading: CompassReading | None = None,
     ) -> tuple[Estimate, NDArray[np.float64], float]:
         """Move and weigh the alternatives; swap the strongest in if the evidence says so."""
         assert self.evidence is not None and self.last_observation is not None
         top = raw.hypotheses[0] if raw.hypotheses else None
         tight = top is not None and top.std_xy_m <= SEARCH_MAX_SPREAD_M
         particles = (self.x, self.y, self.theta, w)
-        if not self.evidence.update(odometry, self.last_observation, top, tight, particles):
+        obs = self.last_observation
+        if not self.evidence.update(odometry, obs, top, tight, particles, heading):
             return raw, w, ess
         self.x, self.y, self.theta = self.evidence.swap(self.n)
         self.log_w = np.zeros(self.n)
