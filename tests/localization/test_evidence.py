@@ -12,8 +12,8 @@ from app.experiments.hard_maps import rotation_room
 from app.localization.config import FilterConfig
 from app.localization.evidence import chain_back
 from app.localization.filter import ParticleFilter
-from app.maps.model import SemanticMap
 from app.localization.types import Odometry
+from app.maps.model import SemanticMap
 from app.simulation.scenarios import paper_config
 from app.simulation.simulator import SimulationConfig, simulate
 
