@@ -162,7 +162,7 @@ def run_suite(
     seeds: int,
     particles: int,
     workers: int,
-    progress: Callable[[], None] | None = None,
+    progress: Callable[[], object] | None = None,
 ) -> list[IntegrityRun]:
     jobs = [(s, seed, particles) for s in todo for seed in range(seeds)]
     if workers <= 1:

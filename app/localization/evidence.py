@@ -348,7 +348,7 @@ class EvidenceTracker:
             float(np.arctan2(np.sin(t).mean(), np.cos(t).mean())),
         )
 
-    def _centres(self) -> tuple[NDArray[np.float64], ...]:
+    def _centres(self) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
         """Each alternative's centre pose (x, y, theta), each shape (A,)."""
         ax, ay, at = self._anchor_pose()
         cx, cy, ct = _carry(self.moves, np.array([ax]), np.array([ay]), np.array([at]))
@@ -408,6 +408,7 @@ class EvidenceTracker:
         """Alternative ``i`` becomes the main mode; the old main an alternative."""
         ax, ay, at = self._anchor_pose()
         shift = float(self.llr[i])
+        assert self._anchor is not None
         cx, cy, ct = _carry(self.moves[i : i + 1], *self._anchor)
         places = self._centres()
         self._anchor = np.vstack([cx[0], cy[0], ct[0]])
@@ -462,7 +463,7 @@ class EvidenceTracker:
         y: NDArray[np.float64],
         t: NDArray[np.float64],
         rounds: tuple[tuple[int, float, float], ...] | None,
-    ) -> tuple[NDArray[np.float64], ...]:
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
         """Each pose moved to the best of its jittered copies over the window (``rounds``
         of random jitter), or polished by pattern search (``rounds`` None)."""
         if rounds is None:
@@ -489,7 +490,7 @@ class EvidenceTracker:
 
     def _polished(
         self, x: NDArray[np.float64], y: NDArray[np.float64], t: NDArray[np.float64]
-    ) -> tuple[NDArray[np.float64], ...]:
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
         """Pattern search over the window: each round tries the 27 steps of -1, 0, +1 in
         x, y and heading around each pose, moves to the best, and halves the steps."""
         st = self.settings

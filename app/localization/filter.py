@@ -256,7 +256,8 @@ class ParticleFilter:
         w = self.weights
         ess = effective_sample_size(w)
         raw = estimate_pose(self.x, self.y, self.theta, w, ess=ess, rng=self.rng)
-        share, confirmed, searched_ago = 0.0, 0.0, 0
+        share, confirmed = 0.0, 0.0
+        searched_ago: int | None = 0
         if self.evidence is not None:
             raw, w, ess = self._weigh_alternatives(odometry, raw, w, ess, heading)
             share, searched_ago = self.evidence.alternative_share, self.evidence.searched_ago

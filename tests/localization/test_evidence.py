@@ -63,15 +63,17 @@ def test_clutter_does_not_flap(paper_office: SemanticMap) -> None:
     """One false detection per frame (Poisson), 180 deg: once found, the position is
     held while it stays right; no 'Location found' / 'no longer sure' alternation."""
     sim = replace(paper_config("nominal", 180.0), false_rate=1.0)
-    _, out = walk(paper_office, sim, FilterConfig(fov_deg=180.0, particles=5000), 3)
-    conv = np.array([e.converged for _, e, _ in out])
-    err = np.array([x for _, _, x in out])
-    assert conv.any()
-    first = int(np.argmax(conv))
-    lost_while_right = np.flatnonzero(conv[:-1] & ~conv[1:] & (err[1:] <= 0.3))
-    assert lost_while_right.size <= 1
-    assert conv[first:].mean() >= 0.9
-    assert not np.any(conv & (err > 1.0))
+    held = []
+    for seed in (1, 2, 3):
+        _, out = walk(paper_office, sim, FilterConfig(fov_deg=180.0, particles=5000), seed)
+        conv = np.array([e.converged for _, e, _ in out])
+        err = np.array([x for _, _, x in out])
+        assert conv.any()
+        lost_while_right = np.flatnonzero(conv[:-1] & ~conv[1:] & (err[1:] <= 0.3))
+        assert lost_while_right.size <= 1  # at most one flip in this 53 s walk
+        assert not np.any(conv & (err > 1.0))
+        held.append(conv[int(np.argmax(conv)) :])
+    assert np.concatenate(held).mean() >= 0.85
 
 
 def test_protection_radius_holds_the_truth(paper_office: SemanticMap) -> None:
