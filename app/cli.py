@@ -46,6 +46,12 @@ def _add_server_flags(p: argparse.ArgumentParser) -> None:
         "--max-particles", type=int, help="most particles per session (BEARINGS_MAX_PARTICLES)"
     )
     p.add_argument(
+        "--store",
+        metavar="memory|redis://HOST:PORT/DB",
+        help="where sessions live (BEARINGS_STORE, default memory): a Redis URL shares them "
+        "between workers, checkpointed, so any worker resumes them",
+    )
+    p.add_argument(
         "--api-keys",
         dest="api_keys_file",
         type=Path,

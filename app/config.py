@@ -6,6 +6,7 @@ import json
 from functools import lru_cache
 from pathlib import Path
 from typing import Annotated
+from urllib.parse import urlsplit
 
 from pydantic import Field, field_validator
 from pydantic_settings import BaseSettings, NoDecode, SettingsConfigDict
@@ -36,6 +37,17 @@ class Settings(BaseSettings):
     default_particles: int = Field(10_000, ge=100, description="particles when not asked")
     max_particles: int = Field(100_000, ge=100, description="most particles per session")
     max_detections: int = Field(200, ge=1, description="most detections in one frame")
+    store: str = Field(
+        "memory",
+        description="where sessions live: 'memory' (this process only) or "
+        "redis://HOST:PORT/DB (shared by every worker given the same URL)",
+    )
+    store_lease_s: float = Field(
+        1.2, gt=0, description="a worker's hold on a session in a shared store (seconds)"
+    )
+    checkpoint_interval_s: float = Field(
+        1.0, gt=0, description="seconds between checkpoints of a changed session (shared store)"
+    )
     max_message_bytes: int = Field(
         65_536, ge=1024, description="largest accepted request body or WebSocket message"
     )
@@ -76,6 +88,15 @@ class Settings(BaseSettings):
     demo_walk_max_s: float = Field(
         600.0, gt=0, description="a demo walk started from the view ends after this long"
     )
+
+    @field_validator("store")
+    @classmethod
+    def _store_url(cls, value: str) -> str:
+        if value != "memory" and urlsplit(value).scheme not in ("redis", "rediss", "unix"):
+            raise ValueError(
+                "store must be 'memory' or a Redis URL such as redis://localhost:6379/0"
+            )
+        return value
 
     @field_validator("allowed_origins", mode="before")
     @classmethod

@@ -13,13 +13,15 @@ import contextlib
 import logging
 import math
 from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 
 from app.localization.compass import CompassReading
 from app.localization.types import Odometry
 from app.maps.geometry import wrap_angle
-from app.service.sessions import LimitReached, SessionManager, SessionNotFound
+from app.service.errors import LimitReached, SessionNotFound
+from app.service.sessions import SessionManager
 from app.service.types import FrameInput, SensorSpec, SessionSpec
 from app.simulation.simulator import SimFrame, simulate
 from app.simulation.walks import demo_config
@@ -51,6 +53,16 @@ def frame_input_of(frame: SimFrame) -> FrameInput:
         if frame.compass_rad is None
         else CompassReading(frame.compass_rad, math.radians(frame.compass_std_deg or 20.0)),
     )
+
+
+def new_walk(manager: SessionManager, **settings: Any) -> DemoWalk:
+    """A walk with the given :class:`DemoSettings` fields, started on the running loop.
+
+    What the live view's demo button calls (as ``functools.partial(new_walk, manager)``).
+    """
+    walk = DemoWalk(manager, DemoSettings(**settings))
+    walk.start()
+    return walk
 
 
 class DemoWalk:
@@ -146,7 +158,7 @@ class DemoWalk:
             await asyncio.sleep(max(0.0, next_at - loop.time()))
 
 
-async def run_demo_walk(manager: SessionManager, **settings: object) -> None:
+async def run_demo_walk(manager: SessionManager, **settings: Any) -> None:
     """The walk `bearings demo` starts: the paper office, 360 degree camera, real time."""
-    walk = DemoWalk(manager, DemoSettings(**settings))  # type: ignore[arg-type]
+    walk = DemoWalk(manager, DemoSettings(**settings))
     await walk.run()

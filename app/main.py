@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import functools
 import importlib.util
 import logging
 from collections.abc import AsyncIterator
@@ -12,9 +13,10 @@ from fastapi import FastAPI
 from fastapi.middleware.cors import CORSMiddleware
 from fastapi.staticfiles import StaticFiles
 
-from app.api.access import AccessControl, startup_keys
-from app.api.errors import install_error_handlers
+from app.api.access import OPEN_PATHS, AccessControl, startup_keys
+from app.api.errors import document_key_errors, install_error_handlers
 from app.api.limits import BodySizeLimit
+from app.api.methods import AllowedMethods
 from app.api.redact import install_redaction
 from app.api.routes import health, maps, metrics, sessions, speech
 from app.api.streams import StreamRegistry
@@ -24,6 +26,7 @@ from app.maps.model import SemanticMap
 from app.resources import bundled_maps_dir, static_dir
 from app.service.metrics import Metrics
 from app.service.sessions import SessionManager
+from app.service.store import open_store
 
 log = logging.getLogger("bearings")
 
@@ -50,6 +53,8 @@ async def drain(app: FastAPI, timeout_s: float = 30.0) -> None:
             await asyncio.wait_for(manager.shutdown(), timeout_s)
         except TimeoutError:
             log.error("frames still unanswered after %.0f s of shutdown; closing anyway", timeout_s)
+        if manager.sharing is not None:  # checkpoint every session, release it
+            await manager.sharing.shutdown()
     await streams.close_all()
 
 
@@ -69,20 +74,32 @@ def create_app(settings: Settings | None = None, *, demo: bool = False) -> FastA
         from app.guidance.planner import warm_up as warm_up_guidance
         from app.localization.filter import warm_up
 
+        def warm_up_all() -> None:
+            warm_up()
+            warm_up_guidance()
+
         # Kernels compile (or load from numba's cache) while the maps are checked and
         # prepared: both release the GIL for most of their work.
         _, maps_ = await asyncio.gather(
-            asyncio.to_thread(warm_up), asyncio.to_thread(load_maps, settings)
+            asyncio.to_thread(warm_up_all), asyncio.to_thread(load_maps, settings)
         )
-        await asyncio.to_thread(warm_up_guidance)
-        manager = SessionManager(maps_, settings, metrics_)
+        store = await asyncio.to_thread(open_store, settings.store)
+        manager = SessionManager(maps_, settings, metrics_, store)
         app.state.manager = manager
         tasks = [asyncio.create_task(manager.run_sweeper())]
+        if manager.sharing is not None:
+            tasks.append(asyncio.create_task(manager.sharing.run_keeper()))
         view = None
         if settings.viser:
+            from app.demo import new_walk
             from app.viz import LiveView
 
-            view = LiveView(manager, port=settings.viser_port, host=settings.viser_host)
+            view = LiveView(
+                manager,
+                port=settings.viser_port,
+                host=settings.viser_host,
+                start_walk=functools.partial(new_walk, manager),
+            )
             view.start()
             app.state.view = view
         if demo:
@@ -99,6 +116,8 @@ def create_app(settings: Settings | None = None, *, demo: bool = False) -> FastA
                     await task
             if view is not None:
                 view.stop()
+            if manager.sharing is not None:  # (already done when drained)
+                await manager.sharing.shutdown()
             manager.close()
 
     app = FastAPI(
@@ -113,6 +132,7 @@ def create_app(settings: Settings | None = None, *, demo: bool = False) -> FastA
     app.state.keys = keys
     app.state.streams = StreamRegistry()
     app.add_middleware(BodySizeLimit, max_bytes=settings.max_message_bytes)
+    app.add_middleware(AllowedMethods, api=app)
     app.add_middleware(AccessControl, keys=keys, allowed_origins=settings.allowed_origins)
     if settings.allowed_origins:  # outermost: answers CORS preflights without a key
         app.add_middleware(
@@ -124,6 +144,7 @@ def create_app(settings: Settings | None = None, *, demo: bool = False) -> FastA
             max_age=600,
         )
     install_error_handlers(app)
+    document_key_errors(app, OPEN_PATHS)
     for module in (health, metrics, maps, sessions, speech):
         app.include_router(module.router)
     if importlib.util.find_spec("app.api.routes.demo") is not None:

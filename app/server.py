@@ -29,6 +29,12 @@ log = logging.getLogger("bearings")
 #: (the connection stays open); a larger one is refused by the protocol (close 1009)
 #: before it is read into memory.
 WS_FRAME_SLACK = 2
+#: How long a thread may keep the GIL while another waits for it (Python's default is
+#: 5 ms). Step threads hold it in short stretches between compiled kernels; a shorter
+#: interval lets the event loop and a waiting client's step in sooner: benchmarks/abuse.py
+#: measured a 10 Hz client's p95 at 40-75 ms with 1 ms against 80-120 ms with 5 ms
+#: while another key flooded (benchmarks/README.md).
+GIL_SWITCH_INTERVAL_S = 0.001
 
 
 def log_config(level: str) -> dict[str, object]:
@@ -81,6 +87,15 @@ def run(settings: Settings, *, demo: bool = False) -> int:
     except StartupRefused as exc:
         print(f"bearings: {exc}", file=sys.stderr)
         return 2
+    if settings.store != "memory":
+        from app.service.store import StoreUnavailable, open_store, redacted
+
+        try:  # say at once when the store cannot be reached, before serving anything
+            open_store(settings.store).close()
+        except StoreUnavailable as exc:
+            print(f"bearings: {exc}", file=sys.stderr)
+            return 2
+        print(f"Sessions are shared through {redacted(settings.store)}")
     shown = "localhost" if settings.host in ("0.0.0.0", "::") else settings.host
     print(f"Bearings API and demo page: http://{shown}:{settings.port}/  (docs: /docs)")
     if settings.viser:
@@ -89,6 +104,7 @@ def run(settings: Settings, *, demo: bool = False) -> int:
         print(
             "Demo: a simulated walk in the paper office is running; watch the particles converge."
         )
+    sys.setswitchinterval(GIL_SWITCH_INTERVAL_S)
     server = BearingsServer(uvicorn_config(app, settings), app)
     server.run()
     return 0

@@ -31,7 +31,8 @@ import httpx
 import numpy as np
 import websockets
 
-from app.maps.model import bundled_maps_dir, load_map
+from app.maps.check import load_map
+from app.maps.model import bundled_maps_dir
 from app.simulation.scenarios import paper_config
 from app.simulation.simulator import simulate
 

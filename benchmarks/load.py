@@ -1,10 +1,17 @@
 """Load test: N WebSocket sessions streaming frames at R Hz for T seconds.
 
-Starts a real server on a free loopback port (or uses ``--url``), creates N
-sessions, streams simulated paper-office frames at the given rate from each, and
-reports p50/p95/max latency (send to result), frames/s and errors.
+Starts a real server on a free loopback port (or uses ``--url``, e.g. a proxy in front
+of several workers), creates N sessions, streams simulated paper-office frames at the
+given rate from each, and reports p50/p95/max latency (send to result), frames/s and
+errors; for a server it started, also the server's CPU seconds per 1,000 frames (from
+/proc, less sensitive to other load on the machine than latency is).
+
+Each client walks the paper office there and back (about 80 s at 10 Hz), starting at
+its own point but never running off the end, so a session is not kidnapped by a jump
+back to the start: after the first second or so every session is a converged walk.
 
     python benchmarks/load.py --sessions 20 --rate 10 --seconds 60 --particles 10000
+    python benchmarks/load.py --sessions 120 --seconds 30 --store redis://127.0.0.1:6379/0
 """
 
 from __future__ import annotations
@@ -18,14 +25,16 @@ import statistics
 import subprocess
 import sys
 import time
+from dataclasses import replace
+from pathlib import Path
 
 import httpx
 import numpy as np
 import websockets
 
-from app.maps.model import load_map
+from app.maps.check import load_map
 from app.resources import bundled_maps_dir
-from app.simulation.scenarios import paper_config
+from app.simulation.scenarios import PAPER_PATH, paper_config
 from app.simulation.simulator import simulate
 
 
@@ -35,13 +44,19 @@ def free_port() -> int:
         return s.getsockname()[1]
 
 
-def start_server(max_particles: int) -> tuple[str, subprocess.Popen[bytes]]:
+def cpu_seconds(pid: int) -> float:
+    """User + system CPU time of a process so far (Linux /proc), seconds."""
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def start_server(max_particles: int, store: str) -> tuple[str, subprocess.Popen[bytes]]:
     """`bearings serve` in its own process, as in production (the client gets its own GIL)."""
     port = free_port()
     env = {**os.environ, "BEARINGS_MAX_PARTICLES": str(max(max_particles, 100_000))}
     proc = subprocess.Popen(
         [sys.executable, "-m", "app.cli", "serve", "--port", str(port), "--no-viser",
-         "--log-level", "warning", "--max-sessions", "1000"],
+         "--log-level", "warning", "--max-sessions", "1000", "--store", store],
         env=env,
     )  # fmt: skip
     deadline = time.time() + 120
@@ -67,11 +82,13 @@ async def one_session(
     latencies: list[tuple[float, float]] = []  # (seconds since start, latency)
     errors = 0
     period = 1.0 / rate
+    room = max(1, len(frames) - int(seconds * rate) - 1)
+    first = (seed * 7) % room  # its own stretch of the walk, never past the end
     async with websockets.connect(f"ws://{url}/sessions/{sid}/stream", max_size=2**22) as ws:
         start = time.perf_counter()
         i = 0
         while time.perf_counter() - start < seconds:
-            frame = frames[(i + seed * 7) % len(frames)]
+            frame = frames[(first + i) % len(frames)]
             t0 = time.perf_counter()
             await ws.send(json.dumps(frame))
             reply = json.loads(await ws.recv())
@@ -87,10 +104,9 @@ async def one_session(
 
 async def run(args: argparse.Namespace, url: str) -> dict[str, object]:
     office = load_map(bundled_maps_dir() / "paper_office.json")
-    frames = [
-        f.to_contract()
-        for f in simulate(office, paper_config("nominal", 360), np.random.default_rng(0))
-    ]
+    there_and_back = PAPER_PATH + PAPER_PATH[-2::-1] + PAPER_PATH[1:]
+    config = replace(paper_config("nominal", 360), path=there_and_back)
+    frames = [f.to_contract() for f in simulate(office, config, np.random.default_rng(0))]
     t0 = time.perf_counter()
     results = await asyncio.gather(
         *(
@@ -136,7 +152,10 @@ def main() -> None:
     parser.add_argument("--rate", type=float, default=10.0, help="frames per second per session")
     parser.add_argument("--seconds", type=float, default=60.0)
     parser.add_argument("--particles", type=int, default=10_000)
-    parser.add_argument("--url", help="host:port of a running server (default: start one)")
+    parser.add_argument("--url", help="host:port of a running server or proxy (default: start one)")
+    parser.add_argument(
+        "--store", default="memory", help="--store of the server started (default memory)"
+    )
     parser.add_argument(
         "--warmup", type=float, default=10.0,
         help="seconds after which latencies also count as steady state (all sessions start lost)",
@@ -145,9 +164,15 @@ def main() -> None:
     proc = None
     url = args.url
     if url is None:
-        url, proc = start_server(args.particles)
+        url, proc = start_server(args.particles, args.store)
     try:
+        cpu0 = cpu_seconds(proc.pid) if proc is not None else None
         report = asyncio.run(run(args, url))
+        if proc is not None and cpu0 is not None:
+            cpu = cpu_seconds(proc.pid) - cpu0
+            report["store"] = args.store
+            report["server_cpu_s"] = round(cpu, 1)
+            report["server_cpu_s_per_1000_frames"] = round(1000 * cpu / max(report["frames"], 1), 3)  # type: ignore[call-overload]
     finally:
         if proc is not None:
             proc.terminate()
@@ -160,6 +185,11 @@ def main() -> None:
         f"p50 {r['p50_ms']} ms, p95 {r['p95_ms']} ms (after {r['steady_after_s']} s: "
         f"p50 {r['steady_p50_ms']} ms, p95 {r['steady_p95_ms']} ms), errors {r['errors']}, "
         f"failed sessions {r['failed_sessions']}"
+        + (
+            f"; server CPU {r['server_cpu_s_per_1000_frames']} s per 1,000 frames"
+            if "server_cpu_s_per_1000_frames" in r
+            else ""
+        )
     )
 
 

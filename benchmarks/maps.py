@@ -39,7 +39,8 @@ import numpy as np
 from app.config import Settings
 from app.localization.config import FilterConfig
 from app.localization.filter import ParticleFilter, warm_up
-from app.maps.model import SemanticMap, load_map, parse_map
+from app.maps.check import load_map
+from app.maps.model import SemanticMap, parse_map
 from app.maps.prepare import build, prepare
 from app.resources import bundled_maps_dir
 from app.service.metrics import Metrics
@@ -128,7 +129,7 @@ def bench_sessions(repeats: int) -> list[dict[str, object]]:
 
 
 def _start_to_first_session(cache_dir: Path) -> float:
-    from tests.support import free_port
+    from tests.helpers import free_port
 
     port = free_port()
     env = {**os.environ, "BEARINGS_CACHE_DIR": str(cache_dir)}

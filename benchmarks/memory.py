@@ -16,7 +16,7 @@ import numpy as np
 
 from app.api.schemas import Frame, SessionCreate
 from app.config import Settings
-from app.maps.model import load_map_dir
+from app.maps.check import load_map_dir
 from app.resources import bundled_maps_dir
 from app.service.metrics import Metrics
 from app.service.sessions import SessionManager

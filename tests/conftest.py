@@ -5,5 +5,30 @@ from __future__ import annotations
 import os
 import tempfile
 
+import pytest
+
 # Before any Settings is built: tests never write to the user's ~/.cache.
 os.environ.setdefault("BEARINGS_CACHE_DIR", tempfile.mkdtemp(prefix="bearings-test-cache-"))
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """Tests marked ``ci`` run in CI (CI=true) or with BEARINGS_ALL_TESTS=1, else skip."""
+    if os.environ.get("CI") or os.environ.get("BEARINGS_ALL_TESTS"):
+        return
+    skip = pytest.mark.skip(reason="runs in CI (CI=true) or with BEARINGS_ALL_TESTS=1")
+    for item in items:
+        if "ci" in item.keywords:
+            item.add_marker(skip)
+
+
+@pytest.fixture(scope="session", autouse=True)
+def compiled_kernels() -> None:
+    """Compile (or load from the disk cache) every numba kernel once, before any test.
+
+    On a fresh clone the cache is empty and compiling takes a while on a busy machine;
+    done here, no test's server start-up (which warms up too) waits for the compiler,
+    whichever test runs first.
+    """
+    from app.localization.filter import warm_up
+
+    warm_up()

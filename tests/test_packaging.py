@@ -24,7 +24,7 @@ from pathlib import Path
 import pytest
 
 from app.resources import bundled_maps_dir
-from tests.support import free_port
+from tests.helpers import free_port
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -57,6 +57,7 @@ def get(url: str) -> tuple[int, bytes]:
         return r.status, r.read()
 
 
+@pytest.mark.ci  # about 80 s: a fresh install compiles every kernel into an empty cache
 def test_installed_wheel_serves_bundled_maps_and_the_demo_page(wheel: Path, tmp_path: Path) -> None:
     venv = tmp_path / "venv"
     subprocess.run([sys.executable, "-m", "venv", "--without-pip", str(venv)], check=True)

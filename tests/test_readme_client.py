@@ -7,9 +7,9 @@ from pathlib import Path
 
 import pytest
 
+from app.config import Settings
 from app.main import create_app
-from tests.api.conftest import make_settings
-from tests.support import free_port, serving
+from tests.helpers import free_port, make_settings, serving
 
 README = Path(__file__).resolve().parents[1] / "README.md"
 
@@ -26,7 +26,9 @@ def test_the_readme_client_prints_guidance(capsys: pytest.CaptureFixture[str]) -
     code = _client_code()
     assert 'SERVER = "127.0.0.1:8000"' in code
     port = free_port()
-    with serving(create_app(make_settings(port=port)), port) as url:
+    # The service's own default particle count, as the README's reader would run it.
+    settings = make_settings(port=port, default_particles=Settings().default_particles)
+    with serving(create_app(settings), port) as url:
         exec(compile(code.replace("127.0.0.1:8000", url), "README.md", "exec"), {})
     out = capsys.readouterr().out
     assert "Finding where you are before guiding you." in out

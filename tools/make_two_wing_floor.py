@@ -19,7 +19,7 @@ Then run (the bundled map is made *through the importer*)::
     python -m app.cli map import --occupancy app/maps/examples/two_wing_office/floor.yaml \\
         --objects app/maps/examples/two_wing_office/objects.csv \\
         --regions app/maps/examples/two_wing_office/rooms.geojson \\
-        --description "..." --out maps/two_wing_office.json
+        --description "..." --out app/resources/maps/two_wing_office.json
 """
 
 from __future__ import annotations

@@ -1,6 +1,7 @@
 """Render a map file (and optionally the occupancy image it came from) to a PNG.
 
-    python -m tools.render_map maps/two_wing_office.json docs/img/two_wing_office.png \\
+    python -m tools.render_map app/resources/maps/two_wing_office.json \\
+        docs/img/two_wing_office.png \\
         --occupancy app/maps/examples/two_wing_office/floor.yaml
 """
 
@@ -15,7 +16,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
-from app.maps.model import load_map
+from app.maps.check import load_map
 
 MARKERS = "osD^v<>phP*X"
 

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping, Sequence
+from typing import Any
 
 from fastapi import FastAPI, Request
 from fastapi.exceptions import RequestValidationError
@@ -10,15 +12,17 @@ from fastapi.responses import JSONResponse
 from pydantic import ValidationError
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
+from app.api.schemas import ErrorBody
 from app.guidance import UnknownDestination, Unreachable
 from app.localization.camera import BoxError
-from app.service.sessions import (
+from app.service.errors import (
     CapacityReached,
     InvalidSessionSpec,
     LimitReached,
     QuotaReached,
     RequestTooLarge,
     SessionNotFound,
+    SessionUnavailable,
     UnknownMap,
 )
 
@@ -28,6 +32,7 @@ from app.service.sessions import (
 LIMIT_STATUS: dict[type[LimitReached], int] = {
     QuotaReached: 429,
     CapacityReached: 503,
+    SessionUnavailable: 503,
     RequestTooLarge: 422,
 }
 
@@ -38,6 +43,32 @@ def limit_status(exc: LimitReached) -> int:
         if isinstance(exc, kind):
             return status
     return 429
+
+
+#: What each error status means on this API (docs/API.md, "Errors"); every one of them
+#: answers with an :class:`~app.api.schemas.ErrorBody`.
+ERROR_MEANING: dict[int, str] = {
+    400: "the request cannot be read (e.g. a body that is not UTF-8)",
+    401: "the service needs an API key and the request has none or a wrong one "
+    "('Authorization: Bearer KEY'; only when the service is configured with keys)",
+    404: "no such session or map (the message lists the known maps)",
+    413: "the request body is larger than the service's limit",
+    422: "the body fails validation (the message says which field and why), asks for "
+    "more than a limit allows (code too_many_particles, too_many_detections), puts "
+    "the initial pose outside the map's free space, gives a pixel box the session's "
+    "camera cannot read (no camera, outside the image), or names a destination that is "
+    "unknown or cannot be reached",
+    429: "this API key's quota is used up right now (code session_quota, particle_quota "
+    "or rate_limited): try again after Retry-After seconds",
+    503: "the service is full or stopping (code too_many_sessions, busy, restarting: try "
+    "again after Retry-After seconds), or the feature needs something the machine lacks "
+    "(no speech engine)",
+}
+
+
+def error_responses(*statuses: int) -> dict[int | str, dict[str, Any]]:
+    """OpenAPI ``responses`` entries for a route's error statuses, all with ErrorBody."""
+    return {s: {"model": ErrorBody, "description": ERROR_MEANING[s]} for s in statuses}
 
 
 def retry_after(exc: LimitReached) -> str | None:
@@ -55,7 +86,32 @@ def limit_body(exc: LimitReached) -> dict[str, object]:
     return body
 
 
-def describe_validation(errors: list[dict]) -> str:
+def document_key_errors(app: FastAPI, open_paths: frozenset[str]) -> None:
+    """Declare 401 on every operation outside ``open_paths`` (the API-key check, done by
+    middleware, answers it before any route runs)."""
+    build = app.openapi
+
+    def openapi() -> dict[str, Any]:
+        if app.openapi_schema is None:
+            schema = build()
+            body = {"$ref": "#/components/schemas/ErrorBody"}
+            for path, operations in schema.get("paths", {}).items():
+                if path in open_paths:
+                    continue
+                for op in operations.values():
+                    op["responses"].setdefault(
+                        "401",
+                        {
+                            "description": ERROR_MEANING[401],
+                            "content": {"application/json": {"schema": body}},
+                        },
+                    )
+        return app.openapi_schema or build()
+
+    app.openapi = openapi  # type: ignore[method-assign]  # FastAPI's documented override
+
+
+def describe_validation(errors: Sequence[Mapping[str, Any]]) -> str:
     """One readable sentence per problem: 'detections.0.score: must be <= 1'."""
     parts = []
     for e in errors:
@@ -72,7 +128,8 @@ def _plain(errors: list[dict]) -> list[dict]:
 
 async def _validation(_: Request, exc: Exception) -> JSONResponse:
     """422 for a request body (or a model built from it) that fails validation."""
-    errors = list(exc.errors())  # type: ignore[attr-defined]
+    assert isinstance(exc, RequestValidationError | ValidationError)
+    errors = list(exc.errors())
     return JSONResponse(
         status_code=422,
         content={"detail": _plain(errors), "message": describe_validation(errors)},

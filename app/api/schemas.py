@@ -1,7 +1,8 @@
-"""Request and response bodies of the HTTP and WebSocket API, exactly as CONTRACT.md says.
+"""Request and response bodies of the HTTP and WebSocket API, as docs/API.md describes them.
 
 Units are in the names: ``*_deg`` degrees, ``*_m`` metres, map coordinates ``x, y``
-in metres. Every float must be finite; unknown fields are refused so typos surface.
+in metres. Every number must be a finite JSON number (booleans and numeric strings are
+refused); unknown fields are refused so typos surface.
 """
 
 from __future__ import annotations
@@ -9,13 +10,10 @@ from __future__ import annotations
 from datetime import datetime
 from typing import Annotated, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import BaseModel, ConfigDict, Field, StrictBool, model_validator
+from pydantic.json_schema import JsonDict, JsonValue
 
-Finite = Annotated[float, Field(allow_inf_nan=False)]
-
-
-class _In(BaseModel):
-    model_config = ConfigDict(extra="forbid", populate_by_name=True)
+from app.validation import NUMBER_ONLY, Finite, Integer, StrictInput
 
 
 class _Out(BaseModel):
@@ -23,7 +21,7 @@ class _Out(BaseModel):
 
 
 # ----------------------------------------------------------------------------- input
-class OdometryIn(_In):
+class OdometryIn(StrictInput):
     """Motion since the previous frame, in the previous body frame (+x forward, +y left)."""
 
     forward_m: Finite = Field(0.0, ge=-10, le=10, description="forward motion, metres")
@@ -33,7 +31,7 @@ class OdometryIn(_In):
     )
 
 
-class BoxIn(_In):
+class BoxIn(StrictInput):
     """A detector's box, horizontally: its left and right image columns (pixels).
 
     Columns grow to the right from 0 at the left edge. On a 360-degree image a box with
@@ -44,8 +42,27 @@ class BoxIn(_In):
     u_max_px: Finite = Field(ge=0, description="right column of the box, pixels")
 
 
-class DetectionIn(_In):
+def _exactly_one(*branches: JsonDict) -> JsonDict:
+    """JSON Schema ``oneOf`` for "exactly one of these": each branch names its required
+    fields (and their types), the others must be null or absent."""
+    names = sorted({name for branch in branches for name in branch})
+    one_of: list[JsonValue] = []
+    for branch in branches:
+        required: list[JsonValue] = list(sorted(branch))
+        properties: JsonDict = {n: branch.get(n, {"type": "null"}) for n in names}
+        one_of.append({"required": required, "properties": properties})
+    return {"oneOf": one_of}
+
+
+class DetectionIn(StrictInput):
     """One detection from the camera's object detector: a bearing or a pixel box."""
+
+    # The rule of _bearing_or_box, stated in the JSON schema as well.
+    model_config = ConfigDict(
+        json_schema_extra=_exactly_one(
+            {"bearing_deg": {"type": "number"}}, {"box": {"type": "object"}}
+        )
+    )
 
     cls: str = Field(
         alias="class",
@@ -74,7 +91,7 @@ class DetectionIn(_In):
         return self
 
 
-class HeadingIn(_In):
+class HeadingIn(StrictInput):
     """The phone compass: an absolute heading in the map frame."""
 
     heading_deg: Finite = Field(
@@ -85,7 +102,7 @@ class HeadingIn(_In):
     )
 
 
-class TruthIn(_In):
+class TruthIn(StrictInput):
     """Ground truth sent by simulations (an addition to the contract; never used by the filter)."""
 
     x: Finite = Field(description="metres")
@@ -93,7 +110,7 @@ class TruthIn(_In):
     theta_deg: Finite = Field(description="heading, degrees CCW from +x")
 
 
-class Frame(_In):
+class Frame(StrictInput):
     """One camera frame with the motion since the previous one."""
 
     timestamp: Finite | None = Field(None, description="client time of the frame, seconds")
@@ -101,7 +118,9 @@ class Frame(_In):
         None, description="motion since the previous frame; null means unknown motion"
     )
     detections: list[DetectionIn] = Field(default_factory=list, description="what the camera sees")
-    describe: bool = Field(False, description="ask for a full description now ('Where am I?')")
+    describe: StrictBool = Field(
+        False, description="ask for a full description now ('Where am I?')"
+    )
     truth: TruthIn | None = Field(
         None, description="addition: a simulation's ground truth, shown in the view only"
     )
@@ -110,27 +129,27 @@ class Frame(_In):
     )
 
 
-class SensorSettings(_In):
+class SensorSettings(StrictInput):
     """The camera and detector: bearing noise and field of view."""
 
     bearing_std_deg: Finite = Field(
         2.0, gt=0.0, le=90.0, description="bearing noise standard deviation, degrees"
     )
     fov_deg: Finite = Field(360.0, gt=0.0, le=360.0, description="camera field of view, degrees")
-    class_bearing_std_deg: dict[str, Annotated[float, Field(gt=0, le=90, allow_inf_nan=False)]] = (
-        Field(default_factory=dict, description="addition: per-class bearing std, degrees")
-    )
+    class_bearing_std_deg: dict[
+        str, Annotated[float, Field(gt=0, le=90, allow_inf_nan=False), NUMBER_ONLY]
+    ] = Field(default_factory=dict, description="addition: per-class bearing std, degrees")
 
 
-class FeedbackSettings(_In):
+class FeedbackSettings(StrictInput):
     style: Literal["clock", "left_right", "degrees"] = Field(
         "clock", description="how directions are spoken"
     )
     units: Literal["metric", "imperial"] = Field("metric", description="metres or feet")
-    max_items: int = Field(3, ge=1, le=10, description="most objects per feedback")
+    max_items: Integer = Field(3, ge=1, le=10, description="most objects per feedback")
 
 
-class InitialPoseIn(_In):
+class InitialPoseIn(StrictInput):
     x: Finite = Field(description="metres")
     y: Finite = Field(description="metres")
     theta_deg: Finite = Field(description="heading, degrees CCW from +x")
@@ -138,21 +157,21 @@ class InitialPoseIn(_In):
     std_theta_deg: Finite = Field(10.0, gt=0.0, le=360.0, description="heading std, degrees")
 
 
-class EquirectangularCameraIn(_In):
+class EquirectangularCameraIn(StrictInput):
     """A 360-degree camera: ``bearing = 360 * (W/2 - u) / W`` degrees."""
 
     model: Literal["equirectangular"]
-    width_px: int = Field(ge=2, le=1_000_000, description="image width, pixels")
+    width_px: Integer = Field(ge=2, le=1_000_000, description="image width, pixels")
     yaw_offset_deg: Finite = Field(
         0.0, ge=-360, le=360, description="camera forward relative to body forward, CCW positive"
     )
 
 
-class PinholeCameraIn(_In):
+class PinholeCameraIn(StrictInput):
     """An ordinary phone camera: ``bearing = atan((cx - u) / fx)``; the FOV follows."""
 
     model: Literal["pinhole"]
-    width_px: int = Field(ge=2, le=1_000_000, description="image width, pixels")
+    width_px: Integer = Field(ge=2, le=1_000_000, description="image width, pixels")
     fx_px: Finite = Field(gt=0, le=1e7, description="horizontal focal length, pixels")
     cx_px: Finite = Field(description="principal point column, pixels (0 to width_px)")
     yaw_offset_deg: Finite = Field(
@@ -171,12 +190,17 @@ class PinholeCameraIn(_In):
 CameraIn = Annotated[EquirectangularCameraIn | PinholeCameraIn, Field(discriminator="model")]
 
 
-class SessionCreate(_In):
+class SessionCreate(StrictInput):
     map: str = Field(min_length=1, max_length=200, description="name of a map from GET /maps")
-    particles: int | None = Field(
-        None, ge=100, description="particle count (default and maximum: service settings)"
+    # Bounds inside the annotation, before the number check: on an optional field
+    # pydantic would otherwise leave them out of the JSON schema.
+    particles: Annotated[int, Field(ge=100), NUMBER_ONLY] | None = Field(
+        None, description="particle count (default and maximum: service settings)"
     )
-    seed: int | None = Field(None, ge=0, le=2**63 - 1, description="random seed, for replays")
+    seed: Annotated[int, Field(ge=0, le=2**53 - 1), NUMBER_ONLY] | None = Field(
+        None,
+        description="random seed, for replays (at most 2^53 - 1: exact in every JSON parser)",
+    )
     initial_pose: InitialPoseIn | None = Field(
         None, description="known start; null starts with no knowledge (global localization)"
     )
@@ -194,8 +218,18 @@ class SessionCreate(_In):
     )
 
 
-class DestinationIn(_In):
+class DestinationIn(StrictInput):
     """Where to guide to: exactly one of label, class, region, or a point x, y."""
+
+    # The rule of _one_target, stated in the JSON schema as well.
+    model_config = ConfigDict(
+        json_schema_extra=_exactly_one(
+            {"label": {"type": "string"}},
+            {"class": {"type": "string"}},
+            {"region": {"type": "string"}},
+            {"x": {"type": "number"}, "y": {"type": "number"}},
+        )
+    )
 
     label: str | None = Field(None, min_length=1, max_length=200, description="an object's label")
     cls: str | None = Field(
@@ -323,10 +357,39 @@ class MapSummary(_Out):
     bounds: Bounds = Field(description="extent of walls and objects, metres")
 
 
+class ValidationIssue(_Out):
+    """One problem pydantic found in a request body."""
+
+    type: str = Field(description="machine-readable kind, e.g. missing, float_type")
+    loc: list[str | int] = Field(description="where: body, field names and list indices")
+    msg: str = Field(description="what was wrong, in words")
+
+
 class ErrorBody(_Out):
-    detail: object
-    message: str
+    """Every error answer (4xx, 5xx): what was wrong, for programs and for people."""
+
+    detail: str | list[ValidationIssue] = Field(
+        description="the problem in words, or for a body that fails validation the list of problems"
+    )
+    message: str = Field(description="one readable sentence covering every problem")
+    code: str | None = Field(
+        None, description="for a service limit: which one, e.g. too_many_sessions"
+    )
+    retry_after_s: float | None = Field(
+        None,
+        description="for a limit that passes: seconds after which trying again may succeed "
+        "(also in the Retry-After header, whole seconds)",
+    )
 
 
-class SpeechRequest(_In):
-    text: str = Field(min_length=1, max_length=2000, description="text to speak")
+class SpeechRequest(StrictInput):
+    # Python's regular expressions, so that "white space" means what str.strip() and
+    # the speech module mean by it.
+    model_config = ConfigDict(regex_engine="python-re")
+
+    text: str = Field(
+        min_length=1,
+        max_length=2000,
+        pattern=r"\S",
+        description="text to speak: 1 to 2000 characters, not only white space",
+    )

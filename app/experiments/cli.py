@@ -10,7 +10,6 @@ from pathlib import Path
 
 from tqdm import tqdm
 
-from app.experiments.figures import figures
 from app.experiments.protocol import cells
 from app.experiments.report import markdown, summarize
 from app.experiments.runner import paper_office, run_all
@@ -39,6 +38,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="tables: the paper's Tables I-IV (default); integrity: the hard-cases suite "
         "(--quick: five scenarios, 2 seeds); building: a walk through the bundled two-wing "
         "floor (global start, 180 deg camera, clutter, kidnap between wings)",
+    )
+    parser.add_argument(
+        "--scenarios",
+        default=None,
+        help="integrity only: comma-separated MAP or MAP/CONDITION (* for any map), e.g. "
+        "'symmetric_room,*/compass-180'",
     )
 
 
@@ -73,6 +78,9 @@ def run(args: argparse.Namespace) -> int:
     (out / "tables.md").write_text(
         markdown(rows, seconds=seconds, particles=particles), encoding="utf-8"
     )
+    # matplotlib only when figures are drawn: `bearings serve` builds this parser too.
+    from app.experiments.figures import figures
+
     written = figures(runs, paper_office(), out)
     print(
         f"wrote {out / 'tables.json'}, {out / 'tables.md'} and {len(written)} figures "
@@ -87,10 +95,13 @@ def _run_integrity(args: argparse.Namespace) -> int:
     seeds = min(args.seeds, 2) if args.quick else args.seeds
     if seeds < 1 or args.particles < 100:
         raise SystemExit("bearings experiments: need --seeds >= 1 and --particles >= 100")
-    summary = integrity.run(
-        args.out, seeds=seeds, particles=args.particles, workers=max(1, args.workers),
-        quick=args.quick,
-    )  # fmt: skip
+    try:
+        summary = integrity.run(
+            args.out, seeds=seeds, particles=args.particles, workers=max(1, args.workers),
+            quick=args.quick, select=args.scenarios,
+        )  # fmt: skip
+    except ValueError as exc:
+        raise SystemExit(f"bearings experiments: {exc}") from None
     print(integrity.markdown_table(summary))
     print(f"wrote {args.out / 'integrity.md'}, integrity.json and integrity.png")
     return 0

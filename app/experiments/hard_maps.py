@@ -6,6 +6,8 @@ hard on purpose:
 * ``rotation_room``: a 12 x 8 m open office whose windows and tables are the same
   under a 180 deg rotation about its centre; only the door breaks the symmetry. The
   walk starts with the door behind the person.
+* ``symmetric_room``: the rotation room without its door: exactly the same under the
+  half turn, so without a compass no amount of walking tells the two ways round apart.
 * ``mirror_room``: a 12 x 8 m room symmetric under reflection in x = 6; one door breaks
   it (a mirror image reverses the order of bearings, so it is a weaker ambiguity).
 * ``twin_offices``: two identical offices off one corridor; only the corridor's two
@@ -21,7 +23,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from app.maps.model import SemanticMap, load_map, parse_map
+from app.maps.check import load_map
+from app.maps.model import SemanticMap, parse_map
 from app.resources import bundled_maps_dir
 from app.simulation.scenarios import PAPER_PATH
 
@@ -76,6 +79,17 @@ def rotation_room() -> HardMap:
     }
     path = ((10.0, 2.0), (2.0, 2.0), (2.0, 6.0), (10.0, 6.0), (10.0, 3.0), (5.0, 4.0))
     return HardMap(parse_map(spec), path, (4.0, 5.0, 0.0), True)
+
+
+def symmetric_room() -> HardMap:
+    """The rotation room without its door: nothing breaks the half-turn symmetry, so only
+    a compass can tell the two ways round apart."""
+    room = rotation_room()
+    spec = room.map.to_json()
+    spec["name"] = "symmetric_room"
+    objects: list[dict[str, object]] = spec["objects"]  # type: ignore[assignment]  # JSON of a MapFile
+    spec["objects"] = [o for o in objects if o["class"] != "door"]
+    return HardMap(parse_map(spec), room.path, room.kidnap_pose, True)
 
 
 def mirror_room() -> HardMap:
@@ -214,6 +228,7 @@ def building_floor() -> HardMap:
 BUILDERS = {
     "paper_office": paper_office,
     "rotation_room": rotation_room,
+    "symmetric_room": symmetric_room,
     "mirror_room": mirror_room,
     "twin_offices": twin_offices,
     "door_corridor": door_corridor,

@@ -29,9 +29,10 @@ from pathlib import Path
 import numpy as np
 
 from app.experiments.hard_maps import BUILDERS, hard_map
+from app.localization.compass import CompassReading
 from app.localization.config import FilterConfig
 from app.localization.filter import ParticleFilter
-from app.simulation.simulator import SimulationConfig, simulate
+from app.simulation.simulator import CompassBias, SimulationConfig, simulate
 
 #: Frames converged yet this far off (m) are confidently wrong.
 WRONG_M = 1.0
@@ -44,6 +45,10 @@ KIDNAP_AT_S = 30.0
 #: The two occlusions (s): the whole view blocked for 10 s each.
 OCCLUSIONS = ((12.0, 22.0), (36.0, 46.0))
 
+#: Noise of the simulated compass (degrees); the filter is told 20 deg.
+COMPASS_STD_DEG = 15.0
+COMPASS_TOLD_STD_DEG = 20.0
+
 #: Condition name -> (field of view, simulation changes).
 CONDITIONS: dict[str, tuple[float, dict[str, object]]] = {
     "nominal-360": (360.0, {}),
@@ -55,9 +60,29 @@ CONDITIONS: dict[str, tuple[float, dict[str, object]]] = {
     "missed-180": (180.0, {"miss_prob": 0.3}),
     "occluded-180": (180.0, {"blocked_intervals": OCCLUSIONS, "blocked_sector_deg": 360.0}),
     "kidnap-360": (360.0, {"kidnap_at_s": KIDNAP_AT_S}),
+    # The phone's compass (std 15 deg), right, or 60 deg off for 20 s (indoor steel):
+    # from the start (while the filter searches) or after the first fix.
+    "compass-360": (360.0, {"compass_std_deg": COMPASS_STD_DEG}),
+    "compass-180": (180.0, {"compass_std_deg": COMPASS_STD_DEG}),
+    "compass-60off-180": (
+        180.0,
+        {"compass_std_deg": COMPASS_STD_DEG, "compass_biases": (CompassBias(0.0, 20.0, 60.0),)},
+    ),
+    "compass-60off-late-180": (
+        180.0,
+        {"compass_std_deg": COMPASS_STD_DEG, "compass_biases": (CompassBias(20.0, 40.0, 60.0),)},
+    ),
 }
 #: Conditions run on every map; the paper office and the rotation room get all.
-COMMON = ("nominal-360", "nominal-180", "clutter-180", "missed-180", "occluded-180", "kidnap-360")
+COMMON = (
+    "nominal-360",
+    "nominal-180",
+    "clutter-180",
+    "missed-180",
+    "occluded-180",
+    "kidnap-360",
+    "compass-180",
+)
 FULL_MAPS = ("paper_office", "rotation_room")
 #: The bundled building floor walks 3 minutes: fewer conditions keep the run bounded.
 BUILDING_MAP = "two_wing_office"
@@ -69,6 +94,7 @@ QUICK = (
     ("paper_office", "nominal-360"),
     ("door_corridor", "nominal-180"),
     ("two_wings", "kidnap-360"),
+    ("symmetric_room", "compass-60off-180"),
 )
 
 
@@ -101,8 +127,12 @@ class Scenario:
         return sim
 
 
-def scenarios(quick: bool = False) -> list[Scenario]:
-    """Every scenario of the suite, in a stable order."""
+def scenarios(quick: bool = False, select: str | None = None) -> list[Scenario]:
+    """Every scenario of the suite, in a stable order.
+
+    ``select``: comma-separated ``MAP`` or ``MAP/CONDITION`` (``*`` for any map): only
+    those of the suite's scenarios.
+    """
     if quick:
         return [Scenario(m, c) for m, c in QUICK]
     out = []
@@ -111,7 +141,23 @@ def scenarios(quick: bool = False) -> list[Scenario]:
         if name == BUILDING_MAP:
             conds = BUILDING_CONDITIONS
         out += [Scenario(name, c) for c in conds]
-    return out
+    if select is None:
+        return out
+    wanted = [w.strip().split("/", 1) for w in select.split(",") if w.strip()]
+    for w in wanted:
+        if w[0] != "*" and w[0] not in BUILDERS:
+            raise ValueError(f"--scenarios: unknown map {w[0]!r}; maps: {', '.join(BUILDERS)}")
+        if len(w) == 2 and w[1] not in CONDITIONS:
+            raise ValueError(
+                f"--scenarios: unknown condition {w[1]!r}; conditions: {', '.join(CONDITIONS)}"
+            )
+
+    def chosen(s: Scenario) -> bool:
+        return any(
+            w[0] in ("*", s.map_name) and (len(w) == 1 or w[1] == s.condition) for w in wanted
+        )
+
+    return [s for s in out if chosen(s)]
 
 
 @dataclass(frozen=True)
@@ -143,7 +189,10 @@ def run_scenario(scenario: Scenario, seed: int, particles: int) -> IntegrityRun:
     ms = np.empty(n)
     for i, f in enumerate(frames):
         t0 = time.perf_counter()
-        e = pf.step(f.odometry, f.detections)
+        heading = None
+        if f.compass_rad is not None:
+            heading = CompassReading(f.compass_rad, np.radians(COMPASS_TOLD_STD_DEG))
+        e = pf.step(f.odometry, f.detections, heading)
         ms[i] = (time.perf_counter() - t0) * 1e3
         err[i] = np.hypot(e.x - f.truth.x, e.y - f.truth.y)
         conv[i] = e.converged
@@ -343,11 +392,14 @@ def figure(runs: list[IntegrityRun], summary: dict[str, object], out: Path) -> P
     return path
 
 
-def run(out: Path, *, seeds: int, particles: int, workers: int, quick: bool) -> dict[str, object]:
-    """Run the suite, write integrity.md/.json and the figure; return the summary."""
+def run(
+    out: Path, *, seeds: int, particles: int, workers: int, quick: bool, select: str | None = None
+) -> dict[str, object]:
+    """Run the suite (or the ``select`` scenarios), write integrity.md/.json and the figure;
+    return the summary."""
     from tqdm import tqdm
 
-    todo = scenarios(quick)
+    todo = scenarios(quick, select)
     out.mkdir(parents=True, exist_ok=True)
     started = time.perf_counter()
     with tqdm(total=len(todo) * seeds, desc="integrity runs", unit="run") as bar:
@@ -355,8 +407,9 @@ def run(out: Path, *, seeds: int, particles: int, workers: int, quick: bool) -> 
     seconds = time.perf_counter() - started
     summary = summarize(runs)
     (out / "integrity.json").write_text(json.dumps(summary, indent=1), encoding="utf-8")
-    (out / "integrity.md").write_text(
-        markdown(summary, seconds=seconds, particles=particles, seeds=seeds), encoding="utf-8"
-    )
+    text = markdown(summary, seconds=seconds, particles=particles, seeds=seeds)
+    if select is not None:
+        text = text.replace("--suite integrity`", f"--suite integrity --scenarios '{select}'`", 1)
+    (out / "integrity.md").write_text(text, encoding="utf-8")
     figure(runs, summary, out)
     return summary

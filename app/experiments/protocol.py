@@ -52,7 +52,8 @@ class Cell:
     false_rate: float = 0.0
 
     def simulation(self) -> SimulationConfig:
-        base_scenario: Scenario = "nominal" if self.table == "IV" else self.scenario  # type: ignore[assignment]
+        # Tables I-III simulate their own scenario; Table IV adds its faults to the nominal walk.
+        base_scenario: Scenario = SCENARIO_OF_TABLE.get(self.table, "nominal")
         sim = paper_config(base_scenario, self.fov_deg)
         if self.table == "IV":
             sim = replace(sim, bearing_noise_deg=self.bearing_noise_deg, false_rate=self.false_rate)

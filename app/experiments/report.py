@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from collections import defaultdict
+from typing import Any
 
 import numpy as np
 
@@ -17,7 +18,7 @@ TABLE_TITLES = {
 }
 
 
-def summarize(runs: list[Run]) -> list[dict[str, object]]:
+def summarize(runs: list[Run]) -> list[dict[str, Any]]:
     """One row per cell: errors pooled over every frame of every seed."""
     by_cell: dict[Cell, list[Run]] = defaultdict(list)
     for r in runs:
@@ -27,7 +28,7 @@ def summarize(runs: list[Run]) -> list[dict[str, object]]:
         pos = np.concatenate([r.pos_err_m for r in rs])
         head = np.concatenate([r.head_err_deg for r in rs])
         final = np.concatenate([r.pos_err_m[2 * r.pos_err_m.size // 3 :] for r in rs])
-        row: dict[str, object] = {
+        row: dict[str, Any] = {
             "table": cell.table,
             "scenario": cell.scenario,
             "fov_deg": cell.fov_deg,
@@ -53,7 +54,7 @@ def _fmt(v: float) -> str:
     return f"{v:.3f}"
 
 
-def markdown(rows: list[dict[str, object]], *, seconds: float, particles: int) -> str:
+def markdown(rows: list[dict[str, Any]], *, seconds: float, particles: int) -> str:
     """tables.md: our figures beside the paper's for Tables I-III, then Table IV."""
     lines = [
         "# Bearings vs. the paper: regenerated tables",
@@ -81,7 +82,7 @@ def markdown(rows: list[dict[str, object]], *, seconds: float, particles: int) -
             "| worst seed (m) | seeds |",
             "|---|---|---|---|---|---|---|---|---|",
         ]
-        for fov in sorted({float(r["fov_deg"]) for r in sel}):  # type: ignore[arg-type]
+        for fov in sorted({float(r["fov_deg"]) for r in sel}):
             p = PAPER_RESULTS.get((table, fov))
             if p:
                 lines.append(
@@ -92,10 +93,10 @@ def markdown(rows: list[dict[str, object]], *, seconds: float, particles: int) -
                 for r in sel:
                     if r["fov_deg"] == fov and r["config"] == cfg:
                         lines.append(
-                            f"| {fov:.0f} | {cfg} (ours) | {_fmt(r['mean_m'])} "  # type: ignore[arg-type]
+                            f"| {fov:.0f} | {cfg} (ours) | {_fmt(r['mean_m'])} "
                             f"| {_fmt(r['std_m'])} | {r['mean_deg']:.2f} | {r['std_deg']:.2f} "
-                            f"| {_fmt(r['final_third_mean_m'])} "  # type: ignore[arg-type]
-                            f"| {_fmt(r['worst_seed_mean_m'])} | {r['seeds']} |"  # type: ignore[arg-type]
+                            f"| {_fmt(r['final_third_mean_m'])} "
+                            f"| {_fmt(r['worst_seed_mean_m'])} | {r['seeds']} |"
                         )
         lines.append("")
     lines += _adaptive_section(rows)
@@ -111,7 +112,7 @@ def markdown(rows: list[dict[str, object]], *, seconds: float, particles: int) -
         ]
         keys = sorted(
             {(r["fov_deg"], r["bearing_noise_deg"], r["false_rate"]) for r in sel},
-            key=lambda k: (-k[0], k[1], k[2]),  # type: ignore[operator]
+            key=lambda k: (-k[0], k[1], k[2]),
         )
         for fov, noise, rate in keys:
             cellv = {}
@@ -120,7 +121,7 @@ def markdown(rows: list[dict[str, object]], *, seconds: float, particles: int) -
                     cellv[r["config"]] = r
             pa, be = cellv.get("paper"), cellv.get("bearings")
 
-            def show(r: dict[str, object] | None) -> str:
+            def show(r: dict[str, Any] | None) -> str:
                 if r is None:
                     return "-"
                 return f"{r['mean_m']:.3f} ({r['final_third_mean_m']:.3f})"
@@ -133,7 +134,7 @@ def markdown(rows: list[dict[str, object]], *, seconds: float, particles: int) -
     return "\n".join(lines)
 
 
-def _adaptive_section(rows: list[dict[str, object]]) -> list[str]:
+def _adaptive_section(rows: list[dict[str, Any]]) -> list[str]:
     """Adaptive vs fixed particle count on the same walks (Tables I-III, our defaults)."""
     pairs = []
     for r in rows:
@@ -157,11 +158,11 @@ def _adaptive_section(rows: list[dict[str, object]]) -> list[str]:
     ]
     for r, f in pairs:
         lines.append(
-            f"| {r['table']} | {float(r['fov_deg']):.0f} "  # type: ignore[arg-type]
-            f"| {_fmt(r['mean_m'])} ({_fmt(r['final_third_mean_m'])}) "  # type: ignore[arg-type]
-            f"| {float(r['mean_particles']):,.0f} "  # type: ignore[arg-type]
-            f"| {_fmt(f['mean_m'])} ({_fmt(f['final_third_mean_m'])}) "  # type: ignore[arg-type]
-            f"| {float(f['mean_particles']):,.0f} |"  # type: ignore[arg-type]
+            f"| {r['table']} | {float(r['fov_deg']):.0f} "
+            f"| {_fmt(r['mean_m'])} ({_fmt(r['final_third_mean_m'])}) "
+            f"| {float(r['mean_particles']):,.0f} "
+            f"| {_fmt(f['mean_m'])} ({_fmt(f['final_third_mean_m'])}) "
+            f"| {float(f['mean_particles']):,.0f} |"
         )
     lines.append("")
     return lines

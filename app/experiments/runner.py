@@ -10,8 +10,9 @@ import numpy as np
 
 from app.experiments.protocol import Cell
 from app.localization.filter import ParticleFilter
+from app.maps.check import load_map
 from app.maps.geometry import wrap_angle
-from app.maps.model import SemanticMap, load_map
+from app.maps.model import SemanticMap
 from app.resources import bundled_maps_dir
 from app.simulation.simulator import simulate
 
@@ -74,7 +75,7 @@ def _job(args: tuple[Cell, int, int]) -> Run:
 def run_all(
     jobs: list[tuple[Cell, int, int]],
     workers: int,
-    progress: Callable[[], None] | None = None,
+    progress: Callable[[], object] | None = None,
 ) -> list[Run]:
     """Run every (cell, seed, particles) job; results in the jobs' order."""
     results: list[Run] = []

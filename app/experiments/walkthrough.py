@@ -14,7 +14,7 @@ import numpy as np
 from app.feedback import FeedbackOptions, Narrator
 from app.localization.config import FilterConfig
 from app.localization.filter import ParticleFilter
-from app.maps.model import load_map
+from app.maps.check import load_map
 from app.resources import bundled_maps_dir
 from app.simulation.scenarios import paper_config
 from app.simulation.simulator import simulate
@@ -32,7 +32,7 @@ def main() -> None:
     pf = ParticleFilter(
         office, FilterConfig(fov_deg=args.fov), rng=np.random.default_rng(args.seed)
     )
-    narrator = Narrator(office, FeedbackOptions(style=args.style))  # type: ignore[arg-type]
+    narrator = Narrator(office, FeedbackOptions(style=args.style))
     for f in frames:
         if f.t > args.until:
             break

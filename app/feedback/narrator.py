@@ -16,8 +16,9 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -31,6 +32,8 @@ from app.feedback.phrasing import (
     direction_phrase,
     distance_phrase,
 )
+from app.localization.config import FilterConfig
+from app.localization.sensor import match_detections, prepare_observation
 from app.localization.types import Detection, Estimate
 from app.maps.geometry import wrap_angle
 from app.maps.model import SemanticMap
@@ -84,12 +87,38 @@ class Narrator:
     def __init__(self, semantic_map: SemanticMap, options: FeedbackOptions | None = None) -> None:
         self.map = semantic_map
         self.options = options or FeedbackOptions()
-        self._said: dict[object, _Said] = {}
+        self._said: dict[tuple[object, ...], _Said] = {}
         self._region: str | None = None
         self._was_converged = False
         self._status_at: float | None = None
         self._ambiguity: tuple[str, ...] = ()
         self._objects_at: float | None = None
+
+    # ------------------------------------------------------------- checkpoints
+    def checkpoint(self) -> dict[str, Any]:
+        """What was said and when, as plain data (times as this narrator saw them)."""
+        return {
+            "said": [
+                [list(key), said.clock, said.distance_m, said.at_s]
+                for key, said in self._said.items()
+            ],
+            "region": self._region,
+            "was_converged": self._was_converged,
+            "status_at": self._status_at,
+            "ambiguity": list(self._ambiguity),
+            "objects_at": self._objects_at,
+        }
+
+    def restore(self, state: Mapping[str, Any]) -> None:
+        """Continue from a :meth:`checkpoint`. Times from another process's clock (frames
+        without timestamps) only make an announcement come once more: a time in the
+        future counts as long ago."""
+        self._said = {tuple(k): _Said(int(c), d, float(at)) for k, c, d, at in state["said"]}
+        self._region = state["region"]
+        self._was_converged = bool(state["was_converged"])
+        self._status_at = state["status_at"]
+        self._ambiguity = tuple(state["ambiguity"])
+        self._objects_at = state["objects_at"]
 
     # ------------------------------------------------------------------ public
     def update(
@@ -230,22 +259,30 @@ class Narrator:
         visible = self.map.visibility.visible(estimate.x, estimate.y)[0]
         rel = self.map.object_xy - pose_xy
         dist = np.hypot(rel[:, 0], rel[:, 1])
-        bearing = wrap_angle(np.arctan2(rel[:, 1], rel[:, 0]) - estimate.theta_rad)
         fov_deg, centre_deg = fov
-        off = wrap_angle(bearing - math.radians(centre_deg))
-        in_view = visible & (np.abs(off) <= math.radians(fov_deg) / 2 + 1e-9)
         matched: list[int] = []
         if dets:
-            # Each detection's best visible object of its class, all detections at once.
-            det_bearing = np.array([d.bearing_rad for d in dets])
-            det_class = np.array([self.map.classes.index(d.cls) for d in dets])
-            err = np.abs(wrap_angle(bearing[None, :] - det_bearing[:, None]))
-            allowed = in_view[None, :] & (self.map.object_class[None, :] == det_class[:, None])
-            err = np.where(allowed, err, np.inf)
-            for k in np.flatnonzero(allowed.any(axis=1)):
-                best = int(np.argmin(err[k]))
-                if best not in matched:
-                    matched.append(best)
+            # Each detection's best visible object of its class: the sensor model's own
+            # correspondence (eq. 3) at the estimated pose, within the camera's view. The
+            # camera may look off the body's forward by centre_deg: the pose turns by it
+            # and the bearings (relative to the body) by the opposite, so each detection
+            # still points the same way while the field of view is centred on the camera.
+            config = FilterConfig(fov_deg=fov_deg, visibility=True, max_range_m=None)
+            centre = math.radians(centre_deg)
+            camera_dets = [Detection(d.cls, d.bearing_rad - centre, d.score) for d in dets]
+            obs = prepare_observation(camera_dets, self.map, config)
+            _, index = match_detections(
+                np.array([estimate.x]),
+                np.array([estimate.y]),
+                np.array([estimate.theta_rad + centre]),
+                obs,
+                self.map,
+                config,
+                visible[None, :],
+            )
+            for best in index[:, 0]:
+                if best >= 0 and int(best) not in matched:
+                    matched.append(int(best))
         matched.sort(key=lambda i: dist[i])  # nearest first: a stable, useful order
         others = [int(i) for i in np.argsort(dist) if visible[i] and int(i) not in matched]
         return matched + others
@@ -254,7 +291,9 @@ class Narrator:
     def _gap_passed(self, now: float) -> bool:
         return self._objects_at is None or not 0 <= now - self._objects_at < MIN_GAP_S
 
-    def _is_new(self, key: object, clock: int | None, distance_m: float | None, now: float) -> bool:
+    def _is_new(
+        self, key: tuple[object, ...], clock: int | None, distance_m: float | None, now: float
+    ) -> bool:
         """True when this announcement adds something; remembers it if so."""
         said = self._said.get(key)
         changed = (

@@ -4,11 +4,12 @@ Once per map and target, a :class:`Plan` runs Dijkstra's algorithm (scipy's comp
 ``csgraph.dijkstra``) over the map's free-space grid, from the target outwards: every
 walkable cell learns its walking distance to the target and the next cell towards it.
 Cells closer than ``CLEARANCE_M`` to a wall are left out so that paths keep a little
-room from walls and door frames (a map whose passages are narrower falls back to the
-whole free space). A target point in a wall (a door) is joined to the walkable cells
-around it that see it.
+room from walls and door frames; a second run over the whole free space serves a person
+in a passage narrower than that. A target point in a wall (a door) is joined to the
+walkable cells around it that see it.
 
-Per frame, :meth:`Plan.route` follows those next-cell links from the person's cell and
+Per frame, :meth:`Plan.route` follows those next-cell links from the person's cell (or
+the nearest such cell in sight, for an estimate close to a wall) and
 straightens the staircase of cells into the few straight legs a person would walk
 (a leg goes on as long as the straight line stays walkable), so the first leg's end
 is the next turn. No search runs per frame.
@@ -67,8 +68,35 @@ class Route:
     end_object: int
 
 
+@dataclass(frozen=True)
+class _Layer:
+    """Dijkstra's answer over one set of walkable cells.
+
+    ``node[cell]`` is the graph node of a grid cell (-1 when not walkable); for each
+    node, ``dist`` its walking distance to the target, ``pred`` the next node towards it
+    and ``source`` the virtual node (target point) it leads to; nodes ``n`` and above are
+    the target's virtual nodes.
+    """
+
+    walkable: NDArray[np.bool_]  # flat, one per grid cell
+    node: NDArray[np.int64]
+    cells: NDArray[np.int64]
+    dist: NDArray[np.float64]
+    pred: NDArray[np.int32]
+    source: NDArray[np.int32]
+    n: int
+
+    def reaches(self, cell: int) -> bool:
+        k = self.node[cell]
+        return bool(k >= 0 and np.isfinite(self.dist[k]))
+
+
 class Plan:
-    """Walking distances to one target over one map's free space (built once)."""
+    """Walking distances to one target over one map's free space (built once).
+
+    Two layers: the cells at least ``CLEARANCE_M`` from walls (paths keep that room where
+    they can) and the whole free space (for a person in a passage too narrow for that).
+    """
 
     def __init__(self, semantic_map: SemanticMap, target: Target) -> None:
         self.map = semantic_map
@@ -82,20 +110,23 @@ class Plan:
         # free space already keeps WALL_CLEARANCE_M (0.1 m) plus half a cell from walls.
         room = ndimage.distance_transform_edt(free) * self.res
         roomy = free & (room >= max(CLEARANCE_M - 0.1, 0.0))
+        self.layers: list[_Layer] = []
         for walkable in (roomy, free):
             try:
-                self._build(walkable)
-                return
+                self.layers.append(self._build(walkable))
             except Unreachable:
                 continue
-        raise Unreachable(f"no walkable path leads to {target.name} on map {semantic_map.name!r}")
+        if not self.layers:
+            raise Unreachable(
+                f"no walkable path leads to {target.name} on map {semantic_map.name!r}"
+            )
 
     # ------------------------------------------------------------------ build
     def _centres(self, flat: NDArray[np.int64]) -> NDArray[np.float64]:
         r, c = np.divmod(flat, self.shape[1])
         return self.origin + (np.column_stack([c, r]) + 0.5) * self.res
 
-    def _build(self, walkable: NDArray[np.bool_]) -> None:
+    def _build(self, walkable: NDArray[np.bool_]) -> _Layer:
         rows, cols = self.shape
         cells = np.flatnonzero(walkable)
         n = cells.size
@@ -131,23 +162,9 @@ class Plan:
             return_predecessors=True,
             min_only=True,
         )
-        reach = np.isfinite(dist[:n])
-        if not reach.any():
+        if not np.isfinite(dist[:n]).any():
             raise Unreachable(f"nothing walkable reaches {self.target.name}")
-        self.walkable = walkable
-        self.node = node
-        self.cells = cells
-        self.dist = dist
-        self.pred = pred
-        self.source = source
-        self.n = n
-        # For every grid cell, the nearest reachable walkable cell (for snapping).
-        reachable = np.zeros(rows * cols, dtype=bool)
-        reachable[cells[reach]] = True
-        _, (ir, ic) = ndimage.distance_transform_edt(
-            ~reachable.reshape(rows, cols), return_indices=True
-        )
-        self.nearest = (ir * cols + ic).reshape(-1)
+        return _Layer(walkable.reshape(-1), node, cells, dist, pred, source, n)
 
     def _seeds(
         self, cells: NDArray[np.int64]
@@ -190,14 +207,79 @@ class Plan:
         r = int(np.clip(np.floor((y - self.origin[1]) / self.res), 0, rows - 1))
         return r * cols + c
 
-    def _clear(self, a: NDArray[np.float64], b: NDArray[np.float64], relax_m: float) -> bool:
-        """Whether the straight line a -> b stays walkable (see :func:`_line_clear`)."""
-        return bool(_line_clear(a[0], a[1], b[0], b[1], *self._grid_args(relax_m)))
+    def _snap(self, layer: _Layer, start: NDArray[np.float64]) -> int | None:
+        """The nearest cell of ``layer`` that leads to the target and that the person sees
+        (no wall between), within ``MAX_SNAP_M``; None when there is none."""
+        rows, cols = self.shape
+        reach = int(np.ceil(MAX_SNAP_M / self.res))
+        c0, r0 = divmod(self._cell_of(*start), cols)[::-1]
+        rr, cc = np.mgrid[
+            max(r0 - reach, 0) : min(r0 + reach + 1, rows),
+            max(c0 - reach, 0) : min(c0 + reach + 1, cols),
+        ]
+        flat = (rr * cols + cc).reshape(-1)
+        k = layer.node[flat]
+        ok = k >= 0
+        ok[ok] = np.isfinite(layer.dist[k[ok]])
+        flat = flat[ok]
+        centres = self._centres(flat)
+        d = np.hypot(*(centres - start).T)
+        near = d <= MAX_SNAP_M
+        flat, centres, d = flat[near], centres[near], d[near]
+        if not flat.size:
+            return None
+        order = np.argsort(d, kind="stable")
+        ends = centres[order]
+        blocked = segments_cross_walls(np.broadcast_to(start, ends.shape), ends, self.map.walls)
+        seen = np.flatnonzero(~blocked)
+        return int(flat[order[seen[0]]]) if seen.size else None
 
-    def _grid_args(self, relax_m: float) -> tuple[object, ...]:
+    def route(self, x: float, y: float) -> Route:
+        """The straightened shortest path from (x, y) to the target.
+
+        Raises:
+            Unreachable: no cell that leads to the target is within ``MAX_SNAP_M`` in
+                sight (outside the building, or in a walled-off part).
+        """
+        start = np.array([x, y], dtype=np.float64)
+        flat = self._cell_of(x, y)
+        for layer in self.layers:
+            relax = 0.0
+            cell: int | None = flat
+            if not layer.reaches(flat):
+                cell = self._snap(layer, start)
+                if cell is None:
+                    continue
+                relax = float(np.hypot(*(self._centres(np.array([cell]))[0] - start))) + self.res
+            assert cell is not None  # reached, or snapped onto a reachable cell above
+            return self._route(layer, start, int(cell), relax)
+        raise Unreachable(f"no walkable path from here to {self.target.name}")
+
+    def _route(self, layer: _Layer, start: NDArray[np.float64], cell: int, relax: float) -> Route:
+        chain = [int(layer.node[cell])]
+        while chain[-1] < layer.n and layer.pred[chain[-1]] >= 0:
+            chain.append(int(layer.pred[chain[-1]]))
+        cell_nodes = np.array([c for c in chain if c < layer.n], dtype=np.int64)
+        pts = self._centres(layer.cells[cell_nodes])
+        end_object = -1
+        if self.target.kind != "region":
+            j = int(layer.source[int(cell_nodes[0])]) - layer.n  # which target point
+            pts = np.vstack([pts, self.target.points[j]])
+            end_object = int(self.target.objects[j])
+        legs = self._straighten(layer, start, pts, end_object, relax)
+        legs = self._merge_small_bends(layer, legs, end_object, relax)
+        return Route(legs, _length(legs), end_object)
+
+    def _clear(
+        self, layer: _Layer, a: NDArray[np.float64], b: NDArray[np.float64], relax_m: float
+    ) -> bool:
+        """Whether the straight line a -> b stays walkable (see :func:`_line_clear`)."""
+        return bool(_line_clear(a[0], a[1], b[0], b[1], *self._grid_args(layer, relax_m)))
+
+    def _grid_args(self, layer: _Layer, relax_m: float) -> tuple[object, ...]:
         rows, cols = self.shape
         return (
-            self.walkable.reshape(-1),
+            layer.walkable,
             self.map.free_space.mask.reshape(-1),
             float(self.origin[0]),
             float(self.origin[1]),
@@ -208,41 +290,8 @@ class Plan:
             relax_m,
         )
 
-    def route(self, x: float, y: float) -> Route:
-        """The straightened shortest path from (x, y) to the target.
-
-        Raises:
-            Unreachable: the pose is not within ``MAX_SNAP_M`` of any cell that leads
-                to the target (outside the building, or in a walled-off part).
-        """
-        start = np.array([x, y], dtype=np.float64)
-        flat = self._cell_of(x, y)
-        node = self.node[flat]
-        relax = 0.0
-        if node < 0 or not np.isfinite(self.dist[node]):
-            snap = int(self.nearest[flat])
-            relax = float(np.hypot(*(self._centres(np.array([snap]))[0] - start)))
-            if relax > MAX_SNAP_M:
-                raise Unreachable(f"no walkable path from here to {self.target.name}")
-            node = self.node[snap]
-            relax += self.res
-        chain = [int(node)]
-        while chain[-1] < self.n and self.pred[chain[-1]] >= 0:
-            chain.append(int(self.pred[chain[-1]]))
-        cell_nodes = np.array([c for c in chain if c < self.n], dtype=np.int64)
-        pts = self._centres(self.cells[cell_nodes])
-        end_object = -1
-        if self.target.kind != "region":
-            j = int(self.source[int(cell_nodes[0])]) - self.n  # which target point
-            pts = np.vstack([pts, self.target.points[j]])
-            end_object = int(self.target.objects[j])
-        legs = self._merge_small_bends(
-            self._straighten(start, pts, end_object, relax), end_object, relax
-        )
-        return Route(legs, _length(legs), end_object)
-
     def _merge_small_bends(
-        self, points: NDArray[np.float64], end_object: int, relax_m: float
+        self, layer: _Layer, points: NDArray[np.float64], end_object: int, relax_m: float
     ) -> NDArray[np.float64]:
         """Drop inner points where the path bends by less than ``MIN_TURN_DEG`` (no turn
         worth a word), where the straight line past them stays walkable too."""
@@ -254,9 +303,9 @@ class Plan:
             if abs(wrap_deg(out - into)) < MIN_TURN_DEG:
                 relax = relax_m if len(keep) == 1 else 0.0
                 if k + 1 == last and self.target.kind != "region":
-                    clear = self._sees_end(keep[-1], points[k + 1], end_object, relax)
+                    clear = self._sees_end(layer, keep[-1], points[k + 1], end_object, relax)
                 else:
-                    clear = self._clear(keep[-1], points[k + 1], relax)
+                    clear = self._clear(layer, keep[-1], points[k + 1], relax)
                 if clear:
                     continue
             keep.append(points[k])
@@ -265,6 +314,7 @@ class Plan:
 
     def _straighten(
         self,
+        layer: _Layer,
         start: NDArray[np.float64],
         chain: NDArray[np.float64],
         end_object: int,
@@ -282,11 +332,12 @@ class Plan:
         special_end = self.target.kind != "region"
         while i < last:
             stop = last - 1 if special_end else last
-            reach = int(_reach(anchor[0], anchor[1], chain, i + 1, stop, *self._grid_args(relax_m)))
+            args = self._grid_args(layer, relax_m)
+            reach = int(_reach(anchor[0], anchor[1], chain, i + 1, stop, *args))
             if (
                 reach == stop
                 and special_end
-                and self._sees_end(anchor, chain[last], end_object, relax_m)
+                and self._sees_end(layer, anchor, chain[last], end_object, relax_m)
             ):
                 reach = last
             reach = max(reach, i + 1)  # at least one step of progress
@@ -297,7 +348,12 @@ class Plan:
         return np.array(out)
 
     def _sees_end(
-        self, a: NDArray[np.float64], end: NDArray[np.float64], obj: int, relax_m: float = 0.0
+        self,
+        layer: _Layer,
+        a: NDArray[np.float64],
+        end: NDArray[np.float64],
+        obj: int,
+        relax_m: float = 0.0,
     ) -> bool:
         """Whether the final point (maybe in a wall) is reachable in a straight line:
         walkable until ``JOIN_RADIUS_M`` before it, then no wall crossed."""
@@ -306,7 +362,7 @@ class Plan:
         if length < 1e-9:
             return True
         cut = max(length - JOIN_RADIUS_M, 0.0)
-        if cut > 0 and not self._clear(a, a + d * (cut / length), relax_m):
+        if cut > 0 and not self._clear(layer, a, a + d * (cut / length), relax_m):
             return False
         ignore = self.map.mounted_walls[obj] if obj >= 0 and self.map.walls.shape[0] else None
         return not segments_cross_walls(a[None], end[None], self.map.walls, ignore=ignore)[0]

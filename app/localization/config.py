@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
+from typing import Any
 
 import numpy as np
 
@@ -68,7 +69,7 @@ class FilterConfig:
         return float(np.radians(self.class_bearing_std_deg.get(cls, self.bearing_std_deg)))
 
     @classmethod
-    def paper(cls, **overrides: object) -> FilterConfig:
+    def paper(cls, **overrides: Any) -> FilterConfig:
         """The paper's model only: no visibility, no clutter floor, no recovery."""
         base = cls(visibility=False, clutter=False, recovery=False, adaptive=False, evidence=False)
-        return replace(base, **overrides)  # type: ignore[arg-type]
+        return replace(base, **overrides)

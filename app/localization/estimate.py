@@ -16,7 +16,9 @@ heading). ``converged`` is true only when that cluster holds at least
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 from numba import njit
@@ -26,6 +28,7 @@ from app.localization.fastmath import FAST, sincos
 from app.localization.resampling import systematic_resample
 from app.localization.types import Estimate, Hypothesis
 from app.maps.geometry import wrap_angle
+from app.state import from_plain, to_plain
 
 
 @dataclass(frozen=True)
@@ -221,7 +224,7 @@ def estimate_pose(
         np.ascontiguousarray(v, dtype=np.float64) for v in (x, y, theta, weights)
     )
     sub = rng is not None and n > max_points
-    if sub:
+    if rng is not None and sub:
         idx = systematic_resample(weights, max_points, rng)
         cx, cy, ct = x[idx], y[idx], theta[idx]
         cw = np.full(max_points, 1.0 / max_points)
@@ -333,6 +336,21 @@ class ConvergenceGate:
         self._light = 0
         self.lost_because: tuple[str, ...] = ()
 
+    def checkpoint(self) -> dict[str, Any]:
+        """The gate's memory, as plain data."""
+        return {
+            "streak": self._streak,
+            "last": to_plain(self._last),
+            "held": self._held,
+            "light": self._light,
+        }
+
+    def restore(self, state: Mapping[str, Any]) -> None:
+        self._streak = int(state["streak"])
+        self._last = from_plain(Estimate | None, state["last"])
+        self._held = bool(state["held"])
+        self._light = int(state["light"])
+
     def confirm(
         self,
         raw: Estimate,
@@ -401,7 +419,7 @@ class ConvergenceGate:
         return replace(raw, converged=self._held)
 
 
-#: Probability the protection radius must hold (CONTRACT.md, FrameResult.protection_m).
+#: Probability the protection radius must hold (docs/API.md, FrameResult.protection_m).
 PROTECTION_PROBABILITY = 0.99
 #: Particles (a systematic resample) whose distances give the radius's quantile.
 PROTECTION_SAMPLE = 1_000

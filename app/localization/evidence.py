@@ -51,8 +51,9 @@ protection radius.
 from __future__ import annotations
 
 from collections import deque
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -68,6 +69,7 @@ from app.localization.types import Hypothesis, Odometry
 from app.maps.geometry import wrap_angle
 from app.maps.model import SemanticMap
 from app.maps.visibility import VisibilityGrid
+from app.state import from_plain, to_plain
 
 
 @dataclass(frozen=True)
@@ -188,6 +190,56 @@ class EvidenceTracker:
         #: Searches run against the current main mode while it stayed tight.
         self.mode_searches = 0
         self._last_main: Hypothesis | None = None
+
+    # ---------------------------------------------------------- checkpoints
+    def checkpoint(self) -> dict[str, Any]:
+        """The anchor, the alternatives (motions, evidence, ages), the dropped ones, the
+        main mode's trail and the recent frames (prepared observations), as plain data
+        and arrays; the random generator is the filter's."""
+        return {
+            "moves": self.moves,
+            "llr": self.llr,
+            "age": self.age,
+            "graves": self._graves,
+            "trail": [list(p) for p in self._trail],
+            "anchor": self._anchor,
+            "history": [
+                [to_plain(odo), to_plain(obs), to_plain(compass)]
+                for odo, obs, compass in self._history
+            ],
+            "since_search": self._since_search,
+            "searched_ago": self.searched_ago,
+            "searches": self.searches,
+            "swaps": self.swaps,
+            "mode_searches": self.mode_searches,
+            "last_main": to_plain(self._last_main),
+        }
+
+    def restore(self, state: Mapping[str, Any]) -> None:
+        """Continue from a :meth:`checkpoint` of a tracker with the same map and config."""
+        self.moves = np.array(state["moves"], dtype=np.float64).reshape(-1, 3)
+        self.llr = np.array(state["llr"], dtype=np.float64)
+        self.age = np.array(state["age"], dtype=np.int64)
+        self._graves = np.array(state["graves"], dtype=np.float64).reshape(-1, 3)
+        self._trail.clear()
+        self._trail.extend((float(x), float(y)) for x, y in state["trail"])
+        anchor = state["anchor"]
+        self._anchor = None if anchor is None else np.array(anchor, dtype=np.float64)
+        self._history.clear()
+        for odo, obs, compass in state["history"]:
+            self._history.append(
+                (
+                    from_plain(Odometry | None, odo),
+                    from_plain(Observation, obs),
+                    from_plain(CompassReading | None, compass),
+                )
+            )
+        self._since_search = int(state["since_search"])
+        self.searched_ago = state["searched_ago"]
+        self.searches = int(state["searches"])
+        self.swaps = int(state["swaps"])
+        self.mode_searches = int(state["mode_searches"])
+        self._last_main = from_plain(Hypothesis | None, state["last_main"])
 
     # ------------------------------------------------------------ read-outs
     @property

@@ -10,8 +10,9 @@ structure of arrays (x, y, theta, log-weight); nothing loops over particles in P
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import replace
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -40,9 +41,12 @@ from app.localization.sensor import Observation, normalized_residuals, prepare_o
 from app.localization.types import Detection, Estimate, InitialPose, Odometry
 from app.maps.geometry import wrap_angle
 from app.maps.model import SemanticMap
+from app.state import from_plain, to_plain
 
 #: Share of a global start's particles drawn from the first observation.
 SEED_SHARE = 0.9
+#: Most particles a checkpoint keeps (a converged filter runs on 2,000: kept whole).
+CHECKPOINT_PARTICLES = 2_000
 #: Weight of the newest frame in the smoothed fit that gates ``converged``.
 FIT_SMOOTHING = 0.3
 #: The fit is measured while the heaviest cluster is at most this wide (m).
@@ -64,6 +68,7 @@ class ParticleFilter:
         rng: the filter's own random generator (same seed, same result).
         initial_pose: a known start, or None for global localization (uniform over the
             free space, any heading).
+        state: a :meth:`checkpoint` to go on from instead (``initial_pose`` is ignored).
     """
 
     def __init__(
@@ -73,6 +78,7 @@ class ParticleFilter:
         *,
         rng: np.random.Generator,
         initial_pose: InitialPose | None = None,
+        state: Mapping[str, Any] | None = None,
     ) -> None:
         self.map = semantic_map
         self.config = config or FilterConfig()
@@ -87,7 +93,10 @@ class ParticleFilter:
             else None
         )
         self.last_observation: Observation | None = None
-        self.reset(initial_pose)
+        if state is None:
+            self.reset(initial_pose)
+        else:  # from a checkpoint (:meth:`checkpoint`): no cloud to draw first
+            self.restore(state)
 
     # ----------------------------------------------------------------- state
     def reset(self, initial_pose: InitialPose | None = None) -> None:
@@ -313,6 +322,74 @@ class ParticleFilter:
         w = self.weights
         ess = effective_sample_size(w)
         return estimate_pose(self.x, self.y, self.theta, w, ess=ess, rng=self.rng), w, ess
+
+    # ------------------------------------------------------------ checkpoints
+    def checkpoint(self, max_particles: int = CHECKPOINT_PARTICLES) -> dict[str, Any]:
+        """Everything the next step depends on, compactly: plain data and float32 arrays.
+
+        A cloud larger than ``max_particles`` is resampled to that many (systematic,
+        equal weights; drawn with its own generator so the filter's is untouched). A
+        smaller one is kept whole, and the filter itself goes on from exactly what is
+        stored (its poses and log-weights rounded to float32, a change of about 1e-7
+        of their values): a filter restored from the checkpoint and fed the same frames
+        then takes the very same steps. The random generator's state is kept too. The
+        map and the configuration are not included: :meth:`restore` runs on a filter
+        built from the same ones.
+        """
+        if self.n > max_particles:
+            idx = systematic_resample(
+                self.weights, max_particles, np.random.default_rng(self.steps)
+            )
+            x, y, theta = (v[idx].astype(np.float32) for v in (self.x, self.y, self.theta))
+            log_w = None
+        else:
+            x, y, theta = (v.astype(np.float32) for v in (self.x, self.y, self.theta))
+            top = self.log_w.max()
+            log_w = None
+            if np.isfinite(top) and not bool(np.all(self.log_w == top)):
+                log_w = (self.log_w - top).astype(np.float32)
+            self.x, self.y, self.theta = (v.astype(np.float64) for v in (x, y, theta))
+            self.log_w = np.zeros(self.n) if log_w is None else log_w.astype(np.float64)
+        return {
+            "x": x,
+            "y": y,
+            "theta": theta,
+            "log_w": log_w,
+            "rng": self.rng.bit_generator.state,
+            "recovery": [self._recovery.w_slow, self._recovery.w_fast],
+            "gate": self._gate.checkpoint(),
+            "seed_from_observation": self._seed_from_observation,
+            "quality": to_plain(self.quality),
+            "had_odometry": self._had_odometry,
+            "evidence": None if self.evidence is None else self.evidence.checkpoint(),
+            "frames_without_evidence": self.frames_without_evidence,
+            "restarts": self.restarts,
+            "steps": self.steps,
+            "estimate": to_plain(self.estimate),
+        }
+
+    def restore(self, state: Mapping[str, Any]) -> None:
+        """Continue from a :meth:`checkpoint` (taken of a filter with this map and config)."""
+        self.x = np.asarray(state["x"], dtype=np.float64)
+        self.y = np.asarray(state["y"], dtype=np.float64)
+        self.theta = np.asarray(state["theta"], dtype=np.float64)
+        log_w = state["log_w"]
+        self.log_w = (
+            np.zeros(self.x.shape[0]) if log_w is None else np.asarray(log_w, dtype=np.float64)
+        )
+        self.rng.bit_generator.state = state["rng"]
+        self._recovery.w_slow, self._recovery.w_fast = (float(v) for v in state["recovery"])
+        self._gate.restore(state["gate"])
+        self._seed_from_observation = bool(state["seed_from_observation"])
+        self.quality = from_plain(FitQuality | None, state["quality"])
+        self._had_odometry = bool(state["had_odometry"])
+        if self.evidence is not None and state["evidence"] is not None:
+            self.evidence.restore(state["evidence"])
+        self.frames_without_evidence = int(state["frames_without_evidence"])
+        self.restarts = int(state["restarts"])
+        self.steps = int(state["steps"])
+        self.estimate = from_plain(Estimate, state["estimate"])
+        self.last_observation = None
 
     def _update_fit(self, raw: Estimate) -> None:
         """Smooth how well the estimated pose explains this frame's detections.

@@ -3,13 +3,15 @@
 The motion (forward, left, turn) is perturbed per particle with zero-mean Gaussian
 noise whose standard deviation grows with the motion and never falls below a floor,
 in the spirit of *sample_motion_odometry* (Probabilistic Robotics, Table 5.6), but
-parameterized directly in the body frame that CONTRACT.md's odometry uses. The
+parameterized directly in the body frame that the API's odometry uses (docs/API.md). The
 Gaussian draws come from :func:`~app.localization.fastmath.fill_normal` (a tabulated
 inverse CDF, four times faster here than numpy's sampler) and the particle loop is
 compiled.
 """
 
 from __future__ import annotations
+
+import math
 
 import numpy as np
 from numba import njit
@@ -20,6 +22,7 @@ from app.localization.fastmath import FAST, fill_normal, grid_cell, sincos
 from app.localization.types import Odometry
 from app.maps.geometry import GEOMETRY_EPS
 from app.maps.model import WALL_CLEARANCE_M, SemanticMap
+from app.maps.prepare import crosses_wall
 
 #: When a frame carries no odometry the person may still have moved: diffuse this much.
 NO_ODOMETRY_STD_M = 0.15
@@ -87,21 +90,8 @@ def sample_motion(
 @njit(cache=True, nogil=True, error_model="numpy", inline="always")
 def _crosses_a_wall(px, py, qx, qy, walls, eps):  # fmt: skip  # pragma: no cover - compiled
     """Whether segment p->q properly crosses a wall: :func:`segments_cross_walls`, one segment."""
-    rx = qx - px
-    ry = qy - py
     for w in range(walls.shape[0]):
-        ax = walls[w, 0]
-        ay = walls[w, 1]
-        sx = walls[w, 2] - ax
-        sy = walls[w, 3] - ay
-        denom = rx * sy - ry * sx
-        if abs(denom) < eps:
-            continue
-        apx = ax - px
-        apy = ay - py
-        t = (apx * sy - apy * sx) / denom
-        u = (apx * ry - apy * rx) / denom
-        if eps < t < 1.0 - eps and -eps <= u <= 1.0 + eps:
+        if crosses_wall(px, py, qx, qy, walls[w, 0], walls[w, 1], walls[w, 2], walls[w, 3], eps):
             return True
     return False
 
@@ -155,7 +145,7 @@ def compose_odometry(first: Odometry | None, then: Odometry | None) -> Odometry 
     """
     if first is None or then is None:
         return None
-    c, s = np.cos(first.turn_rad), np.sin(first.turn_rad)
+    c, s = math.cos(first.turn_rad), math.sin(first.turn_rad)
     return Odometry(
         forward_m=float(first.forward_m + c * then.forward_m - s * then.left_m),
         left_m=float(first.left_m + s * then.forward_m + c * then.left_m),

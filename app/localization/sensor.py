@@ -176,6 +176,50 @@ def candidate_mask(
     return ok
 
 
+def match_detections(
+    x: NDArray[np.float64],
+    y: NDArray[np.float64],
+    theta: NDArray[np.float64],
+    obs: Observation,
+    semantic_map: SemanticMap,
+    config: FilterConfig,
+    visible_rows: NDArray[np.bool_] | None = None,
+) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+    """Eq. (3): each detection's best candidate object at each particle, plain numpy.
+
+    The one implementation of the paper's maximum-likelihood correspondence: among the
+    objects of the detection's class that the particle could see (:func:`candidate_mask`),
+    the one whose direction is closest to the detected bearing (the largest cosine of
+    the bearing error).
+
+    Returns:
+        (best, index), each shape (K, N), detections in the observation's order: the
+        best cosine of the bearing error and the object's index; -inf and -1 where no
+        object of the class is a candidate.
+    """
+    n = x.shape[0]
+    best = np.full((obs.det_cos.size, n), -np.inf)
+    index = np.full((obs.det_cos.size, n), -1, dtype=np.int64)
+    cos_t = np.cos(theta)[:, None]
+    sin_t = np.sin(theta)[:, None]
+    rows = np.arange(n)
+    for g in range(obs.group_kappa.size):
+        objs = obs.members[obs.member_start[g] : obs.member_start[g + 1]]
+        dx = semantic_map.object_xy[objs, 0][None, :] - x[:, None]
+        dy = semantic_map.object_xy[objs, 1][None, :] - y[:, None]
+        dist = np.hypot(dx, dy) + 1e-12
+        # Unit vector towards each object in the particle's body frame.
+        bx = (cos_t * dx + sin_t * dy) / dist
+        by = (-sin_t * dx + cos_t * dy) / dist
+        cand = candidate_mask(x, y, theta, objs, semantic_map, config, visible_rows)
+        for k in np.flatnonzero(obs.det_group == g):
+            cos_err = np.where(cand, obs.det_cos[k] * bx + obs.det_sin[k] * by, -np.inf)
+            j = np.argmax(cos_err, axis=1)
+            best[k] = cos_err[rows, j]
+            index[k] = np.where(np.isfinite(best[k]), objs[j], -1)
+    return best, index
+
+
 def log_likelihood_reference(
     x: NDArray[np.float64],
     y: NDArray[np.float64],
@@ -190,29 +234,16 @@ def log_likelihood_reference(
     The readable reference; :mod:`app.localization.sensor_kernel` computes the same
     numbers faster and the tests hold the two together.
     """
-    n = x.shape[0]
-    total = np.zeros(n, dtype=np.float64)
-    cos_t = np.cos(theta)[:, None]
-    sin_t = np.sin(theta)[:, None]
-    for g in range(obs.group_kappa.size):
-        objs = obs.members[obs.member_start[g] : obs.member_start[g + 1]]
-        dx = semantic_map.object_xy[objs, 0][None, :] - x[:, None]
-        dy = semantic_map.object_xy[objs, 1][None, :] - y[:, None]
-        dist = np.hypot(dx, dy) + 1e-12
-        # Unit vector towards each object in the particle's body frame.
-        bx = (cos_t * dx + sin_t * dy) / dist
-        by = (-sin_t * dx + cos_t * dy) / dist
-        cand = candidate_mask(x, y, theta, objs, semantic_map, config, visible_rows)
-        kappa = obs.group_kappa[g]
-        log_keep = obs.group_log_keep[g]
-        log_floor = obs.group_log_floor[g]
-        for k in np.flatnonzero(obs.det_group == g):
-            cos_err = obs.det_cos[k] * bx + obs.det_sin[k] * by
-            best = np.max(np.where(cand, cos_err, -np.inf), axis=1)  # eq. (3)
-            # von Mises log-density relative to its peak, mixed with the clutter floor
-            log_p = np.logaddexp(kappa * (best - 1.0) + log_keep, log_floor)
-            # score tempering (P^w) and the class exponent 1/size(O_i), eq. (2)
-            total += obs.group_weight[g] * obs.det_score[k] * log_p
+    total = np.zeros(x.shape[0], dtype=np.float64)
+    best, _ = match_detections(x, y, theta, obs, semantic_map, config, visible_rows)  # eq. (3)
+    for k in range(obs.det_cos.size):
+        g = obs.det_group[k]
+        # von Mises log-density relative to its peak, mixed with the clutter floor
+        log_p = np.logaddexp(
+            obs.group_kappa[g] * (best[k] - 1.0) + obs.group_log_keep[g], obs.group_log_floor[g]
+        )
+        # score tempering (P^w) and the class exponent 1/size(O_i), eq. (2)
+        total += obs.group_weight[g] * obs.det_score[k] * log_p
     return total
 
 

@@ -23,7 +23,7 @@ from typing import Literal
 
 import numpy as np
 
-from app.maps.geometry import point_segment_distance, segments_cross_walls
+from app.maps.geometry import segments_cross_walls
 from app.maps.model import (
     MOUNT_TOLERANCE_M,
     MapError,
@@ -32,6 +32,7 @@ from app.maps.model import (
     parse_map,
     validate_spec,
 )
+from app.maps.prepare import enclosed, nearest_walls
 
 log = logging.getLogger("bearings.maps")
 
@@ -202,35 +203,52 @@ def _overlapping_walls(source: str, walls: np.ndarray) -> list[Problem]:
     return out
 
 
+def _first_self_crossing(poly: np.ndarray) -> tuple[int, int] | None:
+    """The first pair of non-adjacent edges of a closed polygon that cross, or None.
+
+    Edge k runs from vertex k to vertex k + 1 (the last one back to vertex 0). A plain
+    pairwise segment test (no polygon library to import at start-up); at most
+    ``MAX_REGION_VERTICES`` squared pairs, in blocks.
+    """
+    start = poly
+    end = np.roll(poly, -1, axis=0)
+    n = poly.shape[0]
+    if n < 4:
+        return None
+    edges = np.column_stack([start, end])
+    k = np.arange(n)
+    for lo in range(0, n, 256):
+        rows = k[lo : lo + 256]
+        # An edge touches itself and its two neighbours at shared vertices: skip those.
+        d = np.abs(rows[:, None] - k[None, :])
+        adjacent = (d <= 1) | (d == n - 1)
+        hit = segments_cross_walls(start[rows], end[rows], edges, ignore=adjacent)
+        if hit.any():
+            i = int(rows[np.argmax(hit)])
+            for j in range(n):
+                skip = abs(i - j) <= 1 or abs(i - j) == n - 1
+                if not skip and segments_cross_walls(start[i], end[i], edges[j])[0]:
+                    return i, j
+    return None
+
+
 def _region_problems(source: str, m: SemanticMap) -> list[Problem]:
     """Regions whose outline crosses itself (which room a point is in becomes ambiguous)."""
-    import shapely
-
     out = []
     for i, poly in enumerate(m.region_polygons):
-        shape = shapely.Polygon(poly)
-        if not shape.is_valid:
-            reason = shapely.is_valid_reason(shape)
+        crossing = _first_self_crossing(poly)
+        if crossing is not None:
+            a, b = crossing
             out.append(
                 Problem(
                     source,
                     f"regions[{i}].polygon",
-                    f"region {m.region_names[i]!r} is not a simple polygon ({reason})",
+                    f"region {m.region_names[i]!r} is not a simple polygon: its edge from "
+                    f"point {a} crosses its edge from point {b}",
                     "warning",
                 )
             )
     return out
-
-
-def _enclosed(points: np.ndarray, walls: np.ndarray) -> np.ndarray:
-    """Whether an axis ray from each point hits a wall in all four directions."""
-    if walls.shape[0] == 0:
-        return np.ones(points.shape[0], dtype=bool)
-    reach = 4.0 * float(np.abs(walls).max() + np.abs(points).max() + 1.0)
-    inside = np.ones(points.shape[0], dtype=bool)
-    for d in ((1.0, 0.0), (-1.0, 0.0), (0.0, 1.0), (0.0, -1.0)):
-        inside &= segments_cross_walls(points, points + reach * np.array(d), walls)
-    return inside
 
 
 def _object_fixes(source: str, m: SemanticMap) -> tuple[Fixes, list[Problem]]:
@@ -241,14 +259,10 @@ def _object_fixes(source: str, m: SemanticMap) -> tuple[Fixes, list[Problem]]:
     fixes: Fixes = {}
     out: list[Problem] = []
     xy = m.object_xy
-    dist = np.vstack(
-        [point_segment_distance(xy[i : i + 256], walls) for i in range(0, xy.shape[0], 256)]
-    )
-    nearest = dist.argmin(axis=1)
-    near = dist[np.arange(xy.shape[0]), nearest]
+    near, nearest, _ = nearest_walls(xy, walls)
     mounted = near < MOUNT_TOLERANCE_M
     candidates = np.flatnonzero(~mounted)
-    outside = candidates[~_enclosed(xy[candidates], walls)] if candidates.size else candidates
+    outside = candidates[~enclosed(xy[candidates], walls)] if candidates.size else candidates
     for i in outside:
         i = int(i)
         label = m.object_labels[i]
@@ -281,11 +295,18 @@ def _object_fixes(source: str, m: SemanticMap) -> tuple[Fixes, list[Problem]]:
     return fixes, out
 
 
-def _free_space_problem(source: str, m: SemanticMap) -> Problem | None:
+def _free_space_problem(
+    source: str, m: SemanticMap, prepare_grids: bool, cache_dir: Path | None
+) -> Problem | None:
+    """No free space at all. With ``prepare_grids`` the map's grids are prepared here
+    (read from ``cache_dir`` when there), else only the free space is built."""
     from app.maps.model import WALL_CLEARANCE_M
-    from app.maps.prepare import build_free_space
+    from app.maps.prepare import build_free_space, prepare
 
-    fs = build_free_space(m, m.grid_resolution_m)
+    if prepare_grids:
+        fs = prepare(m, cache_dir).free_space
+    else:
+        fs = build_free_space(m, m.grid_resolution_m)
     if fs.free_cells.size:
         return None
     return Problem(
@@ -298,9 +319,18 @@ def _free_space_problem(source: str, m: SemanticMap) -> Problem | None:
 
 # --------------------------------------------------------------------- entry points
 def check_data(
-    data: object, *, source: str = "map", expected_name: str | None = None
+    data: object,
+    *,
+    source: str = "map",
+    expected_name: str | None = None,
+    prepare_grids: bool = False,
+    cache_dir: Path | None = None,
 ) -> CheckResult:
-    """Check already-decoded JSON; the map (with fixes applied) when there is no error."""
+    """Check already-decoded JSON; the map (with fixes applied) when there is no error.
+
+    With ``prepare_grids`` a usable map also gets its grids (:func:`app.maps.prepare.
+    prepare`, through ``cache_dir``), so loading builds the free space only once.
+    """
     problems = _count_problems(source, data)
     if problems:
         return CheckResult(source, None, problems)
@@ -326,14 +356,17 @@ def check_data(
         for i, (x, y) in fixes.items():
             fixed["objects"][i]["x"], fixed["objects"][i]["y"] = x, y  # type: ignore[index]
         m = parse_map(fixed, source=source, expected_name=expected_name)
-    empty = _free_space_problem(source, m)
+    empty = _free_space_problem(source, m, prepare_grids, cache_dir)
     if empty is not None:
         return CheckResult(source, None, [*problems, empty])
     return CheckResult(source, m, problems)
 
 
-def check_file(path: str | Path) -> CheckResult:
-    """Check one map file: it must exist, be small enough, be JSON and pass every check."""
+def check_file(
+    path: str | Path, *, prepare_grids: bool = False, cache_dir: Path | None = None
+) -> CheckResult:
+    """Check one map file: it must exist, be small enough, be JSON and pass every check
+    (and prepare its grids, see :func:`check_data`)."""
     p = Path(path)
     source = str(p)
     if p.is_symlink() and not p.exists():
@@ -364,7 +397,13 @@ def check_file(path: str | Path) -> CheckResult:
         return CheckResult(source, None, [Problem(source, "(file)", f"cannot read it ({exc})")])
     except (json.JSONDecodeError, UnicodeDecodeError, ValueError) as exc:
         return CheckResult(source, None, [Problem(source, "(file)", f"not valid JSON ({exc})")])
-    return check_data(data, source=source, expected_name=p.stem)
+    return check_data(
+        data,
+        source=source,
+        expected_name=p.stem,
+        prepare_grids=prepare_grids,
+        cache_dir=cache_dir,
+    )
 
 
 def _refuse_constant(name: str) -> float:
@@ -392,14 +431,14 @@ def load_map_dirs(
             problems.append(problem)
             continue
         for path in sorted(d.glob("*.json")):
-            result = check_file(path)
+            result = check_file(path, prepare_grids=True, cache_dir=cache_dir)
             problems += result.problems
             if result.map is None:
                 log.error("map file skipped: %s", "; ".join(str(p) for p in result.problems))
                 continue
             for p in result.problems:
                 log.warning("%s", p)
-            prepared = prepare(result.map, cache_dir)
+            prepared = result.map.prepared_or_none or prepare(result.map, cache_dir)
             log.info(
                 "map %s: %d walls, %d objects; grids %s in %.3f s",
                 result.map.name,
@@ -410,3 +449,27 @@ def load_map_dirs(
             )
             maps[result.map.name] = result.map
     return maps, problems
+
+
+def load_map(path: str | Path) -> SemanticMap:
+    """Load and check one map file (:func:`app.maps.check.check_file`).
+
+    Its ``name`` must match the file name. Warnings are dropped (their fixes, such as
+    an object snapped onto a wall, are applied).
+
+    Raises:
+        MapError: with every error found, each naming its field.
+    """
+    result = check_file(path)
+    if result.map is None:
+        errors = result.errors
+        raise MapError("; ".join(str(p) for p in errors), [(p.field, p.message) for p in errors])
+    return result.map
+
+
+def load_map_dir(directory: str | Path) -> dict[str, SemanticMap]:
+    """Load every ``*.json`` map in a directory, keyed by name (sorted); any error raises."""
+    d = Path(directory)
+    if not d.is_dir():
+        raise MapError(f"{d}: not a directory of maps")
+    return {m.name: m for m in (load_map(p) for p in sorted(d.glob("*.json")))}

@@ -1,6 +1,6 @@
 """The annotated 2D floor map: file schema, validation, and array form for the filter.
 
-A map file (see CONTRACT.md) holds walls, semantic objects (class, position, optional
+A map file (see docs/API.md) holds walls, semantic objects (class, position, optional
 label) and optional named regions. :func:`load_map` validates a file with pydantic and
 refuses anything invalid with a message that names the field and the reason;
 :class:`SemanticMap` is the validated map as numpy arrays plus the derived, cached
@@ -11,22 +11,23 @@ structures the filter needs (free space and visibility grids, see
 from __future__ import annotations
 
 import re
-from dataclasses import dataclass, field
 from functools import cached_property
-from pathlib import Path
-from typing import TYPE_CHECKING, Annotated
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+from pydantic import Field, ValidationError, field_validator, model_validator
 
+from app.maps.freespace import WALL_CLEARANCE_M as WALL_CLEARANCE_M  # re-exported
+from app.maps.freespace import FreeSpaceGrid as FreeSpaceGrid  # re-exported
+from app.maps.freespace import MapError as MapError  # re-exported
 from app.maps.geometry import (
-    grid_cells,
-    point_segment_distance,
     points_in_polygon,
     segments_cross_walls,
 )
+from app.maps.prepare import nearest_walls
 from app.resources import bundled_maps_dir as bundled_maps_dir  # re-exported for old imports
+from app.validation import Finite, StrictInput
 
 if TYPE_CHECKING:
     from app.maps.prepare import PreparedMap
@@ -36,19 +37,11 @@ if TYPE_CHECKING:
 CLASS_PATTERN = re.compile(r"^[a-z][a-z0-9_-]*$")
 #: A map name is usable as a file name and in a URL.
 NAME_PATTERN = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]*$")
-#: Every point of the free space is at least this far from every wall, in metres.
-WALL_CLEARANCE_M = 0.1
 #: An object closer than this to a wall is mounted in it (doors, windows), in metres.
 MOUNT_TOLERANCE_M = 0.05
 
-Finite = Annotated[float, Field(allow_inf_nan=False)]
 
-
-class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", populate_by_name=True)
-
-
-class WallSpec(_Strict):
+class WallSpec(StrictInput):
     """A wall segment from (x1, y1) to (x2, y2), metres."""
 
     x1: Finite
@@ -63,7 +56,7 @@ class WallSpec(_Strict):
         return self
 
 
-class ObjectSpec(_Strict):
+class ObjectSpec(StrictInput):
     """A semantic landmark: its class, its position (metres) and an optional label."""
 
     cls: str = Field(alias="class", description="lower-case class word, e.g. door")
@@ -81,15 +74,15 @@ class ObjectSpec(_Strict):
         return value
 
 
-class RegionSpec(_Strict):
+class RegionSpec(StrictInput):
     """A named polygon (room, corridor) used for spoken feedback."""
 
     name: str = Field(min_length=1, max_length=200)
     polygon: list[tuple[Finite, Finite]] = Field(min_length=3)
 
 
-class MapFile(_Strict):
-    """The JSON map file exactly as CONTRACT.md specifies it."""
+class MapFile(StrictInput):
+    """The JSON map file as docs/API.md describes it."""
 
     name: str
     description: str = ""
@@ -106,17 +99,6 @@ class MapFile(_Strict):
                 "and must start with a letter or digit"
             )
         return value
-
-
-class MapError(ValueError):
-    """A map file that cannot be used; the message says which field and why.
-
-    ``fields`` holds each (field, reason) pair when there are several.
-    """
-
-    def __init__(self, message: str, fields: list[tuple[str, str]] | None = None) -> None:
-        super().__init__(message)
-        self.fields = fields or [("(file)", message)]
 
 
 def _validation_error(source: str, error: ValidationError) -> MapError:
@@ -156,71 +138,6 @@ def parse_map(
     return SemanticMap(validate_spec(data, source=source, expected_name=expected_name))
 
 
-def load_map(path: str | Path) -> SemanticMap:
-    """Load and check one map file (:func:`app.maps.check.check_file`).
-
-    Its ``name`` must match the file name. Warnings are dropped (their fixes, such as
-    an object snapped onto a wall, are applied).
-
-    Raises:
-        MapError: with every error found, each naming its field.
-    """
-    from app.maps.check import check_file
-
-    result = check_file(path)
-    if result.map is None:
-        errors = result.errors
-        raise MapError("; ".join(str(p) for p in errors), [(p.field, p.message) for p in errors])
-    return result.map
-
-
-def load_map_dir(directory: str | Path) -> dict[str, SemanticMap]:
-    """Load every ``*.json`` map in a directory, keyed by name (sorted); any error raises."""
-    d = Path(directory)
-    if not d.is_dir():
-        raise MapError(f"{d}: not a directory of maps")
-    return {m.name: m for m in (load_map(p) for p in sorted(d.glob("*.json")))}
-
-
-@dataclass(frozen=True)
-class FreeSpaceGrid:
-    """Cells where a person can stand: enclosed by walls and clear of them.
-
-    ``mask[row, col]`` covers the square with lower-left corner
-    ``(origin_x + col * resolution_m, origin_y + row * resolution_m)``.
-    """
-
-    origin_x: float
-    origin_y: float
-    resolution_m: float
-    mask: NDArray[np.bool_]  # shape (rows, cols)
-    free_cells: NDArray[np.int64] = field(repr=False)  # flat indices of free cells
-
-    def cell_index(self, x: ArrayLike, y: ArrayLike) -> tuple[NDArray[np.int64], NDArray[np.bool_]]:
-        """Row-major flat cell index for each point and whether it is on the grid.
-
-        Points off the grid get the nearest edge cell (see :func:`grid_cells`).
-        """
-        return grid_cells(x, y, self.origin_x, self.origin_y, self.resolution_m, self.mask.shape)
-
-    def is_free(self, x: ArrayLike, y: ArrayLike) -> NDArray[np.bool_]:
-        """Whether each point lies in a free cell (False off the grid)."""
-        flat, inside = self.cell_index(x, y)
-        return inside & self.mask.reshape(-1)[flat]
-
-    def sample(self, n: int, rng: np.random.Generator) -> NDArray[np.float64]:
-        """``n`` points uniform over the free space, shape (n, 2)."""
-        if self.free_cells.size == 0:
-            raise MapError("the map has no free space inside its walls")
-        cols = self.mask.shape[1]
-        pick = self.free_cells[rng.integers(0, self.free_cells.size, size=n)]
-        r, c = np.divmod(pick, cols)
-        jitter = rng.random((n, 2))
-        x = self.origin_x + (c + jitter[:, 0]) * self.resolution_m
-        y = self.origin_y + (r + jitter[:, 1]) * self.resolution_m
-        return np.column_stack([x, y])
-
-
 class SemanticMap:
     """A validated map as arrays.
 
@@ -251,12 +168,8 @@ class SemanticMap:
         }
         self.region_names: tuple[str, ...] = tuple(r.name for r in spec.regions)
         self.region_polygons = [np.array(r.polygon, dtype=np.float64) for r in spec.regions]
-        if self.walls.shape[0]:
-            self.mounted_walls = (
-                point_segment_distance(self.object_xy, self.walls) < MOUNT_TOLERANCE_M
-            )
-        else:
-            self.mounted_walls = np.zeros((len(spec.objects), 0), dtype=bool)
+        #: Object n is mounted in wall w: within MOUNT_TOLERANCE_M of it.
+        self.mounted_walls = nearest_walls(self.object_xy, self.walls, MOUNT_TOLERANCE_M)[2]
         self._grid_resolution_m = grid_resolution_m
         self._prepared: PreparedMap | None = None
 

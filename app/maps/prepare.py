@@ -6,7 +6,7 @@ few hundred walls that took a minute. Here they are built when a map is loaded
 reach, and stored on disk keyed by the map's content hash, so a restart reads them back
 instead of building them again.
 
-* **Free space** (:class:`~app.maps.model.FreeSpaceGrid`): cells enclosed by walls in
+* **Free space** (:class:`~app.maps.freespace.FreeSpaceGrid`): cells enclosed by walls in
   all four axis directions and wholly at least ``WALL_CLEARANCE_M`` from every wall.
   For each grid row the kernel keeps the leftmost and rightmost crossing of the row's
   centre line by any wall (and likewise per column): a cell is enclosed when a wall
@@ -41,11 +41,12 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numba import njit
 
+from app.maps.freespace import WALL_CLEARANCE_M, FreeSpaceGrid
 from app.maps.geometry import GEOMETRY_EPS
 from app.maps.visibility import VisibilityGrid, pack_bits
 
 if TYPE_CHECKING:
-    from app.maps.model import FreeSpaceGrid, SemanticMap
+    from app.maps.model import SemanticMap
 
 log = logging.getLogger("bearings.maps")
 
@@ -56,15 +57,9 @@ FREE_SPACE_CELLS = 200_000
 MIN_RESOLUTION_M = 0.05
 #: Upper bound on visibility cells x objects (bytes of the boolean table).
 MAX_TABLE_BYTES = 24_000_000
-#: Upper bound on visibility cells x objects x walls (ray-wall tests in the worst
-#: case); beyond it the visibility grid is coarsened so that preparation stays bounded.
-MAX_VISIBILITY_WORK = 6_000_000_000
-
-
-def default_cache_dir() -> Path:
-    """``BEARINGS_CACHE_DIR`` or ``~/.cache/bearings``."""
-    env = os.environ.get("BEARINGS_CACHE_DIR")
-    return Path(env) if env else Path.home() / ".cache" / "bearings"
+#: Upper bound on the estimated ray-wall tests of the visibility grid (cells x objects
+#: x walls per angular bin); beyond it the grid is coarsened so preparation stays bounded.
+MAX_VISIBILITY_WORK = 3_000_000_000
 
 
 @dataclass(frozen=True)
@@ -152,6 +147,76 @@ def _free_mask(walls, ox, oy, res, rows, cols, clearance, eps):  # fmt: skip  # 
                 if np.sqrt(ex * ex + ey * ey) < reach:
                     mask[r, c] = False
     return mask
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _enclosed_points(px, py, walls, eps):  # fmt: skip  # pragma: no cover - compiled
+    """Whether a wall crosses each point's horizontal and vertical lines on both sides."""
+    out = np.zeros(px.shape[0], dtype=np.bool_)
+    for i in range(px.shape[0]):
+        x, y = px[i], py[i]
+        left = right = down = up = False
+        for w in range(walls.shape[0]):
+            x1, y1, x2, y2 = walls[w, 0], walls[w, 1], walls[w, 2], walls[w, 3]
+            if abs(y2 - y1) > eps and min(y1, y2) <= y <= max(y1, y2):
+                cx = x1 + (y - y1) * (x2 - x1) / (y2 - y1)
+                left = left or cx < x
+                right = right or cx > x
+            if abs(x2 - x1) > eps and min(x1, x2) <= x <= max(x1, x2):
+                cy = y1 + (x - x1) * (y2 - y1) / (x2 - x1)
+                down = down or cy < y
+                up = up or cy > y
+            if left and right and down and up:
+                out[i] = True
+                break
+    return out
+
+
+def enclosed(points: np.ndarray, walls: np.ndarray) -> np.ndarray:
+    """Whether each point (M, 2) has a wall on all four axis sides (the free space's
+    enclosure, without the clearance), shape (M,)."""
+    pts = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 2)
+    w = np.ascontiguousarray(walls, dtype=np.float64).reshape(-1, 4)
+    if w.shape[0] == 0:
+        return np.ones(pts.shape[0], dtype=bool)
+    return _enclosed_points(pts[:, 0].copy(), pts[:, 1].copy(), w, GEOMETRY_EPS)
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _nearest_walls(px, py, walls, eps, tolerance, near):  # fmt: skip  # pragma: no cover
+    """Distance to and index of each point's nearest wall; near[i, w] = within tolerance."""
+    n = px.shape[0]
+    dist = np.full(n, np.inf)
+    index = np.full(n, -1, dtype=np.int64)
+    for i in range(n):
+        for w in range(walls.shape[0]):
+            x1, y1 = walls[w, 0], walls[w, 1]
+            dx = walls[w, 2] - x1
+            dy = walls[w, 3] - y1
+            t = ((px[i] - x1) * dx + (py[i] - y1) * dy) / max(dx * dx + dy * dy, eps)
+            t = min(max(t, 0.0), 1.0)
+            ex = px[i] - (x1 + t * dx)
+            ey = py[i] - (y1 + t * dy)
+            d = np.sqrt(ex * ex + ey * ey)
+            near[i, w] = d < tolerance
+            if d < dist[i]:
+                dist[i] = d
+                index[i] = w
+    return dist, index
+
+
+def nearest_walls(
+    points: np.ndarray, walls: np.ndarray, tolerance: float = 0.0
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per point (M, 2): distance to the nearest wall, its index (-1 without walls), and
+    which walls lie closer than ``tolerance`` (M, W); compiled, no (M, W, 2) temporaries."""
+    pts = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 2)
+    w = np.ascontiguousarray(walls, dtype=np.float64).reshape(-1, 4)
+    near = np.zeros((pts.shape[0], w.shape[0]), dtype=np.bool_)
+    dist, index = _nearest_walls(
+        pts[:, 0].copy(), pts[:, 1].copy(), w, GEOMETRY_EPS, float(tolerance), near
+    )
+    return dist, index, near
 
 
 #: Angular bins per object when culling walls for the visibility rays.
@@ -270,8 +335,6 @@ def build_free_space(semantic_map: SemanticMap, resolution_m: float | None = Non
     on to skip ray tests for short moves. A map without walls is free everywhere
     within its bounds plus one metre.
     """
-    from app.maps.model import WALL_CLEARANCE_M, FreeSpaceGrid
-
     walls = np.ascontiguousarray(semantic_map.walls, dtype=np.float64).reshape(-1, 4)
     ox, oy, res, rows, cols = grid_frame(semantic_map.bounds, walls.shape[0] > 0, resolution_m)
     if walls.shape[0] == 0:
@@ -284,14 +347,16 @@ def build_free_space(semantic_map: SemanticMap, resolution_m: float | None = Non
 def visibility_factor(rows: int, cols: int, n_objects: int, n_free: int, n_walls: int) -> int:
     """How many free-space cells (per side) one visibility cell spans.
 
-    The smallest factor whose table fits ``MAX_TABLE_BYTES`` and whose worst-case
-    ray-wall work fits ``MAX_VISIBILITY_WORK``.
+    The smallest factor whose table fits ``MAX_TABLE_BYTES`` and whose estimated
+    ray-wall work fits ``MAX_VISIBILITY_WORK`` (a ray meets the walls of one angular
+    bin: each wall spans a few of the ``ANGLE_BINS`` as seen from an object).
     """
     n_obj = max(n_objects, 1)
+    per_ray = 3.0 * n_walls / ANGLE_BINS + 4.0
     factor = 1
     while (rows // factor + 1) * (cols // factor + 1) * n_obj > MAX_TABLE_BYTES:
         factor += 1
-    while n_free / factor**2 * n_obj * max(n_walls, 1) > MAX_VISIBILITY_WORK:
+    while n_free / factor**2 * n_obj * per_ray > MAX_VISIBILITY_WORK:
         factor += 1
     return factor
 
@@ -303,7 +368,8 @@ def build_visibility(
     fs = free_space
     n_obj = semantic_map.object_count
     walls = np.ascontiguousarray(semantic_map.walls, dtype=np.float64).reshape(-1, 4)
-    factor = visibility_factor(*fs.mask.shape, n_obj, fs.free_cells.size, walls.shape[0])
+    fs_rows, fs_cols = fs.mask.shape
+    factor = visibility_factor(fs_rows, fs_cols, n_obj, fs.free_cells.size, walls.shape[0])
     res = fs.resolution_m * factor
     rows = int(np.ceil(fs.mask.shape[0] / factor))
     cols = int(np.ceil(fs.mask.shape[1] / factor))
@@ -344,7 +410,7 @@ def build_visibility(
         table[idx] = part
     elif idx.size:
         table[idx] = True
-    return VisibilityGrid(fs.origin_x, fs.origin_y, res, (rows, cols), table, pack_bits(table))
+    return VisibilityGrid(fs.origin_x, fs.origin_y, res, (rows, cols), pack_bits(table), n_obj)
 
 
 # ----------------------------------------------------------------------- cache
@@ -372,7 +438,7 @@ def _save(path: Path, fs: FreeSpaceGrid, vis: VisibilityGrid) -> None:
                 free_mask=np.packbits(fs.mask.reshape(-1)),
                 free_shape=np.array(fs.mask.shape),
                 vis_frame=np.array([vis.origin_x, vis.origin_y, vis.resolution_m]),
-                vis_shape=np.array([*vis.shape, vis.table.shape[1]]),
+                vis_shape=np.array([*vis.shape, vis.n_objects]),
                 vis_bits=vis.bits,
             )
         os.replace(tmp, path)  # atomic: a reader never sees half a file
@@ -382,8 +448,6 @@ def _save(path: Path, fs: FreeSpaceGrid, vis: VisibilityGrid) -> None:
 
 
 def _load(path: Path) -> tuple[FreeSpaceGrid, VisibilityGrid]:
-    from app.maps.model import FreeSpaceGrid
-
     with np.load(path, allow_pickle=False) as data:
         ox, oy, res = (float(v) for v in data["free_frame"])
         rows, cols = (int(v) for v in data["free_shape"])
@@ -393,9 +457,8 @@ def _load(path: Path) -> tuple[FreeSpaceGrid, VisibilityGrid]:
         bits = np.ascontiguousarray(data["vis_bits"], dtype=np.uint64)
     if bits.shape != (vrows * vcols, max((n_obj + 63) // 64, 1)):
         raise ValueError(f"visibility bits of shape {bits.shape} do not match the grid")
-    table = np.unpackbits(bits.view(np.uint8), axis=1, bitorder="little")[:, :n_obj].astype(bool)
     fs = FreeSpaceGrid(ox, oy, res, mask, np.flatnonzero(mask.reshape(-1)))
-    return fs, VisibilityGrid(vx, vy, vres, (vrows, vcols), table, bits)
+    return fs, VisibilityGrid(vx, vy, vres, (vrows, vcols), bits, n_obj)
 
 
 def build(semantic_map: SemanticMap) -> PreparedMap:
@@ -418,7 +481,7 @@ def prepare(semantic_map: SemanticMap, cache_dir: Path | None = None) -> Prepare
     if path is not None and path.is_file():
         try:
             fs, vis = _load(path)
-            if vis.table.shape[1] != semantic_map.object_count:
+            if vis.n_objects != semantic_map.object_count:
                 raise ValueError("object count differs")
             prepared = PreparedMap(fs, vis, time.perf_counter() - started, from_cache=True)
         except (OSError, ValueError, KeyError) as exc:

@@ -11,6 +11,7 @@ not hidden by it (see :meth:`SemanticMap.line_of_sight`).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -26,18 +27,27 @@ class VisibilityGrid:
         origin_x, origin_y: lower-left corner of cell (0, 0), metres.
         resolution_m: cell side, metres.
         shape: (rows, cols).
-        table: ``table[cell, object]`` is True when the object is visible from the
-            cell centre, shape (rows * cols, N), row-major cells.
+        bits: the table packed in bits, shape (rows * cols, ceil(N / 64)): bit
+            ``o % 64`` of word ``o // 64`` is object ``o`` seen from the cell centre
+            (row-major cells). One load per particle serves 64 objects.
+        n_objects: N.
     """
 
     origin_x: float
     origin_y: float
     resolution_m: float
     shape: tuple[int, int]
-    table: NDArray[np.bool_]
-    #: The same table packed in bits, shape (rows * cols, ceil(N / 64)): bit ``o % 64``
-    #: of word ``o // 64`` is object ``o``. One load per particle serves 64 objects.
     bits: NDArray[np.uint64]
+    n_objects: int
+
+    @cached_property
+    def table(self) -> NDArray[np.bool_]:
+        """The unpacked table, ``table[cell, object]``, shape (rows * cols, N).
+
+        Unpacked on first use only (a large floor's is tens of MB; the service reads
+        single rows through :meth:`visible`).
+        """
+        return unpack_bits(self.bits, self.n_objects)
 
     def cells(self, x: ArrayLike, y: ArrayLike) -> NDArray[np.int64]:
         """Flat cell index per point, clipped onto the grid, shape (M,)."""
@@ -45,7 +55,7 @@ class VisibilityGrid:
 
     def visible(self, x: ArrayLike, y: ArrayLike) -> NDArray[np.bool_]:
         """Visibility rows for each point, shape (M, N)."""
-        return self.table[self.cells(x, y)]
+        return unpack_bits(self.bits[self.cells(x, y)], self.n_objects)
 
 
 def pack_bits(table: NDArray[np.bool_]) -> NDArray[np.uint64]:
@@ -56,3 +66,10 @@ def pack_bits(table: NDArray[np.bool_]) -> NDArray[np.uint64]:
     padded[:, :n] = table
     packed = np.packbits(padded.reshape(cells, words, 64), axis=2, bitorder="little")
     return packed.view("<u8").reshape(cells, words).astype(np.uint64)
+
+
+def unpack_bits(bits: NDArray[np.uint64], n: int) -> NDArray[np.bool_]:
+    """The inverse of :func:`pack_bits`: (cells, words) words to a (cells, n) table."""
+    words = np.ascontiguousarray(bits, dtype="<u8")
+    flat = np.unpackbits(words.view(np.uint8), axis=-1, bitorder="little")
+    return flat[..., :n].astype(bool)

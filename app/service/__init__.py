@@ -4,17 +4,15 @@ The service speaks its own types (:mod:`app.service.types`, radians); it imports
 nothing of HTTP. The API layer converts its wire models to and from them.
 """
 
-from app.service.sessions import (
+from app.service.errors import (
     CapacityReached,
     InvalidSessionSpec,
     LimitReached,
     QuotaReached,
     RequestTooLarge,
-    Session,
-    SessionManager,
     SessionNotFound,
-    SessionSnapshot,
 )
+from app.service.sessions import Session, SessionManager, SessionSnapshot
 from app.service.types import FrameInput, FrameOutcome, SensorSpec, SessionSpec
 
 __all__ = [

@@ -107,7 +107,11 @@ def parse_keys(
         if len(fields) == 1:
             key = fields[0]
             name = "key-" + hashlib.sha256(key.encode()).hexdigest()[:8]
-            quotas = (default_sessions, default_particles, default_frames_per_s)
+            quotas: tuple[float | None, float | None, float | None] = (
+                default_sessions,
+                default_particles,
+                default_frames_per_s,
+            )
         elif len(fields) == 5:
             name, key = fields[0], fields[1]
             if not _NAME.match(name):

@@ -13,6 +13,11 @@ class Metrics:
     def __init__(self) -> None:
         self.registry = CollectorRegistry()
         self.frames = Counter("bearings_frames", "Frames processed", registry=self.registry)
+        self.frames_accepted = Counter(
+            "bearings_frames_accepted",
+            "Frames accepted into a session's queue (each is answered, maybe merged)",
+            registry=self.registry,
+        )
         self.step_seconds = Histogram(
             "bearings_step_seconds",
             "Time to process one frame (filter step and feedback), seconds",
@@ -24,6 +29,19 @@ class Metrics:
         )
         self.sessions_created = Counter(
             "bearings_sessions_created", "Sessions created", registry=self.registry
+        )
+        self.sessions_resumed = Counter(
+            "bearings_sessions_resumed",
+            "Sessions resumed from the shared session store",
+            registry=self.registry,
+        )
+        self.checkpoints = Counter(
+            "bearings_checkpoints", "Session checkpoints written", registry=self.registry
+        )
+        self.checkpoint_bytes = Counter(
+            "bearings_checkpoint_bytes",
+            "Bytes of session checkpoints written",
+            registry=self.registry,
         )
         self.frames_merged = Counter(
             "bearings_frames_merged",

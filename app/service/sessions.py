@@ -12,16 +12,15 @@ disconnect does not end a session; ``DELETE``, the idle timeout or a restart doe
 from __future__ import annotations
 
 import asyncio
-import hashlib
-import hmac
-import json
 import logging
 import os
 import secrets
 import threading
 import time
-from dataclasses import dataclass, field
+from collections.abc import Mapping
+from dataclasses import dataclass, field, replace
 from datetime import UTC, datetime
+from typing import Any
 
 import numpy as np
 
@@ -35,73 +34,25 @@ from app.localization.filter import ParticleFilter
 from app.localization.types import Detection, Estimate, Pose
 from app.maps.model import SemanticMap
 from app.service.access import OPEN, Principal, TokenBucket
+from app.service.errors import (
+    CapacityReached,
+    InvalidSessionSpec,
+    QuotaReached,
+    RequestTooLarge,
+    SessionNotFound,
+    SessionUnavailable,
+    UnknownMap,
+    log_event,
+    session_tag,
+)
 from app.service.metrics import Metrics
 from app.service.queueing import FrameQueue, merged_warning
 from app.service.scheduler import FairExecutor
+from app.service.sharing import SessionSharing
+from app.service.store import MemoryStore, SessionStore
 from app.service.types import FrameInput, FrameOutcome, SessionSpec
 
 log = logging.getLogger("bearings.sessions")
-
-#: When this process started: a session id unknown to it may have ended with a restart.
-STARTED_AT = time.monotonic()
-#: Per-process secret of :func:`session_tag` (so a tag cannot be traced back to an id).
-_TAG_KEY = secrets.token_bytes(16)
-
-
-def session_tag(session_id: str) -> str:
-    """A short handle for logs and the view: a keyed hash, not a piece of the id."""
-    return hmac.new(_TAG_KEY, session_id.encode(), hashlib.sha256).hexdigest()[:8]
-
-
-class SessionNotFound(KeyError):
-    """No live session has that id for this caller (another key's session counts as none)."""
-
-    def __init__(self, session_id: str) -> None:
-        super().__init__(session_id)
-        up = time.monotonic() - STARTED_AT
-        self.message = (
-            f"no session {session_id!r}: it never existed, was deleted, expired, or ended "
-            f"when the service restarted (this server started {up:.0f} s ago); "
-            "create a new session"
-        )
-
-    def __str__(self) -> str:
-        return self.message
-
-
-class LimitReached(RuntimeError):
-    """A service limit was hit; ``code`` names the limit in a machine-readable word.
-
-    ``retry_after_s`` says when trying again may succeed (None: it never will as asked).
-    """
-
-    def __init__(
-        self, message: str, code: str = "limit", retry_after_s: float | None = None
-    ) -> None:
-        super().__init__(message)
-        self.code = code
-        self.retry_after_s = retry_after_s
-
-
-class CapacityReached(LimitReached):
-    """The whole service is full now (sessions, step threads, or it is restarting)."""
-
-
-class QuotaReached(LimitReached):
-    """One client's own quota (sessions, particles, frames per second) is used up now."""
-
-
-class RequestTooLarge(LimitReached):
-    """One request asks for more than the service ever allows (particles, detections)."""
-
-
-class InvalidSessionSpec(ValueError):
-    """A session cannot be built as asked (e.g. a start pose outside the free space)."""
-
-
-class UnknownMap(LookupError):
-    def __init__(self, name: str, known: list[str]) -> None:
-        super().__init__(f"no map {name!r}; known maps: {', '.join(known) or 'none'}")
 
 
 def unknown_class_warnings(
@@ -113,11 +64,6 @@ def unknown_class_warnings(
         f"class {c!r} is not on map {semantic_map.name!r}; its detections were ignored"
         for c in unknown
     ]
-
-
-def log_event(event: str, **fields: object) -> None:
-    """One structured (JSON) log line per session event."""
-    log.info(json.dumps({"event": event, **fields}, default=str))
 
 
 @dataclass(frozen=True)
@@ -149,6 +95,8 @@ class Session:
     narrator: Narrator
     particles: int
     created_at: datetime
+    #: What the session was built from (a checkpoint rebuilds it from this).
+    spec: SessionSpec | None = None
     owner: str | None = None
     shared: bool = False
     queue_limit: int = 2
@@ -172,6 +120,7 @@ class Session:
             self.destination = plan
             self.speaker.reset()
             self.last_guidance = None
+            self.version += 1  # a checkpoint keeps it
 
     def _guide(
         self, estimate: Estimate, now: float, warnings: list[str]
@@ -274,11 +223,30 @@ class Session:
 class SessionManager:
     """Creates, finds, feeds and expires sessions, within the service's limits and quotas."""
 
-    def __init__(self, maps: dict[str, SemanticMap], settings: Settings, metrics: Metrics) -> None:
+    def __init__(
+        self,
+        maps: dict[str, SemanticMap],
+        settings: Settings,
+        metrics: Metrics,
+        store: SessionStore | None = None,
+    ) -> None:
         self.maps = maps
         self.settings = settings
         self.metrics = metrics
         self._sessions: dict[str, Session] = {}
+        self.store = store or MemoryStore()
+        #: With a shared store (Redis): checkpoints, journal and leases; else None.
+        self.sharing = (
+            SessionSharing(
+                self,
+                self.store,
+                lease_s=settings.store_lease_s,
+                checkpoint_interval_s=settings.checkpoint_interval_s,
+                idle_timeout_s=settings.session_idle_timeout_s,
+            )
+            if self.store.shared
+            else None
+        )
         self._buckets: dict[str, TokenBucket] = {}
         #: Set by :meth:`shutdown`: no new sessions or frames are taken.
         self.closing = False
@@ -296,6 +264,8 @@ class SessionManager:
     def close(self) -> None:
         """Stop the step threads (at shutdown); steps not started are dropped."""
         self._steps.shutdown(wait=False, cancel_futures=True)
+        if self.sharing is not None:
+            self.sharing.close()
 
     async def shutdown(self) -> None:
         """Take no new sessions or frames, and answer every frame already accepted.
@@ -320,6 +290,46 @@ class SessionManager:
         ):
             raise SessionNotFound(session_id)
         return session
+
+    async def find(self, session_id: str, owner: Principal | None = None) -> Session:
+        """:meth:`get`, or with a shared store, the session resumed from it."""
+        if self.sharing is None or session_id in self._sessions:
+            return self.get(session_id, owner)
+        await self.sharing.resume(session_id)
+        return self.get(session_id, owner)
+
+    async def settled(self, session_id: str, owner: Principal | None = None) -> Session:
+        """:meth:`find`, once the frames waiting for it are answered: with a shared store,
+        what it reports (frames, last result) is then also what the store holds."""
+        for _ in range(3):
+            session = await self.find(session_id, owner)
+            if self.sharing is None:
+                return session
+            if session.pump is not None:
+                await asyncio.wait({session.pump}, timeout=5.0)
+            # A copy in memory may be stale if this worker stalled past its lease.
+            if self._sessions.get(session_id) is session and await self.sharing.confirm(session):
+                return session
+        raise SessionUnavailable(
+            "the session moved while being read; ask again", "session_moved", 1.0
+        )
+
+    def adopt(self, session: Session) -> None:
+        """Serve a session resumed from the store."""
+        self._sessions[session.id] = session
+        self.metrics.active_sessions.set(len(self._sessions))
+
+    def forget(self, session: Session) -> None:
+        """Stop serving a session here (it lives on in the store)."""
+        if self._sessions.get(session.id) is session:
+            del self._sessions[session.id]
+            self.metrics.active_sessions.set(len(self._sessions))
+
+    async def let_go(self, session_id: str) -> None:
+        """Its client went away (WebSocket closed): with a shared store, checkpoint the
+        session and release it, so that its next connection may land on any worker."""
+        if self.sharing is not None:
+            await self.sharing.let_go(session_id)
 
     def _refuse_when_closing(self) -> None:
         if self.closing:
@@ -373,7 +383,14 @@ class SessionManager:
                 1.0,
             )
 
-    def _build(self, request: SessionSpec) -> Session:
+    def _build(
+        self,
+        request: SessionSpec,
+        *,
+        session_id: str | None = None,
+        created_at: datetime | None = None,
+        filter_state: Mapping[str, Any] | None = None,
+    ) -> Session:
         if request.map_name not in self.maps:
             raise UnknownMap(request.map_name, sorted(self.maps))
         semantic_map = self.maps[request.map_name]
@@ -403,16 +420,21 @@ class SessionManager:
                 "give a pose where a person can stand, or null for a global start"
             )
         pf = ParticleFilter(
-            semantic_map, config, rng=np.random.default_rng(seed), initial_pose=initial
+            semantic_map,
+            config,
+            rng=np.random.default_rng(seed),
+            initial_pose=initial,
+            state=filter_state,
         )
         narrator = Narrator(semantic_map, request.feedback)
         return Session(
-            id=secrets.token_urlsafe(24),  # 192 random bits
+            id=session_id or secrets.token_urlsafe(24),  # 192 random bits
             map=semantic_map,
             filter=pf,
             narrator=narrator,
             particles=particles,
-            created_at=datetime.now(UTC),
+            created_at=created_at or datetime.now(UTC),
+            spec=replace(request, seed=seed),  # rebuilds this very filter
             camera=camera,
             speaker=GuidanceSpeaker(request.feedback.style, request.feedback.units),
             shared=request.share_view,
@@ -426,8 +448,11 @@ class SessionManager:
         session = await asyncio.to_thread(self._build, request)
         self._check_room(owner, particles)  # another create may have won the race
         session.owner = owner.name
-        self._sessions[session.id] = session
-        self.metrics.active_sessions.set(len(self._sessions))
+        if self.sharing is not None:
+            await self.sharing.publish(session)  # any worker may get its frames
+        else:
+            self._sessions[session.id] = session
+            self.metrics.active_sessions.set(len(self._sessions))
         self.metrics.sessions_created.inc()
         log_event(
             "session_created",
@@ -475,6 +500,7 @@ class SessionManager:
                     wait,
                 )
         waiter: asyncio.Future[FrameOutcome] = asyncio.get_running_loop().create_future()
+        self.metrics.frames_accepted.inc()
         if session.queue.put(frame, waiter):
             self.metrics.frames_merged.inc()
         if session.pump is None:
@@ -490,20 +516,21 @@ class SessionManager:
             SessionNotFound, UnknownDestination (nothing by that name: says what the
             map has), Unreachable (no walkable path leads there).
         """
-        session = self.get(session_id, owner)
+        session = await self.find(session_id, owner)
         plan = await asyncio.to_thread(plan_for, session.map, spec)
         session.set_destination(plan)
         log_event("destination_set", tag=session.tag, kind=spec.kind)
         return plan.target
 
-    def clear_destination(self, session_id: str, owner: Principal | None = None) -> None:
+    async def clear_destination(self, session_id: str, owner: Principal | None = None) -> None:
         """Stop guiding the session."""
-        self.get(session_id, owner).set_destination(None)
+        (await self.find(session_id, owner)).set_destination(None)
 
     async def process(
         self, session_id: str, frame: FrameInput, owner: Principal | None = None
     ) -> FrameOutcome:
         """Run one frame, strictly after the session's previous ones (maybe merged with others)."""
+        await self.find(session_id, owner)  # with a shared store: resumed here if need be
         return await self.submit(session_id, frame, owner)
 
     def _turn_of(self, session: Session) -> str | None:
@@ -523,13 +550,17 @@ class SessionManager:
                     continue
                 started = time.perf_counter()
                 job = self._steps.submit(
-                    self._turn_of(session),
-                    session.process_sync,
-                    item.frame,
-                    item.count,
+                    self._turn_of(session), self._step_sync, session, item.frame, item.count
                 )
                 try:
-                    result = await asyncio.wrap_future(job)
+                    result, entry = await asyncio.wrap_future(job)
+                    # With a shared store the answer leaves once the frame is journalled.
+                    if entry is not None and not await self.sharing.journal(session, entry):  # type: ignore[union-attr]
+                        raise SessionUnavailable(
+                            "another worker serves this session now; reconnect to go on",
+                            "session_moved",
+                            0.5,
+                        )
                 except Exception as exc:
                     for w in item.waiters:
                         if not w.done():
@@ -544,11 +575,26 @@ class SessionManager:
         finally:
             session.pump = None
 
+    def _step_sync(
+        self, session: Session, frame: FrameInput, merged: int
+    ) -> tuple[FrameOutcome, bytes | None]:
+        """One step (step thread); with a shared store, also its journal entry."""
+        result = session.process_sync(frame, merged)
+        entry = None if self.sharing is None else self.sharing.entry(result.seq, frame, merged)
+        return result, entry
+
     async def delete(
         self, session_id: str, *, reason: str = "deleted", owner: Principal | None = None
     ) -> None:
+        if self.sharing is not None and session_id not in self._sessions:
+            # Only in the store: no need to build it to delete it.
+            frames = await self.sharing.delete_stored(session_id, owner)
+            log_event(f"session_{reason}", tag=session_tag(session_id), frames=frames)
+            return
         session = self.get(session_id, owner)
         del self._sessions[session_id]
+        if self.sharing is not None:
+            await self.sharing.delete(session_id)
         self.metrics.active_sessions.set(len(self._sessions))
         log_event(f"session_{reason}", tag=session.tag, frames=session.frames)
 

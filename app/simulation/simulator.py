@@ -105,7 +105,7 @@ class SimFrame:
         ]
 
     def to_contract(self, camera: Camera | None = None) -> dict[str, object]:
-        """CONTRACT.md's ``Frame`` JSON, with the ground truth as the extra ``truth``.
+        """The ``Frame`` JSON of docs/API.md, with the ground truth in ``truth``.
 
         With ``camera``, detections give pixel boxes (rounded to 0.1 pixel) instead of
         bearings; with a compass reading, the frame carries ``heading``.
@@ -292,6 +292,9 @@ def simulate(
     The first frame has no odometry (nothing came before it), and so has the frame
     right after a kidnap (the person was carried; no motion was measured).
     """
+    # The compass draws from its own stream (spawning does not advance ``rng``): the same
+    # seed then gives the same world with and without a compass, a paired comparison.
+    compass_rng = rng.spawn(1)[0] if config.compass_std_deg is not None else rng
     camera = CameraModel(config.fov_deg, config.max_range_m)
     if config.camera is not None:
         camera = CameraModel(
@@ -312,7 +315,7 @@ def simulate(
                 dets,
                 blocked,
                 tuple(widths),
-                _compass(t, pose, config, rng),
+                _compass(t, pose, config, compass_rng),
                 config.compass_std_deg,
             )
         )

@@ -8,6 +8,10 @@ browser disconnects, or after ``demo_walk_max_s`` (10 minutes by default).
 
 viser runs GUI callbacks on its own threads; anything that touches sessions is sent
 to the service's event loop with ``asyncio.run_coroutine_threadsafe``.
+
+The panel knows the view only through :class:`ViewHost` and starts simulated walks
+only through the :class:`StartWalk` it is given (the application passes
+:func:`app.demo.new_walk`), so viz imports neither the demo nor itself in a circle.
 """
 
 from __future__ import annotations
@@ -15,27 +19,66 @@ from __future__ import annotations
 import asyncio
 import contextlib
 from concurrent.futures import Future
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Protocol
 
-from app.demo import DemoSettings, DemoWalk
+import viser
+
+from app.service.sessions import SessionManager
 
 if TYPE_CHECKING:
     from app.service.sessions import Session
-    from app.viz.view import LiveView
 
 NONE = "(none)"
 FOVS = ("360", "270", "180")
 
 
-class ViewControls:
-    """GUI handles and what they do."""
+class Walk(Protocol):
+    """A running simulated walk, as the panel drives it."""
 
-    def __init__(self, view: LiveView) -> None:
+    session_id: str | None
+    finished: bool
+
+    def kidnap(self) -> None: ...
+
+    async def stop(self) -> None: ...
+
+
+class StartWalk(Protocol):
+    """Create a walk with the panel's settings and start it (on the event loop)."""
+
+    def __call__(
+        self,
+        *,
+        map_name: str,
+        fov_deg: float,
+        occlusion: bool,
+        missing: bool,
+        particles: int,
+        max_duration_s: float | None,
+    ) -> Walk: ...
+
+
+class ViewHost(Protocol):
+    """What the panel needs of the view that holds it."""
+
+    server: viser.ViserServer | None
+    manager: SessionManager
+    loop: asyncio.AbstractEventLoop | None
+    watched: str | None
+
+    def watch(self, session_id: str | None) -> None: ...
+
+
+class ViewControls:
+    """GUI handles and what they do; the demo folder only when walks can be started."""
+
+    def __init__(self, view: ViewHost, start_walk: StartWalk | None = None) -> None:
         self.view = view
+        self.new_walk = start_walk
         server = view.server
         assert server is not None
         gui = server.gui
-        self.walks: dict[str, DemoWalk] = {}
+        self.walks: dict[str, Walk] = {}
         self._walk_viewer: dict[str, int | None] = {}  # session id -> viser client id
         self._walk_labels: dict[str, str] = {}
         self._walks_started = 0
@@ -44,6 +87,9 @@ class ViewControls:
         self.session = gui.add_dropdown("Watch session", (NONE,), initial_value=NONE)
         self.session.on_update(lambda _: view.watch(self._labels.get(self.session.value)))
         self.status = gui.add_markdown("No session yet.")
+        server.on_client_disconnect(lambda client: self.viewer_left(client.client_id))
+        if start_walk is None:
+            return
         with gui.add_folder("Demo: simulated walk"):
             maps = tuple(sorted(view.manager.maps))
             self.map = gui.add_dropdown(
@@ -58,10 +104,13 @@ class ViewControls:
             self.start_button = gui.add_button("Start walk")
             self.kidnap_button = gui.add_button("Kidnap now")
             self.reset_button = gui.add_button("Reset walk")
-        self.start_button.on_click(lambda e: self._submit(self.start_walk(e.client_id)))
+        self.start_button.on_click(lambda e: self._run(self.start_walk(e.client_id)))
         self.kidnap_button.on_click(lambda _: self.kidnap())
-        self.reset_button.on_click(lambda e: self._submit(self.reset_walk(e.client_id)))
-        server.on_client_disconnect(lambda client: self.viewer_left(client.client_id))
+        self.reset_button.on_click(lambda e: self._run(self.reset_walk(e.client_id)))
+
+    def _run(self, coro: Any) -> None:
+        """Start ``coro`` on the event loop from a GUI callback (which must return None)."""
+        self._submit(coro)
 
     def _submit(self, coro: Any) -> Future[Any] | None:
         loop = self.view.loop
@@ -70,20 +119,18 @@ class ViewControls:
             return None
         return asyncio.run_coroutine_threadsafe(coro, loop)
 
-    def settings(self) -> DemoSettings:
-        return DemoSettings(
-            map_name=self.map.value,
+    async def start_walk(self, viewer: int | None = None) -> str:
+        """Start a simulated walk with the panel's settings, for ``viewer``, and watch it."""
+        assert self.new_walk is not None, "this view was given no way to start walks"
+        map_name = self.map.value
+        walk = self.new_walk(
+            map_name=map_name,
             fov_deg=float(self.fov.value),
             occlusion=bool(self.occlusion.value),
             missing=bool(self.missing.value),
             particles=int(self.particles.value),
             max_duration_s=self.view.manager.settings.demo_walk_max_s,
         )
-
-    async def start_walk(self, viewer: int | None = None) -> str:
-        """Start a simulated walk with the panel's settings, for ``viewer``, and watch it."""
-        walk = DemoWalk(self.view.manager, self.settings())
-        walk.start()
         for _ in range(200):  # the session exists once the walk created it
             if walk.session_id is not None or walk.finished:
                 break
@@ -92,9 +139,7 @@ class ViewControls:
         self._walks_started += 1
         self.walks[walk.session_id] = walk
         self._walk_viewer[walk.session_id] = viewer
-        self._walk_labels[walk.session_id] = (
-            f"walk {self._walks_started} ({walk.settings.map_name})"
-        )
+        self._walk_labels[walk.session_id] = f"walk {self._walks_started} ({map_name})"
         self.view.watch(walk.session_id)
         return walk.session_id
 
@@ -150,7 +195,8 @@ class ViewControls:
         shown = {sid: label for label, sid in self._labels.items()}
         value = shown.get(watched, NONE) if watched is not None else NONE
         if self.session.value != value:
-            self.session.value = value
+            # viser types the dropdown's value as read-only; it has a setter at run time.
+            self.session.value = value  # type: ignore[misc]
         if watched is not None:
             with contextlib.suppress(Exception):
                 s = self.view.manager.get(watched)

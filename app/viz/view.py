@@ -18,8 +18,9 @@ import threading
 import numpy as np
 import viser
 
-from app.service.sessions import SessionManager, SessionNotFound, SessionSnapshot
-from app.viz.gui import ViewControls
+from app.service.errors import SessionNotFound
+from app.service.sessions import SessionManager, SessionSnapshot
+from app.viz.gui import StartWalk, ViewControls
 from app.viz.particles import detection_rays, pose_arrow, sample_particles
 from app.viz.scene import MapScene, build_map_scene
 
@@ -38,8 +39,12 @@ class LiveView:
         port: int = 8080,
         host: str = "127.0.0.1",
         max_rate_hz: float = 10.0,
+        start_walk: StartWalk | None = None,
     ) -> None:
+        """``start_walk``: how the panel's demo button starts a simulated walk (none:
+        no demo controls)."""
         self.manager = manager
+        self.start_walk = start_walk
         self.port = port
         self.host = host
         self.period_s = 1.0 / max_rate_hz
@@ -73,7 +78,7 @@ class LiveView:
             "paper_office" if "paper_office" in self.manager.maps else next(iter(self.manager.maps))
         )
         self.show_map(default_map)
-        self.controls = ViewControls(self)
+        self.controls = ViewControls(self, self.start_walk)
         self._thread = threading.Thread(target=self._run, name="bearings-view", daemon=True)
         self._thread.start()
 

@@ -7,20 +7,8 @@ from collections.abc import Iterator
 import pytest
 from fastapi.testclient import TestClient
 
-from app.config import Settings
 from app.main import create_app
-
-
-def make_settings(**overrides: object) -> Settings:
-    base = {
-        "viser": False,
-        "max_sessions": 5,
-        "max_particles": 20_000,
-        "default_particles": 1000,
-        "max_detections": 20,
-        "max_message_bytes": 8192,
-    }
-    return Settings(**{**base, **overrides})
+from tests.helpers import make_settings
 
 
 @pytest.fixture

@@ -14,8 +14,7 @@ import websockets
 from websockets.exceptions import InvalidStatus
 
 from app.main import create_app
-from tests.api.conftest import make_settings
-from tests.support import free_port, serving
+from tests.helpers import free_port, make_settings, serving
 
 ALICE = "alice-key-0123456789abcdef"
 BOB = "bob-key-0123456789abcdef-bob"
@@ -232,3 +231,25 @@ def test_open_mode_only_on_loopback(tmp_path: Path) -> None:
     keys.write_text(f"{ALICE}\nbad line with three\n")
     with pytest.raises(StartupRefused, match="line 2: expected"):
         create_app(make_settings(api_keys_file=keys))
+
+
+def test_the_command_refuses_to_start_and_says_why(tmp_path: Path) -> None:
+    import subprocess
+    import sys
+
+    def serve(*args: str) -> subprocess.CompletedProcess[str]:
+        return subprocess.run(
+            [sys.executable, "-m", "app.cli", "serve", "--no-viser", "--port", "1", *args],
+            capture_output=True,
+            text=True,
+            timeout=120,
+        )
+
+    open_ = serve("--host", "0.0.0.0")
+    assert open_.returncode == 2
+    assert "without API keys" in open_.stderr and "--insecure-open" in open_.stderr
+    keys = tmp_path / "keys.txt"
+    keys.write_text(f"# comment\n{ALICE}\nname {BOB} 1 2\n")
+    bad = serve("--api-keys", str(keys))
+    assert bad.returncode == 2
+    assert f"{keys}, line 3: expected" in bad.stderr and BOB not in bad.stderr

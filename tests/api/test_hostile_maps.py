@@ -10,7 +10,7 @@ import pytest
 from fastapi.testclient import TestClient
 
 from app.main import create_app
-from tests.api.conftest import make_settings
+from tests.helpers import make_settings
 from tests.maps.hostile import box, write_hostile_dir
 
 REFUSED = ("many_walls", "no_free_space", "huge_coordinates", "zero_length_wall", "broken_link")

@@ -9,7 +9,7 @@ from fastapi.testclient import TestClient
 
 from app.main import create_app
 from app.resources import bundled_maps_dir
-from tests.api.conftest import make_settings
+from tests.helpers import make_settings
 
 
 def test_health(client: TestClient) -> None:

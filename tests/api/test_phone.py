@@ -9,7 +9,7 @@ import pytest
 from fastapi.testclient import TestClient
 
 from app.localization.types import Pose
-from app.maps.model import load_map
+from app.maps.check import load_map
 from app.resources import bundled_maps_dir
 from app.simulation.camera import CameraModel, visible_objects
 

@@ -8,10 +8,9 @@ import numpy as np
 import pytest
 from fastapi.testclient import TestClient
 
-from app.maps.model import load_map
-from app.resources import bundled_maps_dir
 from app.simulation.scenarios import paper_config
 from app.simulation.simulator import simulate
+from tests.helpers import paper_office
 
 
 def test_create_and_get_session(client: TestClient) -> None:
@@ -69,7 +68,7 @@ def test_a_walk_converges_and_says_where(client: TestClient) -> None:
     sid = client.post(
         "/sessions", json={"map": "paper_office", "particles": 3000, "seed": 2}
     ).json()["id"]
-    office = load_map(bundled_maps_dir() / "paper_office.json")
+    office = paper_office()
     frames = simulate(office, paper_config("nominal", 360), np.random.default_rng(5))[:40]
     for f in frames:
         res = client.post(f"/sessions/{sid}/frames", json=f.to_contract()).json()

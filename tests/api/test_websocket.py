@@ -9,16 +9,31 @@ from fastapi.testclient import TestClient
 from starlette.websockets import WebSocketDisconnect
 
 
+def frame(i: int) -> str:
+    return json.dumps({"timestamp": i * 0.2, "detections": [{"class": "door", "bearing_deg": 10}]})
+
+
 def test_one_result_per_frame_in_order(client: TestClient, session_id: str) -> None:
     with client.websocket_connect(f"/sessions/{session_id}/stream") as ws:
+        seqs = []
         for i in range(5):
-            ws.send_text(
-                json.dumps(
-                    {"timestamp": i * 0.2, "detections": [{"class": "door", "bearing_deg": 10}]}
-                )
-            )
-        seqs = [json.loads(ws.receive_text())["seq"] for _ in range(5)]
+            ws.send_text(frame(i))
+            seqs.append(json.loads(ws.receive_text())["seq"])
     assert seqs == [1, 2, 3, 4, 5]
+
+
+def test_a_burst_gets_one_answer_per_frame_merged_ones_say_so(
+    client: TestClient, session_id: str
+) -> None:
+    with client.websocket_connect(f"/sessions/{session_id}/stream") as ws:
+        for i in range(20):
+            ws.send_text(frame(i))
+        answers = [json.loads(ws.receive_text()) for _ in range(20)]
+    seqs = [a["seq"] for a in answers]
+    assert seqs == sorted(seqs) and seqs[0] == 1
+    for a in answers:  # a step that stands for several frames says how many
+        n = seqs.count(a["seq"])
+        assert (n > 1) == any(f"{n} frames arrived" in w for w in a["warnings"])
 
 
 @pytest.mark.parametrize(

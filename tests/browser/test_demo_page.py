@@ -15,8 +15,7 @@ from pathlib import Path
 import pytest
 
 from app.main import create_app
-from tests.api.conftest import make_settings
-from tests.support import free_port, serving
+from tests.helpers import free_port, make_settings, serving
 
 CHROMIUM = "/usr/bin/chromium"
 ARTIFACTS = Path("test-artifacts")

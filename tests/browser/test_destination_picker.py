@@ -7,9 +7,8 @@ from collections.abc import Iterator
 import pytest
 
 from app.main import create_app
-from tests.api.conftest import make_settings
 from tests.browser.test_demo_page import ARGS, CHROMIUM, pytestmark  # noqa: F401
-from tests.support import free_port, serving
+from tests.helpers import free_port, make_settings, serving
 
 
 @pytest.fixture(scope="module")

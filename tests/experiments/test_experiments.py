@@ -101,7 +101,7 @@ def test_pcrb_single_step_by_hand() -> None:
 def test_pcrb_on_the_paper_walk_is_below_the_single_frame_bound() -> None:
     """Odometry only adds information: the PCRB lies under one frame's bound."""
     from app.experiments.pcrb import pcrb_position_m
-    from app.maps.model import load_map
+    from app.maps.check import load_map
     from app.resources import bundled_maps_dir
     from app.simulation.scenarios import paper_config
     from app.simulation.simulator import simulate
@@ -118,7 +118,7 @@ def test_pcrb_on_the_paper_walk_is_below_the_single_frame_bound() -> None:
 
 def test_building_suite_walks_both_wings_and_recovers_from_the_kidnap(tmp_path) -> None:
     from app.experiments import building
-    from app.experiments.metrics import first_right_fix_s
+    from app.experiments.building import first_right_fix_s
 
     runs = [building.run_condition(c, 0, 3000) for c in ("nominal-360", "kidnap-360")]
     for r in runs:

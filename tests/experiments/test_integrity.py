@@ -13,6 +13,7 @@ import pytest
 from app.experiments import cli
 from app.experiments.hard_maps import BUILDERS, hard_map
 from app.experiments.integrity import (
+    QUICK,
     IntegrityRun,
     Scenario,
     first_fix_s,
@@ -74,7 +75,7 @@ def test_tiny_suite_end_to_end(tmp_path: Path) -> None:
     )  # fmt: skip
     assert cli.run(args) == 0
     summary = json.loads((tmp_path / "integrity.json").read_text())
-    assert len(summary["scenarios"]) == 5
+    assert len(summary["scenarios"]) == len(QUICK)
     assert summary["total"]["frames"] > 1200
     assert (tmp_path / "integrity.png").stat().st_size > 10_000
     assert "| rotation_room | nominal-180 |" in (tmp_path / "integrity.md").read_text()

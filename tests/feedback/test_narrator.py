@@ -8,7 +8,8 @@ import pytest
 
 from app.feedback import FeedbackOptions, Narrator
 from app.localization.types import Detection, Estimate, Hypothesis
-from app.maps.model import SemanticMap, parse_map
+from app.maps.model import parse_map
+from tests.helpers import paper_office
 
 TWO_OFFICES = parse_map(
     {
@@ -169,15 +170,8 @@ def test_hedging_when_less_certain() -> None:
     assert "roughly 3 metres" in fb.text
 
 
-def paper_map() -> SemanticMap:
-    from app.maps.model import load_map
-    from app.resources import bundled_maps_dir
-
-    return load_map(bundled_maps_dir() / "paper_office.json")
-
-
 def test_paper_office_walk_sentence() -> None:
-    n = Narrator(paper_map())
+    n = Narrator(paper_office())
     # Near the south-west table, facing east: the door is far ahead-left.
     fb = n.update(located(2.0, 1.2), [Detection("door", math.radians(28))], timestamp_s=0)
     assert "Main entrance at 11 o'clock, about 9 metres." in fb.text

@@ -15,8 +15,9 @@ from app.guidance import (
     guide,
     plan_for,
 )
+from app.maps.check import load_map
 from app.maps.geometry import segments_cross_walls
-from app.maps.model import SemanticMap, load_map, parse_map
+from app.maps.model import SemanticMap, parse_map
 from app.resources import bundled_maps_dir
 
 SUITE = load_map(bundled_maps_dir() / "office_suite.json")
@@ -168,3 +169,41 @@ def test_region_arrival_inside_the_region() -> None:
     plan = plan_for(SUITE, DestinationSpec("region", "Office 2"))
     assert guide(plan, 10.0, 7.0, 0.0).arrived
     assert not guide(plan, 3.0, 8.0, 0.0).arrived
+
+
+def _two_rooms(gap: tuple[float, float]) -> SemanticMap:
+    """Two 6 x 4 m rooms side by side, joined by a gap in the wall x = 6 between them."""
+    return parse_map(
+        {
+            "name": "two_rooms",
+            "walls": [
+                {"x1": 0, "y1": 0, "x2": 12, "y2": 0},
+                {"x1": 12, "y1": 0, "x2": 12, "y2": 4},
+                {"x1": 12, "y1": 4, "x2": 0, "y2": 4},
+                {"x1": 0, "y1": 4, "x2": 0, "y2": 0},
+                {"x1": 6, "y1": 0, "x2": 6, "y2": gap[0]},
+                {"x1": 6, "y1": gap[1], "x2": 6, "y2": 4},
+            ],
+            "objects": [{"class": "door", "x": 11.0, "y": 0.0, "label": "exit"}],
+        }
+    )
+
+
+def test_a_passage_too_narrow_for_the_clearance_is_still_walked() -> None:
+    m = _two_rooms((1.75, 2.25))  # 0.5 m: free space, but no room for 0.3 m each side
+    g = guide(plan_for(m, DestinationSpec("label", "exit")), 1.0, 2.0, 0.0)
+    assert g.path_m < 12.0
+    for a, b in zip(g.path[:-2], g.path[1:-1], strict=True):
+        assert _in_free_space(m, a, b)
+    assert not segments_cross_walls(g.path[:-1], g.path[1:], m.walls).any()
+
+
+def test_a_pose_against_a_wall_never_snaps_through_it() -> None:
+    # A narrow gap: the roomy cells of the right room do not reach the left one.
+    m = _two_rooms((1.75, 2.25))
+    plan = plan_for(m, DestinationSpec("point", x=4.0, y=1.0))
+    # Just on the far side of the dividing wall from the target, 3 cm from it: the
+    # nearest cells that lead to the target are 0.3 m away, behind the wall.
+    g = guide(plan, 6.03, 1.0, 0.0)
+    assert not segments_cross_walls(g.path[:-1], g.path[1:], m.walls).any()
+    assert g.path_m > 3.0  # round through the gap, not 2 m through the wall

@@ -1,27 +1,17 @@
-"""Small maps shared by the localization tests."""
+"""Map fixtures of the localization tests (the builders are in tests/helpers.py)."""
 
 from __future__ import annotations
 
 import pytest
 
-from app.maps.model import SemanticMap, load_map, parse_map
-from app.resources import bundled_maps_dir
-
-
-def room(objects: list[dict], walls: list[dict] | None = None, name: str = "room") -> SemanticMap:
-    """A 6 m x 4 m walled room with the given objects (and extra walls)."""
-    outline = [
-        {"x1": 0, "y1": 0, "x2": 6, "y2": 0},
-        {"x1": 6, "y1": 0, "x2": 6, "y2": 4},
-        {"x1": 6, "y1": 4, "x2": 0, "y2": 4},
-        {"x1": 0, "y1": 4, "x2": 0, "y2": 0},
-    ]
-    return parse_map({"name": name, "walls": outline + (walls or []), "objects": objects})
+from app.maps.model import SemanticMap
+from tests import helpers
+from tests.helpers import room
 
 
 @pytest.fixture(scope="session")
 def paper_office() -> SemanticMap:
-    return load_map(bundled_maps_dir() / "paper_office.json")
+    return helpers.paper_office()
 
 
 @pytest.fixture(scope="session")

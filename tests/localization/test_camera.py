@@ -12,7 +12,7 @@ from app.localization.camera import BoxError, Camera
 from app.localization.config import FilterConfig
 from app.localization.types import Detection, Pose
 from app.simulation.camera import CameraModel, visible_objects
-from tests.localization.conftest import room
+from tests.helpers import room
 from tests.localization.test_sensor import loglik
 
 EQUI = Camera("equirectangular", 3840)

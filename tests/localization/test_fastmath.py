@@ -1,4 +1,4 @@
-"""The compiled building blocks: polynomial sincos and softplus, tabulated normal noise."""
+"""The compiled building blocks: sincos, softplus, tabulated normal noise, grid cells."""
 
 from __future__ import annotations
 
@@ -16,7 +16,6 @@ from app.localization.fastmath import (
     softplus,
 )
 from app.maps.geometry import grid_cells
-from app.maps.visibility import pack_bits
 
 
 @njit(fastmath=FAST, error_model="numpy")
@@ -69,15 +68,6 @@ def test_tabulated_normal_is_reproducible_and_uses_the_given_generator() -> None
     b = fill_normal(np.random.default_rng(7), 1001)
     c = fill_normal(np.random.default_rng(8), 1001)
     assert a.shape == (1001,) and np.array_equal(a, b) and not np.array_equal(a, c)
-
-
-def test_packed_visibility_bits_hold_the_table() -> None:
-    table = np.random.default_rng(1).random((7, 130)) < 0.5
-    bits = pack_bits(table)
-    assert bits.shape == (7, 3) and bits.dtype == np.uint64
-    objects = np.arange(130)
-    unpacked = (bits[:, objects // 64] >> (objects % 64).astype(np.uint64)) & np.uint64(1)
-    assert np.array_equal(unpacked.astype(bool), table)
 
 
 @njit(error_model="numpy")

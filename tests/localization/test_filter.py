@@ -7,10 +7,8 @@ from dataclasses import replace
 import numpy as np
 
 from app.localization.config import FilterConfig
-from app.localization.estimate import estimate_pose
 from app.localization.filter import ParticleFilter
 from app.localization.types import InitialPose
-from app.maps.geometry import wrap_angle
 from app.maps.model import SemanticMap
 from app.simulation.scenarios import paper_config
 from app.simulation.simulator import SimulationConfig, simulate
@@ -118,52 +116,6 @@ def test_frames_without_detections_do_not_inject(paper_office: SemanticMap) -> N
     truth = out[-1][0].truth
     assert np.hypot(e.x - truth.x, e.y - truth.y) < 0.8
     assert np.mean(np.hypot(pf.x - before[0].mean(), pf.y - before[1].mean())) < 2.0
-
-
-def test_mirror_modes_are_never_converged() -> None:
-    rng = np.random.default_rng(0)
-    n = 4000
-    x = np.concatenate([rng.normal(2.0, 0.05, n), rng.normal(8.0, 0.05, n)])
-    y = np.concatenate([rng.normal(2.0, 0.05, n), rng.normal(5.0, 0.05, n)])
-    th = np.concatenate([rng.normal(0.0, 0.02, n), rng.normal(np.pi, 0.02, n)])
-    w = np.full(2 * n, 1.0 / (2 * n))
-    e = estimate_pose(x, y, wrap_angle(th), w)
-    assert not e.converged
-    assert len(e.hypotheses) == 2
-    assert np.isclose(e.hypotheses[0].weight, 0.5, atol=0.01)
-    # The pose reported is one of the modes, not the point between them.
-    assert min(np.hypot(e.x - 2, e.y - 2), np.hypot(e.x - 8, e.y - 5)) < 0.1
-    # One heavy tight mode is converged.
-    w2 = np.concatenate([np.full(n, 0.95 / n), np.full(n, 0.05 / n)])
-    assert estimate_pose(x, y, wrap_angle(th), w2).converged
-
-
-def test_estimate_summarizes_each_mode_by_its_weighted_moments() -> None:
-    """Three separated modes (one across the +-pi seam), zero-weight outliers ignored."""
-    rng = np.random.default_rng(2)
-    centres = [(1.0, 1.0, np.pi - 0.01, 0.5), (6.0, 1.0, 0.5, 0.3), (1.0, 6.0, -1.0, 0.2)]
-    xs, ys, ths, ws = [], [], [], []
-    for cx, cy, ct, mass in centres:
-        n = 3000
-        xs.append(rng.normal(cx, 0.05, n))
-        ys.append(rng.normal(cy, 0.08, n))
-        ths.append(rng.normal(ct, 0.05, n))
-        ws.append(np.full(n, mass / n))
-    xs.append(np.full(50, 20.0))  # far away but weightless: never a hypothesis
-    ys.append(np.full(50, 20.0))
-    ths.append(np.zeros(50))
-    ws.append(np.zeros(50))
-    x, y, th, w = (np.concatenate(v) for v in (xs, ys, ths, ws))
-    e = estimate_pose(x, y, wrap_angle(th), w)
-    assert [round(h.weight, 3) for h in e.hypotheses] == [0.5, 0.3, 0.2]
-    for h, (cx, cy, ct, _) in zip(e.hypotheses, centres, strict=True):
-        assert np.hypot(h.x - cx, h.y - cy) < 0.01
-        assert abs(wrap_angle(h.theta_rad - ct)) < 0.01
-        assert abs(h.std_xy_m - np.hypot(0.05, 0.08)) < 0.01
-    assert (e.x, e.y) == (e.hypotheses[0].x, e.hypotheses[0].y)
-    assert abs(e.std_x_m - 0.05) < 0.005 and abs(e.std_y_m - 0.08) < 0.005
-    assert abs(e.std_theta_rad - 0.05) < 0.005
-    assert not e.converged  # half the mass is elsewhere
 
 
 def test_weights_stay_finite_when_nothing_fits(small_room: SemanticMap) -> None:

@@ -8,8 +8,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from app.maps.model import MapError, load_map, load_map_dir, parse_map
+from app.maps.check import load_map, load_map_dir
+from app.maps.model import MapError, parse_map
 from app.resources import bundled_maps_dir
+from tests.helpers import paper_office
 
 ROOM = {
     "name": "room",
@@ -31,7 +33,7 @@ ROOM = {
 
 
 def test_bundled_paper_office_matches_the_protocol() -> None:
-    m = load_map(bundled_maps_dir() / "paper_office.json")
+    m = paper_office()
     assert m.bounds == (0.0, 0.0, 10.0, 7.0)
     assert m.classes == ("door", "table", "window")
     assert len(m.class_members["window"]) == 6

@@ -10,7 +10,7 @@ from app.localization.motion import NO_ODOMETRY_STD_M, motion_log_penalty, sampl
 from app.localization.tolerances import U64, motion_position_tolerance
 from app.localization.types import Odometry
 from app.maps.geometry import segments_cross_walls
-from tests.localization.conftest import room
+from tests.helpers import room
 
 EXACT = FilterConfig(
     trans_noise_frac=0, rot_noise_frac=0, trans_noise_floor_m=0, rot_noise_floor_deg=0

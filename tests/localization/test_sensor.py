@@ -25,7 +25,7 @@ from app.localization.types import Detection, Pose
 from app.maps.geometry import wrap_angle
 from app.maps.model import SemanticMap, parse_map
 from app.simulation.camera import CameraModel, visible_objects
-from tests.localization.conftest import room
+from tests.helpers import room
 
 #: Detections that match nothing in particular (false or far-off ones), one per class.
 CLASS_BEARINGS = [("door", 0.5), ("window", -2.5), ("table", 3.0)]

@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 from app.maps import check
-from app.maps.check import check_data, check_file, load_map_dirs
-from app.maps.model import MapError, load_map
+from app.maps.check import check_data, check_file, load_map, load_map_dirs
+from app.maps.model import MapError
 from app.resources import bundled_maps_dir
 from tests.maps.hostile import box, hostile_maps, write_hostile_dir
 
@@ -85,10 +85,15 @@ def test_overlapping_walls_and_bowtie_regions_are_reported() -> None:
     assert result.map is not None
     fields = {p.field: p.message for p in result.problems}
     assert fields["walls[5]"] == "overlaps walls[4] along 0.50 m (a duplicated wall?)"
-    assert (
-        "bowtie" in fields["regions[0].polygon"]
-        and "Self-intersection" in fields["regions[0].polygon"]
+    assert fields["regions[0].polygon"] == (
+        "region 'bowtie' is not a simple polygon: its edge from point 0 crosses its edge "
+        "from point 2"
     )
+    # A square and a concave (L-shaped) room are simple.
+    square = np.array([[0, 0], [2, 0], [2, 2], [0, 2]], dtype=float)
+    ell = np.array([[0, 0], [3, 0], [3, 1], [1, 1], [1, 3], [0, 3]], dtype=float)
+    assert check._first_self_crossing(square) is None
+    assert check._first_self_crossing(ell) is None
 
 
 def test_files_broken_links_and_sizes(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:

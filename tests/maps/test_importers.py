@@ -10,11 +10,11 @@ import pytest
 from PIL import Image
 
 from app.cli import main
+from app.maps.check import load_map
 from app.maps.geometry import point_segment_distance, segments_cross_walls
 from app.maps.importers.common import MapImportError
 from app.maps.importers.geojson import read_geojson
 from app.maps.importers.occupancy import read_occupancy, vectorize
-from app.maps.model import load_map
 
 RES = 0.05
 ORIGIN = (-0.5, -0.5)

@@ -4,8 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from app.maps.check import load_map
 from app.maps.geometry import point_segment_distance, segments_cross_walls
-from app.maps.model import WALL_CLEARANCE_M, SemanticMap, load_map, parse_map
+from app.maps.model import WALL_CLEARANCE_M, SemanticMap, parse_map
 from app.maps.prepare import build, content_key, grid_frame, prepare
 from app.resources import bundled_maps_dir
 
@@ -68,6 +69,8 @@ def test_visibility_equals_line_of_sight_at_cell_centres() -> None:
             ]
         )
         assert np.array_equal(vis.table[used], m.line_of_sight(centres)), seed
+        # Rows read straight from the packed bits equal the unpacked table's.
+        assert np.array_equal(vis.visible(centres[:, 0], centres[:, 1]), vis.table[used])
         assert used.size > 100, seed  # the test saw many cells
 
 

@@ -15,8 +15,8 @@ from app.localization.config import FilterConfig
 from app.localization.motion import compose_odometry, sample_motion
 from app.localization.tolerances import motion_position_tolerance
 from app.localization.types import Detection, Odometry, Pose
+from app.service.errors import CapacityReached
 from app.service.queueing import FrameQueue, merge_frames
-from app.service.sessions import CapacityReached
 from app.service.types import FrameInput, SessionSpec
 from tests.service.test_sessions_expiry import make_manager
 

@@ -17,12 +17,11 @@ from app.guidance import ARRIVED_M
 from app.localization.camera import Camera
 from app.localization.types import Pose
 from app.main import create_app
+from app.maps.check import load_map
 from app.maps.geometry import segments_cross_walls, wrap_angle
-from app.maps.model import load_map
 from app.resources import bundled_maps_dir
 from app.simulation.camera import CameraModel, visible_objects
-from tests.api.conftest import make_settings
-from tests.support import free_port, serving
+from tests.helpers import free_port, make_settings, serving
 
 SUITE = load_map(bundled_maps_dir() / "office_suite.json")
 CAMERA = Camera("equirectangular", 3840, yaw_offset_deg=0.0)
@@ -69,7 +68,7 @@ def _frame(pose: Pose, odo: tuple[float, float, float] | None, t: float, rng) ->
 
 def test_guided_around_a_wall_to_the_main_entrance(server_url: str) -> None:
     rng = np.random.default_rng(5)
-    http = httpx.Client(base_url=f"http://{server_url}")
+    http = httpx.Client(base_url=f"http://{server_url}", timeout=60.0)  # slow when loaded
     x, y, th = START
     r = http.post(
         "/sessions",

@@ -13,12 +13,9 @@ import pytest
 import websockets
 
 from app.main import create_app
-from app.maps.model import load_map
-from app.resources import bundled_maps_dir
 from app.simulation.scenarios import paper_config
 from app.simulation.simulator import simulate
-from tests.api.conftest import make_settings
-from tests.support import free_port, serving
+from tests.helpers import free_port, make_settings, paper_office, serving
 
 
 @pytest.fixture(scope="module")
@@ -31,7 +28,7 @@ def server_url() -> Iterator[str]:
 FRAMES = [
     f.to_contract()
     for f in simulate(
-        load_map(bundled_maps_dir() / "paper_office.json"),
+        paper_office(),
         paper_config("nominal", 360),
         np.random.default_rng(11),
     )[:30]

@@ -5,12 +5,13 @@ from __future__ import annotations
 import asyncio
 
 from app.localization.types import Detection
-from app.maps.model import load_map_dir
+from app.maps.check import load_map_dir
 from app.resources import bundled_maps_dir
+from app.service.errors import SessionNotFound
 from app.service.metrics import Metrics
-from app.service.sessions import SessionManager, SessionNotFound
+from app.service.sessions import SessionManager
 from app.service.types import FrameInput, SessionSpec
-from tests.api.conftest import make_settings
+from tests.helpers import make_settings
 
 
 def make_manager(**overrides: object) -> SessionManager:

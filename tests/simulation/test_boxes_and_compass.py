@@ -11,8 +11,8 @@ import pytest
 from app.api.convert import frame_input
 from app.api.schemas import Frame
 from app.localization.camera import Camera
+from app.maps.check import load_map
 from app.maps.geometry import wrap_deg
-from app.maps.model import load_map
 from app.resources import bundled_maps_dir
 from app.simulation.scenarios import paper_config
 from app.simulation.simulator import CompassBias, simulate

@@ -11,12 +11,12 @@ import pytest
 
 from app.localization.types import Pose
 from app.maps.geometry import wrap_angle
-from app.maps.model import load_map, parse_map
-from app.resources import bundled_maps_dir
+from app.maps.model import parse_map
 from app.simulation import CameraModel, paper_config, simulate, visible_objects
 from app.simulation.scenarios import PAPER_PATH
 from app.simulation.simulator import CornerVisit, SimulationConfig
 from app.simulation.walks import loop_path
+from tests.helpers import paper_office
 
 ROOM = parse_map(
     {
@@ -36,7 +36,7 @@ ROOM = parse_map(
         ],
     }
 )
-OFFICE = load_map(bundled_maps_dir() / "paper_office.json")
+OFFICE = paper_office()
 
 
 def seen(pose: Pose, fov: float, max_range: float = 15.0) -> dict[int, float]:

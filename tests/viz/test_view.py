@@ -3,14 +3,15 @@
 from __future__ import annotations
 
 import asyncio
+import functools
 import time
 
 import numpy as np
 import pytest
 import viser
 
-from app.demo import frame_input_of
-from app.maps.model import load_map, load_map_dir
+from app.demo import frame_input_of, new_walk
+from app.maps.check import load_map_dir
 from app.resources import bundled_maps_dir
 from app.service.metrics import Metrics
 from app.service.sessions import SessionManager
@@ -20,10 +21,9 @@ from app.simulation.simulator import simulate
 from app.viz.particles import MAX_DRAWN, detection_rays, sample_particles
 from app.viz.scene import build_map_scene, top_down_camera
 from app.viz.view import LiveView
-from tests.api.conftest import make_settings
-from tests.support import free_port
+from tests.helpers import free_port, make_settings, paper_office
 
-OFFICE = load_map(bundled_maps_dir() / "paper_office.json")
+OFFICE = paper_office()
 
 
 @pytest.fixture
@@ -81,7 +81,12 @@ def test_particles_are_sampled_by_weight_and_capped() -> None:
 def test_live_view_draws_the_watched_session() -> None:
     async def main() -> LiveView:
         manager = make_manager()
-        view = LiveView(manager, port=free_port(), host="127.0.0.1")
+        view = LiveView(
+            manager,
+            port=free_port(),
+            host="127.0.0.1",
+            start_walk=functools.partial(new_walk, manager),
+        )
         view.start()
         try:
             s = await manager.create(
@@ -103,7 +108,9 @@ def test_live_view_draws_the_watched_session() -> None:
             # The GUI's demo button starts a simulated walk and watches it.
             sid = await view.controls.start_walk()
             assert view.watched == sid
-            await asyncio.sleep(0.6)
+            deadline = time.time() + 10  # the walk simulates its path, then 5 frames/s
+            while manager.get(sid).frames < 2 and time.time() < deadline:
+                await asyncio.sleep(0.05)
             assert manager.get(sid).frames >= 2
             await view.controls.reset_walk()
             return view
@@ -137,8 +144,9 @@ def test_the_view_draws_the_way_to_the_destination() -> None:
             for f in frames[:15]:
                 await manager.process(s.id, frame_input_of(f))
             snap = s.snapshot()
-            view.draw(snap)
-            return snap, view.route
+            with view._draw_lock:  # the view's own thread may be drawing too
+                view.draw(snap)
+                return snap, view.route
         finally:
             view.stop()
 

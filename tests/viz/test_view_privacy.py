@@ -7,6 +7,7 @@ protocol, reading every byte the server sends it.
 from __future__ import annotations
 
 import asyncio
+import functools
 import time
 
 import msgspec
@@ -17,10 +18,11 @@ import zstandard
 from viser._messages import ViewerCameraMessage
 
 from app.config import Settings
+from app.demo import new_walk
 from app.main import create_app
 from app.service.types import FrameInput, SessionSpec
 from app.viz.view import LiveView
-from tests.support import free_port
+from tests.helpers import free_port
 from tests.viz.test_view import make_manager
 
 
@@ -51,7 +53,7 @@ async def watch_as_anonymous(port: int, seconds: float) -> bytes:
 def test_an_anonymous_viewer_sees_only_shared_sessions_and_no_id() -> None:
     async def main() -> None:
         manager = make_manager()
-        view = LiveView(manager, port=free_port())
+        view = LiveView(manager, port=free_port(), start_walk=functools.partial(new_walk, manager))
         view.start()
         try:
             private = await manager.create(SessionSpec(map_name="paper_office", particles=500))
@@ -100,7 +102,7 @@ async def drain(ws: websockets.ClientConnection) -> None:
 def test_view_walks_end_with_their_viewer_and_after_the_time_limit() -> None:
     async def main() -> None:
         manager = make_manager()
-        view = LiveView(manager, port=free_port())
+        view = LiveView(manager, port=free_port(), start_walk=functools.partial(new_walk, manager))
         view.start()
         assert view.server is not None and view.controls is not None
         try:
@@ -114,7 +116,9 @@ def test_view_walks_end_with_their_viewer_and_after_the_time_limit() -> None:
                     await asyncio.sleep(0.05)
                 (viewer,) = view.server.get_clients()
                 sid = await view.controls.start_walk(viewer)
-                await asyncio.sleep(0.5)
+                deadline = time.monotonic() + 10  # the walk simulates its path first
+                while manager.get(sid).frames < 1 and time.monotonic() < deadline:
+                    await asyncio.sleep(0.05)
                 assert manager.get(sid).frames >= 1 and manager.get(sid).shared is False
                 assert view.controls.label(manager.get(sid)) == "walk 1 (paper_office)"
                 reading.cancel()

@@ -4,38 +4,45 @@ from __future__ import annotations
 
 import asyncio
 from dataclasses import replace
+from typing import Annotated
 
 import numpy as np
 from fastapi import APIRouter, Request
-from pydantic import Field
+from pydantic import Field, StrictBool
 
 from app.api.convert import camera_of
 from app.api.deps import ManagerDep
-from app.api.schemas import CameraIn, _In
-from app.service.sessions import UnknownMap
+from app.api.errors import error_responses
+from app.api.schemas import CameraIn
+from app.service.errors import UnknownMap
 from app.simulation.simulator import simulate
 from app.simulation.walks import demo_config
+from app.validation import NUMBER_ONLY, Finite, Integer, StrictInput
 
 router = APIRouter(tags=["demo"])
 
 
-class SimulationRequest(_In):
+class SimulationRequest(StrictInput):
     map: str = Field("paper_office", description="map to walk on")
-    fov_deg: float = Field(360.0, gt=0, le=360, description="camera field of view, degrees")
-    occlusion: bool = Field(False, description="face a corner with the front 180 deg blocked")
-    missing: bool = Field(False, description="each frame loses a random share of detections")
-    false_rate: float = Field(0.0, ge=0, le=5, description="false detections per frame (mean)")
-    bearing_noise_deg: float = Field(2.0, ge=0, le=45, description="bearing noise std, degrees")
-    seed: int = Field(0, ge=0, le=2**32 - 1, description="random seed")
+    fov_deg: Finite = Field(360.0, gt=0, le=360, description="camera field of view, degrees")
+    occlusion: StrictBool = Field(False, description="face a corner with the front 180 deg blocked")
+    missing: StrictBool = Field(False, description="each frame loses a random share of detections")
+    false_rate: Finite = Field(0.0, ge=0, le=5, description="false detections per frame (mean)")
+    bearing_noise_deg: Finite = Field(2.0, ge=0, le=45, description="bearing noise std, degrees")
+    seed: Integer = Field(0, ge=0, le=2**32 - 1, description="random seed")
     camera: CameraIn | None = Field(
         None, description="give detections as this camera's pixel boxes (its field of view)"
     )
-    compass_std_deg: float | None = Field(
-        None, gt=0, le=90, description="give each frame a compass heading with this noise"
-    )
+    compass_std_deg: (
+        Annotated[float, Field(gt=0, le=90, allow_inf_nan=False), NUMBER_ONLY] | None
+    ) = Field(None, description="give each frame a compass heading with this noise")
 
 
-@router.post("/simulations", summary="Simulated frames of a looping walk (with ground truth)")
+@router.post(
+    "/simulations",
+    summary="Simulated frames of a looping walk (with ground truth)",
+    responses=error_responses(400, 404, 413, 422),
+)
 async def simulations(body: SimulationRequest, manager: ManagerDep) -> dict[str, object]:
     """Frames in the ``Frame`` format (plus ``truth``) for a client to stream to a session."""
     if body.map not in manager.maps:

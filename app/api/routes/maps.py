@@ -5,8 +5,9 @@ from __future__ import annotations
 from fastapi import APIRouter
 
 from app.api.deps import ManagerDep
+from app.api.errors import error_responses
 from app.api.schemas import Bounds, MapSummary
-from app.service.sessions import UnknownMap
+from app.service.errors import UnknownMap
 
 router = APIRouter(prefix="/maps", tags=["maps"])
 
@@ -28,7 +29,7 @@ async def list_maps(manager: ManagerDep) -> list[MapSummary]:
     return out
 
 
-@router.get("/{name}", summary="One map file's JSON")
+@router.get("/{name}", summary="One map file's JSON", responses=error_responses(404))
 async def get_map(name: str, manager: ManagerDep) -> dict[str, object]:
     if name not in manager.maps:
         raise UnknownMap(name, sorted(manager.maps))

@@ -6,6 +6,7 @@ import asyncio
 
 from fastapi import APIRouter, HTTPException, Response
 
+from app.api.errors import error_responses
 from app.api.schemas import SpeechRequest
 from app.feedback.speech import SpeechUnavailable, synthesize_wav
 
@@ -15,7 +16,10 @@ router = APIRouter(tags=["speech"])
 @router.post(
     "/speech",
     response_class=Response,
-    responses={200: {"content": {"audio/wav": {}}}, 503: {"description": "no speech engine"}},
+    responses={
+        200: {"content": {"audio/wav": {}}, "description": "the spoken text, a WAV file"},
+        **error_responses(400, 413, 422, 503),
+    },
     summary="Speak text as a WAV file",
 )
 async def speech(body: SpeechRequest) -> Response:

@@ -21,12 +21,15 @@ import itertools
 import math
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TypeVar
 
 import numpy as np
 import yaml
 from numpy.typing import NDArray
 
 from app.maps.importers.common import MapImportError
+
+N = TypeVar("N", int, float, str)
 
 #: Occupied specks smaller than this many pixels are sensor noise, not walls.
 MIN_BLOB_PX = 4
@@ -57,7 +60,7 @@ class OccupancyMap:
         return np.column_stack([ox + c * x - s * y, oy + s * x + c * y])
 
 
-def _field(meta: dict, key: str, source: Path, kind: type, default: object = None) -> object:
+def _field(meta: dict, key: str, source: Path, kind: type[N], default: N | None = None) -> N:
     if key not in meta:
         if default is None:
             raise MapImportError(f"{source}: {key}: missing (map_server requires it)")
@@ -68,7 +71,7 @@ def _field(meta: dict, key: str, source: Path, kind: type, default: object = Non
             out = float(value)
             if not math.isfinite(out):
                 raise ValueError
-            return out
+            return kind(out)
         return kind(value)
     except (TypeError, ValueError):
         raise MapImportError(f"{source}: {key}: {value!r} is not a {kind.__name__}") from None
@@ -89,7 +92,7 @@ def read_occupancy(yaml_path: str | Path) -> OccupancyMap:
         raise MapImportError(f"{src}: expected a YAML mapping with image, resolution, origin")
     image = Path(str(_field(meta, "image", src, str)))
     image = image if image.is_absolute() else src.parent / image
-    res = float(_field(meta, "resolution", src, float))  # type: ignore[arg-type]
+    res = float(_field(meta, "resolution", src, float))
     if not 0.001 <= res <= 10.0:
         raise MapImportError(f"{src}: resolution: {res} m per pixel is out of 0.001-10")
     origin = meta.get("origin")
@@ -99,9 +102,9 @@ def read_occupancy(yaml_path: str | Path) -> OccupancyMap:
         or not all(isinstance(v, int | float) and math.isfinite(v) for v in origin)
     ):
         raise MapImportError(f"{src}: origin: expected [x, y, yaw] numbers, got {origin!r}")
-    negate = int(_field(meta, "negate", src, int, 0))  # type: ignore[arg-type]
-    occ_t = float(_field(meta, "occupied_thresh", src, float, 0.65))  # type: ignore[arg-type]
-    free_t = float(_field(meta, "free_thresh", src, float, 0.196))  # type: ignore[arg-type]
+    negate = int(_field(meta, "negate", src, int, 0))
+    occ_t = float(_field(meta, "occupied_thresh", src, float, 0.65))
+    free_t = float(_field(meta, "free_thresh", src, float, 0.196))
     if not 0.0 <= free_t <= occ_t <= 1.0:
         raise MapImportError(
             f"{src}: free_thresh {free_t} and occupied_thresh {occ_t} must satisfy "

@@ -1,4 +1,7 @@
-"""Helpers shared by tests that run real servers."""
+"""Builders shared by the tests: small maps, service settings, real servers and processes.
+
+Fixtures stay in the ``conftest.py`` files; anything a test module imports lives here.
+"""
 
 from __future__ import annotations
 
@@ -18,8 +21,44 @@ import httpx
 from fastapi import FastAPI
 
 from app.config import Settings
+from app.maps.check import load_map
+from app.maps.model import SemanticMap, parse_map
+from app.resources import bundled_maps_dir
 from app.server import BearingsServer, uvicorn_config
 
+
+# ---------------------------------------------------------------------------- maps
+def room(objects: list[dict], walls: list[dict] | None = None, name: str = "room") -> SemanticMap:
+    """A 6 m x 4 m walled room with the given objects (and extra walls)."""
+    outline = [
+        {"x1": 0, "y1": 0, "x2": 6, "y2": 0},
+        {"x1": 6, "y1": 0, "x2": 6, "y2": 4},
+        {"x1": 6, "y1": 4, "x2": 0, "y2": 4},
+        {"x1": 0, "y1": 4, "x2": 0, "y2": 0},
+    ]
+    return parse_map({"name": name, "walls": outline + (walls or []), "objects": objects})
+
+
+def paper_office() -> SemanticMap:
+    """The bundled 10 m x 7 m office of the paper's experiments."""
+    return load_map(bundled_maps_dir() / "paper_office.json")
+
+
+# ------------------------------------------------------------------------- service
+def make_settings(**overrides: object) -> Settings:
+    """Service settings for tests: no viser, small limits so they are easy to hit."""
+    base = {
+        "viser": False,
+        "max_sessions": 5,
+        "max_particles": 20_000,
+        "default_particles": 1000,
+        "max_detections": 20,
+        "max_message_bytes": 8192,
+    }
+    return Settings(**{**base, **overrides})
+
+
+# ------------------------------------------------------------------------- servers
 ROOT = Path(__file__).resolve().parents[1]
 
 
@@ -40,7 +79,11 @@ def serving(
     redaction, draining at shutdown), from the app's own settings.
     """
     settings: Settings = app.state.settings
-    config = uvicorn_config(app, settings, host="127.0.0.1", port=port, log_level=log_level)
+    # log_config=None: records go to pytest's capture, not to handlers bound to a stream
+    # that one test's capture closes (the redaction filters sit on the loggers as well).
+    config = uvicorn_config(
+        app, settings, host="127.0.0.1", port=port, log_level=log_level, log_config=None
+    )
     server = BearingsServer(config, app)
     thread = threading.Thread(target=server.run, daemon=True)
     thread.start()
@@ -117,3 +160,52 @@ def rss_kib(pid: int) -> int:
         if line.startswith("VmRSS:"):
             return int(line.split()[1])
     raise RuntimeError(f"no VmRSS for process {pid}")
+
+
+def need_binary(name: str) -> str:
+    """The path of a program the test needs: skipped here when missing, a failure in CI."""
+    import os
+    import shutil
+
+    import pytest
+
+    path = shutil.which(name) or next(
+        (p for p in (f"/usr/sbin/{name}", f"/usr/bin/{name}") if os.path.exists(p)), None
+    )
+    if path is None:
+        message = f"{name} is not installed (Debian package: see .ci/run)"
+        if os.environ.get("CI", "").lower() == "true":
+            pytest.fail(f"{message}; CI must run this test")
+        pytest.skip(message)
+    return path
+
+
+def wait_for_port(port: int, timeout_s: float = 20.0) -> None:
+    """Until something accepts connections on 127.0.0.1:port."""
+    deadline = time.time() + timeout_s
+    while time.time() < deadline:
+        with socket.socket() as s:
+            if s.connect_ex(("127.0.0.1", port)) == 0:
+                return
+        time.sleep(0.05)
+    raise RuntimeError(f"nothing listens on port {port} after {timeout_s} s")
+
+
+@contextmanager
+def redis_server() -> Iterator[str]:
+    """A private redis-server on a free port, in memory only; yields its redis:// URL."""
+    import subprocess
+
+    binary = need_binary("redis-server")
+    port = free_port()
+    proc = subprocess.Popen(
+        [binary, "--port", str(port), "--bind", "127.0.0.1", "--save", "", "--appendonly", "no"],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
+    try:
+        wait_for_port(port)
+        yield f"redis://127.0.0.1:{port}/0"
+    finally:
+        proc.terminate()
+        proc.wait(timeout=10)

@@ -1,0 +1,193 @@
+"""A session's checkpoint and its journal of frames, as bytes for a session store.
+
+A checkpoint holds everything a session needs to go on elsewhere: how it was created
+(its :class:`~app.service.types.SessionSpec`), the filter's state
+(:meth:`ParticleFilter.checkpoint`: at most 2,000 particles as float32, the recovery
+averages, the convergence gate, the alternative hypotheses' tracker, the random
+generator), the narrator's memory (:meth:`Narrator.checkpoint`), the guidance speaker's,
+the destination, the owner, the frame count and the latest result. Each part serializes
+itself; this module only assembles the parts and packs them.
+
+Checkpoints are written about once a second; every frame answered since the last one is
+kept in a journal (one short entry per frame) and replayed on resume, so a session
+resumed on another worker has seen exactly the frames its client was answered for.
+
+Bytes: ``BRGC1``, a 4-byte little-endian header length, a JSON header, then the raw
+arrays the header points to (dtype, shape, offset). A checkpoint of a converged session
+(2,000 particles, the evidence tracker's window of 10 observations) is about 46 KB.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import struct
+from collections.abc import Mapping
+from datetime import datetime
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from app.feedback.guidance import GuidanceSpeaker
+from app.guidance.planner import Plan
+from app.guidance.targets import Target
+from app.localization.types import Detection, Pose
+from app.service.types import FrameInput, FrameOutcome, SessionSpec
+from app.state import from_plain, to_plain
+
+if TYPE_CHECKING:
+    from app.service.sessions import Session
+
+MAGIC = b"BRGC1"
+FORMAT_VERSION = 1
+_ARRAY = "__array__"
+
+
+class BadCheckpoint(ValueError):
+    """Bytes that are not a checkpoint this version can read."""
+
+
+def pack(state: Mapping[str, Any]) -> bytes:
+    """Nested plain data with numpy arrays anywhere in it, as bytes."""
+    blobs: list[bytes] = []
+    offset = 0
+
+    def walk(value: Any) -> Any:
+        nonlocal offset
+        if isinstance(value, np.ndarray):
+            data = np.ascontiguousarray(value).tobytes()
+            ref = {_ARRAY: [value.dtype.str, list(value.shape), offset]}
+            blobs.append(data)
+            offset += len(data)
+            return ref
+        if isinstance(value, Mapping):
+            return {str(k): walk(v) for k, v in value.items()}
+        if isinstance(value, list | tuple):
+            return [walk(v) for v in value]
+        return value
+
+    header = json.dumps(walk(state), separators=(",", ":")).encode()
+    return b"".join([MAGIC, struct.pack("<I", len(header)), header, *blobs])
+
+
+def unpack(data: bytes) -> dict[str, Any]:
+    """The state :func:`pack` was given (arrays read-only, backed by ``data``)."""
+    if not data.startswith(MAGIC) or len(data) < len(MAGIC) + 4:
+        raise BadCheckpoint("not a Bearings checkpoint (wrong magic bytes)")
+    (size,) = struct.unpack_from("<I", data, len(MAGIC))
+    start = len(MAGIC) + 4
+    body = memoryview(data)[start + size :]
+    try:
+        header = json.loads(data[start : start + size])
+    except ValueError as exc:
+        raise BadCheckpoint(f"checkpoint header is not JSON: {exc}") from None
+
+    def walk(value: Any) -> Any:
+        if isinstance(value, dict):
+            if _ARRAY in value:
+                dtype, shape, offset = value[_ARRAY]
+                dt = np.dtype(dtype)
+                count = int(np.prod(shape, dtype=np.int64))
+                return np.frombuffer(body, dtype=dt, count=count, offset=offset).reshape(shape)
+            return {k: walk(v) for k, v in value.items()}
+        if isinstance(value, list):
+            return [walk(v) for v in value]
+        return value
+
+    state = walk(header)
+    if state.get("format") != FORMAT_VERSION:
+        raise BadCheckpoint(
+            f"checkpoint format {state.get('format')!r}; this version reads {FORMAT_VERSION}"
+        )
+    return state
+
+
+def capture(session: Session) -> dict[str, Any]:
+    """A session's state (call under its ``state_lock``, or when no step can run).
+
+    Before its first frame a session is exactly what its spec (with the seed drawn at
+    creation) builds, so its filter and narrator are left out.
+    """
+    fresh = session.frames == 0
+    plan = session.destination
+    return {
+        "format": FORMAT_VERSION,
+        "id": session.id,
+        "spec": to_plain(session.spec),
+        "created_at": session.created_at.isoformat(),
+        "particles": session.particles,
+        "frames": session.frames,
+        "owner": session.owner,
+        "shared": session.shared,
+        "speaker": to_plain(session.speaker),
+        "destination": None if plan is None else to_plain(plan.target),
+        "last_timestamp": session.last_timestamp,
+        "last_outcome": to_plain(session.last_outcome),
+        "last_detections": to_plain(session.last_detections),
+        "truth": to_plain(session.truth),
+        "filter": None if fresh else session.filter.checkpoint(),
+        "narrator": None if fresh else session.narrator.checkpoint(),
+    }
+
+
+def spec_of(state: Mapping[str, Any]) -> SessionSpec:
+    """The spec a checkpointed session was created from (to build it again)."""
+    spec: SessionSpec = from_plain(SessionSpec, state["spec"])
+    return spec
+
+
+def created_at_of(state: Mapping[str, Any]) -> datetime:
+    return datetime.fromisoformat(state["created_at"])
+
+
+def apply(session: Session, state: Mapping[str, Any]) -> None:
+    """Put a checkpoint's state into a session built from the same spec (its filter
+    already restored, see :meth:`SessionManager._build`)."""
+    if state["narrator"] is not None:
+        session.narrator.restore(state["narrator"])
+    session.frames = int(state["frames"])
+    session.owner = state["owner"]
+    session.shared = bool(state["shared"])
+    session.speaker = from_plain(GuidanceSpeaker, state["speaker"])
+    if state["destination"] is not None:
+        session.destination = Plan(session.map, from_plain(Target, state["destination"]))
+    session.last_timestamp = state["last_timestamp"]
+    session.last_outcome = from_plain(FrameOutcome | None, state["last_outcome"])
+    session.last_detections = from_plain(list[Detection], state["last_detections"])
+    session.truth = from_plain(Pose | None, state["truth"])
+    session.version += 1
+
+
+def _frame_plain(frame: FrameInput) -> dict[str, Any]:
+    """:func:`to_plain` of a frame, written out for its commonest fields (every frame
+    is journalled: the generic walk cost 60 µs a frame here, this a fifth of that);
+    any other field goes through the generic walk."""
+    plain: dict[str, Any] = {}
+    for f in dataclasses.fields(frame):
+        value = getattr(frame, f.name)
+        if f.name == "detections":
+            plain[f.name] = [
+                {"cls": d.cls, "bearing_rad": d.bearing_rad, "score": d.score} for d in value
+            ]
+        elif f.name == "odometry" and value is not None:
+            plain[f.name] = {
+                "forward_m": value.forward_m,
+                "left_m": value.left_m,
+                "turn_rad": value.turn_rad,
+            }
+        else:
+            plain[f.name] = to_plain(value)
+    return plain
+
+
+def encode_frame(seq: int, frame: FrameInput, merged: int = 1) -> bytes:
+    """One journal entry: the step's sequence number, then the frame (``merged`` frames
+    merged into one) as JSON."""
+    body = {"frame": _frame_plain(frame), "merged": merged}
+    return b"%d|" % seq + json.dumps(body, separators=(",", ":")).encode()
+
+
+def decode_frame(entry: bytes) -> tuple[int, FrameInput, int]:
+    seq, _, raw = entry.partition(b"|")
+    body = json.loads(raw)
+    return int(seq), from_plain(FrameInput, body["frame"]), int(body["merged"])

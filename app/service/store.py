@@ -1,0 +1,447 @@
+"""Where sessions live besides a worker's memory: the session store.
+
+``--store memory`` (the default) keeps every session in the one process that serves it,
+as a single machine needs: nothing is written anywhere. ``--store redis://HOST:PORT/DB``
+shares sessions between workers (docs/API.md, "Overload and restarts"): each session's
+checkpoint (:mod:`app.service.checkpoint`), a journal of the frames answered since it,
+and a lease naming the one worker that may step it.
+
+Keys of one session share a Redis Cluster hash tag, ``bearings:{ID}:...``:
+
+* ``:ckpt``: the latest checkpoint, expiring after the idle timeout (``:ckpt:frames``:
+  how many frames it covers; an older checkpoint never replaces a newer one);
+* ``:journal``: a list of the frames answered since that checkpoint (same expiry);
+* ``:lease``: the serving worker's token, with a short expiry (``--lease-s``) that the
+  worker renews while it serves the session.
+
+Every write is conditional on holding the lease (a server-side script compares the
+token first), so a worker that lost its lease can never overwrite a newer state.
+
+The store's methods block: the session manager calls them from its own threads, never
+on the event loop. :meth:`SessionStore.append` returns a future instead: entries from
+all sessions are written together by one thread (group commit), so a frame's answer
+waits for its journal entry to be stored without one round trip per frame.
+"""
+
+from __future__ import annotations
+
+import queue
+import threading
+import time
+from collections.abc import Callable, Sequence
+from concurrent.futures import Future
+from typing import Protocol
+from urllib.parse import urlsplit, urlunsplit
+
+#: Most journal entries written in one round trip.
+MAX_BATCH = 512
+
+
+class StoreUnavailable(RuntimeError):
+    """The session store cannot be reached or refused an operation."""
+
+
+class SessionStore(Protocol):
+    """Checkpoints, journals and leases of sessions (see the module docstring).
+
+    ``shared`` is False for a store only this process sees: the manager then keeps
+    sessions in memory only and writes nothing.
+    """
+
+    shared: bool
+
+    def acquire(self, session_id: str, owner: str, ttl_s: float) -> bool:
+        """Take (or keep) the session's lease; False while another owner holds it."""
+        ...
+
+    def renew(self, session_ids: Sequence[str], owner: str, ttl_s: float) -> list[bool]:
+        """Extend the leases still held by ``owner``; False for each one lost."""
+        ...
+
+    def release(self, session_ids: Sequence[str], owner: str) -> None:
+        """Give up the leases ``owner`` holds (others' leases are left alone)."""
+        ...
+
+    def load(self, session_id: str) -> tuple[bytes | None, list[bytes]]:
+        """The checkpoint (None if there is none) and the journal entries after it."""
+        ...
+
+    def save(self, items: Sequence[tuple[str, bytes, int]], owner: str, ttl_s: float) -> list[bool]:
+        """Write checkpoints (session id, bytes, frames covered) where ``owner`` holds the
+        lease, drop the journal entries they cover; False where the lease was lost."""
+        ...
+
+    def append(
+        self, session_id: str, entry: bytes, owner: str, ttl_s: float, lease_s: float
+    ) -> Future[bool]:
+        """Add a journal entry; the future says True once it is stored.
+
+        A lease that ran out (the owner stalled) is taken back first when nobody went on
+        with the session meanwhile: the stored frames end right before this entry's.
+        False: another owner has the session."""
+        ...
+
+    def delete(self, session_id: str) -> None:
+        """Forget the session: checkpoint, journal and lease."""
+        ...
+
+    def close(self) -> None: ...
+
+
+def _seq(entry: bytes) -> int:
+    return int(entry.partition(b"|")[0])
+
+
+class MemoryStore:
+    """The embedded store: the same operations on dictionaries of this process.
+
+    ``shared=False`` (what ``--store memory`` builds) tells the manager that nothing
+    needs writing, which keeps a single machine exactly as without a store.
+    ``shared=True`` makes a store that several managers in one process can share, with
+    the same semantics as Redis (expiry, leases, fencing): the tests use it.
+    """
+
+    def __init__(self, *, shared: bool = False) -> None:
+        self.shared = shared
+        self._lock = threading.Lock()
+        self._values: dict[str, tuple[object, float]] = {}
+
+    def _get(self, key: str) -> object | None:
+        item = self._values.get(key)
+        if item is None:
+            return None
+        if item[1] <= time.monotonic():
+            del self._values[key]
+            return None
+        return item[0]
+
+    def _put(self, key: str, value: object, ttl_s: float) -> None:
+        self._values[key] = (value, time.monotonic() + ttl_s)
+
+    def _touch(self, key: str, ttl_s: float) -> None:
+        value = self._get(key)
+        if value is not None:
+            self._put(key, value, ttl_s)
+
+    def acquire(self, session_id: str, owner: str, ttl_s: float) -> bool:
+        with self._lock:
+            holder = self._get(f"{session_id}:lease")
+            if holder not in (None, owner):
+                return False
+            self._put(f"{session_id}:lease", owner, ttl_s)
+            return True
+
+    def renew(self, session_ids: Sequence[str], owner: str, ttl_s: float) -> list[bool]:
+        with self._lock:
+            held = [self._get(f"{sid}:lease") == owner for sid in session_ids]
+            for sid, ok in zip(session_ids, held, strict=True):
+                if ok:
+                    self._put(f"{sid}:lease", owner, ttl_s)
+            return held
+
+    def release(self, session_ids: Sequence[str], owner: str) -> None:
+        with self._lock:
+            for sid in session_ids:
+                if self._get(f"{sid}:lease") == owner:
+                    del self._values[f"{sid}:lease"]
+
+    def load(self, session_id: str) -> tuple[bytes | None, list[bytes]]:
+        with self._lock:
+            data = self._get(f"{session_id}:ckpt")
+            journal = self._get(f"{session_id}:journal")
+            return data, list(journal or [])  # type: ignore[return-value, call-overload]
+
+    def save(self, items: Sequence[tuple[str, bytes, int]], owner: str, ttl_s: float) -> list[bool]:
+        out = []
+        with self._lock:
+            for sid, data, frames in items:
+                if self._get(f"{sid}:lease") != owner:
+                    out.append(False)
+                    continue
+                out.append(True)
+                stored = self._get(f"{sid}:ckpt:frames")
+                if stored is not None and frames < stored:  # type: ignore[operator]
+                    continue  # overtaken by a newer checkpoint
+                self._put(f"{sid}:ckpt", data, ttl_s)
+                self._put(f"{sid}:ckpt:frames", frames, ttl_s)
+                journal = self._get(f"{sid}:journal") or []
+                kept = [e for e in journal if _seq(e) > frames]  # type: ignore[attr-defined]
+                self._put(f"{sid}:journal", kept, ttl_s)
+        return out
+
+    def _last_frame(self, session_id: str) -> int:
+        journal = self._get(f"{session_id}:journal") or []
+        stored = self._get(f"{session_id}:ckpt:frames")
+        last = -1 if stored is None else int(stored)  # type: ignore[call-overload]
+        return max([last, *(_seq(e) for e in journal)])  # type: ignore[attr-defined]
+
+    def append(
+        self, session_id: str, entry: bytes, owner: str, ttl_s: float, lease_s: float
+    ) -> Future[bool]:
+        done: Future[bool] = Future()
+        with self._lock:
+            holder = self._get(f"{session_id}:lease")
+            ok = holder == owner
+            if holder is None and self._last_frame(session_id) == _seq(entry) - 1:
+                self._put(f"{session_id}:lease", owner, lease_s)  # taken back
+                ok = True
+            if ok:
+                journal = self._get(f"{session_id}:journal") or []
+                self._put(f"{session_id}:journal", [*journal, entry], ttl_s)  # type: ignore[misc]
+                self._touch(f"{session_id}:ckpt", ttl_s)
+                self._touch(f"{session_id}:ckpt:frames", ttl_s)
+        done.set_result(ok)
+        return done
+
+    def delete(self, session_id: str) -> None:
+        with self._lock:
+            for part in ("ckpt", "ckpt:frames", "journal", "lease"):
+                self._values.pop(f"{session_id}:{part}", None)
+
+    def close(self) -> None:
+        pass
+
+
+# Server-side scripts: each compares the lease's token before it writes anything.
+_ACQUIRE = """
+local v = redis.call('GET', KEYS[1])
+if v == ARGV[1] then redis.call('PEXPIRE', KEYS[1], ARGV[2]) return 1 end
+if v then return 0 end
+redis.call('SET', KEYS[1], ARGV[1], 'PX', ARGV[2])
+return 1
+"""
+_RENEW = """
+local out = {}
+for i, k in ipairs(KEYS) do
+  if redis.call('GET', k) == ARGV[1] then
+    redis.call('PEXPIRE', k, ARGV[2]); out[i] = 1
+  else out[i] = 0 end
+end
+return out
+"""
+_RELEASE = """
+for _, k in ipairs(KEYS) do
+  if redis.call('GET', k) == ARGV[1] then redis.call('DEL', k) end
+end
+return 0
+"""
+# KEYS: lease, ckpt, journal per session; ARGV: token, ttl_ms, then (data, frames) each.
+# A checkpoint older than the stored one (two writes overtaking each other) is ignored.
+_SAVE = """
+local out = {}
+for i = 1, #KEYS / 3 do
+  local lease, ckpt, journal = KEYS[3*i-2], KEYS[3*i-1], KEYS[3*i]
+  if redis.call('GET', lease) == ARGV[1] then
+    local frames = tonumber(ARGV[2*i+2])
+    local stored = tonumber(redis.call('GET', ckpt .. ':frames') or '-1')
+    if frames >= stored then
+      redis.call('SET', ckpt, ARGV[2*i+1], 'PX', ARGV[2])
+      redis.call('SET', ckpt .. ':frames', frames, 'PX', ARGV[2])
+      while true do
+        local head = redis.call('LINDEX', journal, 0)
+        if not head then break end
+        local seq = tonumber(string.match(head, '^(%d+)|'))
+        if seq == nil or seq > frames then break end
+        redis.call('LPOP', journal)
+      end
+    end
+    redis.call('PEXPIRE', journal, ARGV[2])
+    out[i] = 1
+  else out[i] = 0 end
+end
+return out
+"""
+# KEYS: lease, ckpt, journal per entry; ARGV: token, ttl_ms, lease_ms, then one entry
+# each. A lapsed lease is taken back if the stored frames end right before the entry.
+_APPEND = """
+local out = {}
+for i = 1, #KEYS / 3 do
+  local lease, ckpt, journal = KEYS[3*i-2], KEYS[3*i-1], KEYS[3*i]
+  local entry = ARGV[i+3]
+  local holder = redis.call('GET', lease)
+  if not holder then
+    local last = tonumber(redis.call('GET', ckpt .. ':frames') or '-1')
+    local tail = redis.call('LINDEX', journal, -1)
+    if tail then last = math.max(last, tonumber(string.match(tail, '^(%d+)|'))) end
+    if last == tonumber(string.match(entry, '^(%d+)|')) - 1 then
+      redis.call('SET', lease, ARGV[1], 'PX', ARGV[3])
+      holder = ARGV[1]
+    end
+  end
+  if holder == ARGV[1] then
+    redis.call('RPUSH', journal, entry)
+    redis.call('PEXPIRE', journal, ARGV[2])
+    redis.call('PEXPIRE', ckpt, ARGV[2])
+    redis.call('PEXPIRE', ckpt .. ':frames', ARGV[2])
+    out[i] = 1
+  else out[i] = 0 end
+end
+return out
+"""
+
+
+def _keys(session_id: str) -> tuple[str, str, str]:
+    base = f"bearings:{{{session_id}}}"
+    return f"{base}:lease", f"{base}:ckpt", f"{base}:journal"
+
+
+def _ms(seconds: float) -> int:
+    return max(1, round(seconds * 1000))
+
+
+def redacted(url: str) -> str:
+    """The URL without a password (for logs and messages)."""
+    parts = urlsplit(url)
+    if parts.password is None:
+        return url
+    host = parts.hostname or ""
+    if parts.port is not None:
+        host = f"{host}:{parts.port}"
+    user = f"{parts.username}:***@" if parts.username else ":***@"
+    return urlunsplit(parts._replace(netloc=user + host))
+
+
+class _GroupCommit:
+    """One thread writes the journal entries of all sessions, many per round trip."""
+
+    def __init__(
+        self, write: Callable[[list[tuple[str, bytes, str, int, int]]], list[bool]]
+    ) -> None:
+        self._write = write
+        self._queue: queue.SimpleQueue[tuple[tuple[str, bytes, str, int, int], Future[bool]] | None]
+        self._queue = queue.SimpleQueue()
+        self._thread = threading.Thread(target=self._run, name="store-journal", daemon=True)
+        self._thread.start()
+
+    def submit(self, item: tuple[str, bytes, str, int, int]) -> Future[bool]:
+        done: Future[bool] = Future()
+        self._queue.put((item, done))
+        return done
+
+    def close(self) -> None:
+        self._queue.put(None)
+        self._thread.join(timeout=5)
+
+    def _run(self) -> None:
+        while True:
+            first = self._queue.get()
+            if first is None:
+                return
+            batch = [first]
+            stop = False
+            while len(batch) < MAX_BATCH:
+                try:
+                    more = self._queue.get_nowait()
+                except queue.Empty:
+                    break
+                if more is None:
+                    stop = True
+                    break
+                batch.append(more)
+            try:
+                results = self._write([item for item, _ in batch])
+            except Exception as exc:  # the futures carry it to each waiting frame
+                for _, done in batch:
+                    done.set_exception(StoreUnavailable(f"journal write failed: {exc}"))
+            else:
+                for (_, done), ok in zip(batch, results, strict=True):
+                    done.set_result(ok)
+            if stop:
+                return
+
+
+class RedisStore:
+    """Sessions in Redis, shared by every worker given the same URL."""
+
+    shared = True
+
+    def __init__(self, url: str, *, timeout_s: float = 5.0) -> None:
+        import redis
+
+        self.url = url
+        try:
+            self._redis = redis.Redis.from_url(
+                url, socket_timeout=timeout_s, socket_connect_timeout=timeout_s
+            )
+            self._redis.ping()
+        except (redis.RedisError, ValueError) as exc:
+            raise StoreUnavailable(
+                f"cannot reach the session store at {redacted(url)}: {exc}"
+            ) from None
+        self._acquire = self._redis.register_script(_ACQUIRE)
+        self._renew = self._redis.register_script(_RENEW)
+        self._release = self._redis.register_script(_RELEASE)
+        self._save = self._redis.register_script(_SAVE)
+        self._append = self._redis.register_script(_APPEND)
+        self._journal = _GroupCommit(self._write_entries)
+
+    def acquire(self, session_id: str, owner: str, ttl_s: float) -> bool:
+        return bool(self._acquire(keys=[_keys(session_id)[0]], args=[owner, _ms(ttl_s)]))
+
+    def renew(self, session_ids: Sequence[str], owner: str, ttl_s: float) -> list[bool]:
+        if not session_ids:
+            return []
+        keys = [_keys(sid)[0] for sid in session_ids]
+        return [bool(v) for v in self._renew(keys=keys, args=[owner, _ms(ttl_s)])]
+
+    def release(self, session_ids: Sequence[str], owner: str) -> None:
+        if session_ids:
+            self._release(keys=[_keys(sid)[0] for sid in session_ids], args=[owner])
+
+    def load(self, session_id: str) -> tuple[bytes | None, list[bytes]]:
+        _, ckpt, journal = _keys(session_id)
+        pipe = self._redis.pipeline(transaction=True)
+        pipe.get(ckpt)
+        pipe.lrange(journal, 0, -1)
+        data, entries = pipe.execute()
+        return data, list(entries)
+
+    def save(self, items: Sequence[tuple[str, bytes, int]], owner: str, ttl_s: float) -> list[bool]:
+        out: list[bool] = []
+        for start in range(0, len(items), 64):  # a few MB per call at most
+            chunk = items[start : start + 64]
+            keys = [k for sid, _, _ in chunk for k in _keys(sid)]
+            args: list[bytes | str | int | float] = [owner, _ms(ttl_s)]
+            for _, data, frames in chunk:
+                args += [data, frames]
+            out += [bool(v) for v in self._save(keys=keys, args=args)]
+        return out
+
+    def append(
+        self, session_id: str, entry: bytes, owner: str, ttl_s: float, lease_s: float
+    ) -> Future[bool]:
+        return self._journal.submit((session_id, entry, owner, _ms(ttl_s), _ms(lease_s)))
+
+    def _write_entries(self, batch: list[tuple[str, bytes, str, int, int]]) -> list[bool]:
+        # One script call per (owner, ttl, lease): in practice one per batch.
+        results: dict[int, bool] = {}
+        groups: dict[tuple[str, int, int], list[int]] = {}
+        for i, (_, _, owner, ttl, lease) in enumerate(batch):
+            groups.setdefault((owner, ttl, lease), []).append(i)
+        for (owner, ttl, lease), rows in groups.items():
+            keys = [k for i in rows for k in _keys(batch[i][0])]
+            args: list[bytes | str | int | float] = [owner, ttl, lease]
+            args += [batch[i][1] for i in rows]
+            for i, v in zip(rows, self._append(keys=keys, args=args), strict=True):
+                results[i] = bool(v)
+        return [results[i] for i in range(len(batch))]
+
+    def delete(self, session_id: str) -> None:
+        lease, ckpt, journal = _keys(session_id)
+        self._redis.delete(lease, ckpt, f"{ckpt}:frames", journal)
+
+    def close(self) -> None:
+        self._journal.close()
+        self._redis.close()
+
+
+def open_store(url: str) -> SessionStore:
+    """The store a ``--store`` value names: ``memory`` or ``redis://HOST:PORT/DB``."""
+    if url == "memory":
+        return MemoryStore()
+    scheme = urlsplit(url).scheme
+    if scheme in ("redis", "rediss", "unix"):
+        return RedisStore(url)
+    raise ValueError(
+        f"store: {redacted(url)!r} is neither 'memory' nor a redis:// (rediss://, unix://) URL"
+    )

@@ -1,0 +1,60 @@
+"""The visibility grid: what a person standing in a cell can see."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from app.maps.visibility import pack_bits
+from tests.helpers import room
+
+#: An inner wall at x = 3 with a door in it at (3, 2); a window on the west wall, a table
+#: in each half of the room.
+SPLIT = room(
+    [
+        {"class": "door", "x": 3, "y": 2},
+        {"class": "window", "x": 0, "y": 3},
+        {"class": "table", "x": 1.5, "y": 1},
+        {"class": "table", "x": 4.5, "y": 1},
+    ],
+    walls=[{"x1": 3, "y1": 0, "x2": 3, "y2": 4}],
+)
+DOOR, WINDOW, WEST_TABLE, EAST_TABLE = range(4)
+
+
+def test_a_wall_hides_what_is_behind_it() -> None:
+    east = SPLIT.visibility.visible([4.5], [3.0])[0]
+    west = SPLIT.visibility.visible([1.5], [3.0])[0]
+    assert east[EAST_TABLE] and not east[WEST_TABLE] and not east[WINDOW]
+    assert west[WEST_TABLE] and west[WINDOW] and not west[EAST_TABLE]
+
+
+def test_a_door_is_not_hidden_by_its_own_wall() -> None:
+    """Mounted in the inner wall, the door is seen from both halves of the room."""
+    assert SPLIT.mounted_walls[DOOR].any()
+    for x in (1.0, 2.5, 3.5, 5.0):
+        assert SPLIT.visibility.visible([x], [2.5])[0][DOOR], x
+
+
+def test_every_free_cell_sees_what_its_centre_sees() -> None:
+    grid = SPLIT.visibility
+    pts = SPLIT.free_space.sample(300, np.random.default_rng(0))
+    cells = grid.cells(pts[:, 0], pts[:, 1])
+    rows, cols = grid.shape
+    centres = np.column_stack(
+        [
+            grid.origin_x + (cells % cols + 0.5) * grid.resolution_m,
+            grid.origin_y + (cells // cols + 0.5) * grid.resolution_m,
+        ]
+    )
+    assert np.array_equal(grid.visible(pts[:, 0], pts[:, 1]), SPLIT.line_of_sight(centres))
+    assert cells.max() < rows * cols
+
+
+def test_packed_bits_hold_the_table() -> None:
+    table = np.random.default_rng(1).random((7, 130)) < 0.5
+    bits = pack_bits(table)
+    assert bits.shape == (7, 3) and bits.dtype == np.uint64
+    objects = np.arange(130)
+    unpacked = (bits[:, objects // 64] >> (objects % 64).astype(np.uint64)) & np.uint64(1)
+    assert np.array_equal(unpacked.astype(bool), table)
+    assert np.array_equal(SPLIT.visibility.bits, pack_bits(SPLIT.visibility.table))

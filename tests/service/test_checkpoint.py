@@ -1,0 +1,236 @@
+"""Checkpoints: each part restores itself, a session resumes where it was, nothing repeats.
+
+Two managers sharing one in-process store (``MemoryStore(shared=True)``, the same
+semantics as Redis) stand for two workers.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import math
+
+import numpy as np
+import pytest
+
+from app.feedback import FeedbackOptions, Narrator
+from app.localization.compass import CompassReading
+from app.localization.config import FilterConfig
+from app.localization.filter import CHECKPOINT_PARTICLES, ParticleFilter
+from app.localization.types import InitialPose
+from app.maps.check import load_map
+from app.resources import bundled_maps_dir
+from app.service import checkpoint
+from app.service.errors import SessionNotFound, SessionUnavailable
+from app.service.metrics import Metrics
+from app.service.sessions import SessionManager
+from app.service.store import MemoryStore
+from app.service.types import FrameInput, FrameOutcome, SensorSpec, SessionSpec
+from app.simulation.scenarios import paper_config
+from app.simulation.simulator import simulate
+from app.state import from_plain, to_plain
+from tests.helpers import make_settings
+
+OFFICE = load_map(bundled_maps_dir() / "paper_office.json")
+WALK = simulate(OFFICE, paper_config("nominal", 360), np.random.default_rng(5))
+
+
+def frame(i: int) -> FrameInput:
+    f = WALK[i]
+    return FrameInput(
+        timestamp=f.t, odometry=f.odometry, detections=tuple(f.detections), truth=f.truth
+    )
+
+
+def test_plain_data_round_trip_of_a_full_spec_and_an_outcome() -> None:
+    spec = SessionSpec(
+        map_name="paper_office",
+        particles=3000,
+        seed=7,
+        initial_pose=InitialPose(1.0, 2.0, 0.5, 0.2, 0.1),
+        sensor=SensorSpec(3.0, 180.0, {"door": 4.0}),
+        feedback=FeedbackOptions("left_right", "imperial", 2),
+    )
+    assert from_plain(SessionSpec, to_plain(spec)) == spec
+    pf = ParticleFilter(OFFICE, FilterConfig(particles=500), rng=np.random.default_rng(0))
+    estimate = pf.step(WALK[1].odometry, WALK[1].detections)
+    narrator = Narrator(OFFICE)
+    feedback = narrator.update(estimate, WALK[1].detections, timestamp_s=0.2)
+    outcome = FrameOutcome(3, estimate, feedback, ("a warning",), ("Kitchen", None, None))
+    assert from_plain(FrameOutcome, to_plain(outcome)) == outcome
+    assert from_plain(FrameInput, to_plain(frame(3))) == frame(3)
+    # The journal's written-out encoding says the same as the generic one.
+    for f in (frame(3), FrameInput(), FrameInput(heading=CompassReading(1.0, 0.2))):
+        assert checkpoint._frame_plain(f) == to_plain(f)
+        assert checkpoint.decode_frame(checkpoint.encode_frame(7, f, 2)) == (7, f, 2)
+
+
+def test_from_plain_says_what_does_not_fit() -> None:
+    with pytest.raises(TypeError, match="expected a number"):
+        from_plain(InitialPose, {"x": "one", "y": 0.0, "theta_rad": 0.0})
+
+
+def test_filter_restored_from_its_checkpoint_goes_on_the_same_way() -> None:
+    config = FilterConfig(particles=4000)
+    a = ParticleFilter(OFFICE, config, rng=np.random.default_rng(3))
+    for i in range(40):
+        a.step(WALK[i].odometry, WALK[i].detections)
+    assert a.estimate.converged and a.n <= CHECKPOINT_PARTICLES
+    data = checkpoint.pack({"format": 1, "filter": a.checkpoint()})
+    assert len(data) < 64_000  # "a few tens of KB" (docs/SCALE.md sizes Redis with it)
+    b = ParticleFilter(OFFICE, config, rng=np.random.default_rng(99))
+    b.restore(checkpoint.unpack(data)["filter"])
+    assert b.estimate == a.estimate and b.n == a.n
+    for i in range(40, 60):
+        ea = a.step(WALK[i].odometry, WALK[i].detections)
+        eb = b.step(WALK[i].odometry, WALK[i].detections)
+        # Same particles up to float32 rounding, same random draws: the same path.
+        assert math.hypot(ea.x - eb.x, ea.y - eb.y) < 1e-3
+        assert ea.converged == eb.converged
+
+
+def test_a_lost_filter_is_checkpointed_on_a_subsample() -> None:
+    pf = ParticleFilter(OFFICE, FilterConfig(particles=10_000), rng=np.random.default_rng(1))
+    pf.step(WALK[0].odometry, WALK[0].detections)
+    state = pf.checkpoint()
+    assert state["x"].shape == (CHECKPOINT_PARTICLES,) and state["log_w"] is None
+    restored = ParticleFilter(OFFICE, FilterConfig(particles=10_000), rng=np.random.default_rng(2))
+    restored.restore(checkpoint.unpack(checkpoint.pack({"format": 1, "f": state}))["f"])
+    assert restored.n == CHECKPOINT_PARTICLES
+    restored.step(WALK[1].odometry, WALK[1].detections)
+    assert restored.n == 10_000  # lost again: grows back to the configured count
+
+
+def test_narrator_restored_does_not_repeat_itself() -> None:
+    pf = ParticleFilter(OFFICE, FilterConfig(particles=2000), rng=np.random.default_rng(3))
+    narrator = Narrator(OFFICE)
+    for i in range(30):
+        est = pf.step(WALK[i].odometry, WALK[i].detections)
+        narrator.update(est, WALK[i].detections, timestamp_s=WALK[i].t)
+    twin = Narrator(OFFICE)
+    twin.restore(checkpoint.unpack(checkpoint.pack({"format": 1, "n": narrator.checkpoint()}))["n"])
+    est = pf.step(WALK[30].odometry, WALK[30].detections)
+    said = narrator.update(est, WALK[30].detections, timestamp_s=WALK[30].t)
+    again = twin.update(est, WALK[30].detections, timestamp_s=WALK[30].t)
+    assert again == said
+    assert "Location found" not in again.text
+
+
+def test_bad_bytes_are_refused_with_a_reason() -> None:
+    with pytest.raises(checkpoint.BadCheckpoint, match="magic"):
+        checkpoint.unpack(b"not a checkpoint")
+    with pytest.raises(checkpoint.BadCheckpoint, match="format"):
+        checkpoint.unpack(checkpoint.pack({"format": 99}))
+
+
+def manager(store: MemoryStore, **overrides: object) -> SessionManager:
+    settings = make_settings(store_lease_s=0.3, checkpoint_interval_s=0.2, **overrides)
+    return SessionManager({"paper_office": OFFICE}, settings, Metrics(), store)
+
+
+SPEC = SessionSpec(map_name="paper_office", particles=3000, seed=4)
+
+
+def test_a_session_moves_between_workers_and_goes_on_exactly() -> None:
+    """Worker A serves 25 frames and dies without a word; B resumes the session from the
+    checkpoint and the journal and takes the very step A would have taken."""
+
+    async def main() -> None:
+        store = MemoryStore(shared=True)
+        a = manager(store)
+        sid = (await a.create(SPEC)).id
+        assert a.sessions() == []  # published, not kept: any worker may take it
+        with pytest.raises(SessionNotFound):
+            a.get(sid)
+        keeper = asyncio.create_task(a.sharing.run_keeper())
+        for i in range(25):
+            await a.process(sid, frame(i))
+            if i == 12:
+                await asyncio.sleep(0.45)  # let the keeper write a checkpoint mid-walk
+        keeper.cancel()
+        # The store as A would leave it if it died now: frames 14-25 only in the journal.
+        # (A goes on in the original store, to say what it would have answered.)
+        after_death = MemoryStore(shared=True)
+        after_death._values = {
+            k: (list(v) if isinstance(v, list) else v, t) for k, (v, t) in store._values.items()
+        }
+        out_a = await a.process(sid, frame(25))  # what A would have said
+        b = manager(after_death)
+        loop = asyncio.get_running_loop()
+        t0 = loop.time()
+        out_b = await b.process(sid, frame(25))  # waits for A's lease to run out (0.3 s)
+        waited = loop.time() - t0
+        assert out_b.seq == out_a.seq == 26
+        assert 0.2 < waited < 2.0
+        assert out_b.estimate == out_a.estimate and out_a.estimate.converged
+        assert out_b.feedback == out_a.feedback
+        assert b.metrics.sessions_resumed._value.get() == 1
+        for m in (a, b):
+            m.close()
+
+    asyncio.run(main())
+
+
+def test_a_worker_that_lost_its_lease_never_forks_the_session() -> None:
+    async def main() -> None:
+        store = MemoryStore(shared=True)
+        a, b = manager(store), manager(store)
+        sid = (await a.create(SPEC)).id
+        for i in range(3):
+            await a.process(sid, frame(i))
+        stale = a.get(sid)
+        await asyncio.sleep(0.35)  # A stalls past its lease; B takes the session on
+        assert (await b.process(sid, frame(3))).seq == 4
+        await asyncio.sleep(0.35)  # ... and goes quiet (its lease runs out too)
+        # A's copy (3 frames) is stale: its step is refused by the store (no fork), A
+        # drops the copy; sent again, the frame runs on the stored state, after B's.
+        with pytest.raises(SessionUnavailable, match="another worker"):
+            await a.process(sid, frame(4))
+        assert sid not in {s.id for s in a.sessions()}
+        out = await a.process(sid, frame(4))
+        assert out.seq == 5 and a.get(sid) is not stale
+        assert a.metrics.sessions_resumed._value.get() == 2
+        await b.delete(sid)
+        with pytest.raises(SessionNotFound):
+            await b.find(sid)
+        for m in (a, b):
+            m.close()
+
+    asyncio.run(main())
+
+
+def test_idle_sessions_are_let_go_and_shutdown_checkpoints_everything() -> None:
+    async def main() -> None:
+        store = MemoryStore(shared=True)
+        a, b = manager(store), manager(store)
+        a.sharing.handoff_idle_s = 0.2
+        sid = (await a.create(SPEC)).id
+        for i in range(5):
+            await a.process(sid, frame(i))
+        await asyncio.sleep(0.3)
+        await a.sharing.keep()
+        assert a.sessions() == []  # idle: checkpointed and released
+        got = await b.find(sid)
+        assert got.frames == 5 and b.sessions() == [got]
+        await b.process(sid, frame(5))
+        await b.sharing.shutdown()
+        assert b.sessions() == []
+        with pytest.raises(SessionUnavailable, match="shutting down"):
+            await b.find(sid)
+        resumed = await a.find(sid)  # released at shutdown: no wait
+        assert resumed.frames == 6
+        for m in (a, b):
+            m.close()
+
+    asyncio.run(main())
+
+
+def test_unknown_ids_are_not_found_through_the_store() -> None:
+    async def main() -> None:
+        m = manager(MemoryStore(shared=True))
+        with pytest.raises(SessionNotFound):
+            await m.find("no-such-session")
+        with pytest.raises(SessionNotFound):
+            await m.delete("no-such-session")
+        m.close()
+
+    asyncio.run(main())

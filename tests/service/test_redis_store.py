@@ -1,0 +1,149 @@
+"""The session stores: leases, fencing, journal, expiry; the same rules for the Redis
+store (against a real redis-server) and the in-process one.
+
+The Redis cases are skipped where redis-server is missing; required in CI (CI=true).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import time
+from collections.abc import Iterator
+
+import pytest
+import redis
+
+from app.service.store import (
+    MemoryStore,
+    RedisStore,
+    SessionStore,
+    StoreUnavailable,
+    open_store,
+)
+from tests.helpers import free_port, redis_server
+
+
+@pytest.fixture(scope="module")
+def url() -> Iterator[str]:
+    with redis_server() as u:
+        yield u
+
+
+@pytest.fixture(params=["redis", "memory"])
+def store(request: pytest.FixtureRequest) -> Iterator[SessionStore]:
+    if request.param == "memory":
+        yield MemoryStore(shared=True)
+        return
+    url = request.getfixturevalue("url")
+    redis.Redis.from_url(url).flushdb()
+    s = RedisStore(url)
+    yield s
+    s.close()
+
+
+def test_one_lease_at_a_time_and_it_runs_out(store: SessionStore) -> None:
+    assert store.acquire("s1", "w1", 0.3)
+    assert store.acquire("s1", "w1", 0.3)  # the holder keeps it
+    assert not store.acquire("s1", "w2", 0.3)
+    assert store.renew(["s1", "s2"], "w1", 0.3) == [True, False]
+    store.release(["s1"], "w2")  # not w2's to release
+    assert not store.acquire("s1", "w2", 0.3)
+    time.sleep(0.4)
+    assert store.acquire("s1", "w2", 0.3)
+    assert store.renew(["s1"], "w1", 0.3) == [False]
+    store.release(["s1"], "w2")
+    assert store.acquire("s1", "w1", 0.3)
+
+
+def test_writes_need_the_lease(store: SessionStore) -> None:
+    assert store.save([("s1", b"ckpt", 0)], "w1", 60) == [False]
+    assert not store.append("s1", b"1|{}", "w1", 60, 5).result(5)
+    assert store.load("s1") == (None, [])
+    assert store.acquire("s1", "w1", 5)
+    assert store.save([("s1", b"ckpt-0", 0)], "w1", 60) == [True]
+    stored = [store.append("s1", b"%d|{}" % i, "w1", 60, 5).result(5) for i in (1, 2, 3)]
+    assert stored == [True] * 3
+    assert store.load("s1") == (b"ckpt-0", [b"1|{}", b"2|{}", b"3|{}"])
+    # A checkpoint covering frame 2 drops the entries it covers, keeps the rest.
+    assert store.save([("s1", b"ckpt-2", 2)], "w1", 60) == [True]
+    assert store.load("s1") == (b"ckpt-2", [b"3|{}"])
+    assert store.save([("s1", b"other", 9)], "w2", 60) == [False]
+    assert store.load("s1")[0] == b"ckpt-2"
+    # Two writes overtaking each other: the older checkpoint does not replace the newer.
+    assert store.append("s1", b"4|{}", "w1", 60, 5).result(5)
+    assert store.save([("s1", b"ckpt-4", 4)], "w1", 60) == [True]
+    assert store.save([("s1", b"ckpt-3", 3)], "w1", 60) == [True]
+    assert store.load("s1") == (b"ckpt-4", [])
+
+
+def test_a_lapsed_lease_is_taken_back_only_if_nobody_went_on(store: SessionStore) -> None:
+    assert store.acquire("s1", "w1", 0.2)
+    assert store.save([("s1", b"ckpt-2", 2)], "w1", 60) == [True]
+    assert store.append("s1", b"3|{}", "w1", 60, 0.2).result(5)
+    time.sleep(0.3)  # w1 stalled: its lease ran out, nobody took the session
+    assert store.append("s1", b"4|{}", "w1", 60, 5).result(5)  # frames end at 3: ok
+    assert not store.acquire("s1", "w2", 5)  # and w1 holds the lease again
+    store.release(["s1"], "w1")
+    assert store.acquire("s1", "w2", 5)
+    assert store.append("s1", b"5|{}", "w2", 60, 5).result(5)
+    store.release(["s1"], "w2")
+    # w1 comes back with a copy that missed frame 5: refused, no fork.
+    assert not store.append("s1", b"5|{}", "w1", 60, 5).result(5)
+    assert store.load("s1")[1] == [b"3|{}", b"4|{}", b"5|{}"]
+
+
+def test_journal_entries_from_many_sessions_in_one_round_trip(store: SessionStore) -> None:
+    ids = [f"s{i}" for i in range(50)]
+    for sid in ids:
+        assert store.acquire(sid, "w1", 5)
+    done = [store.append(sid, b"1|x", "w1", 60, 5) for sid in ids for _ in range(3)]
+    assert all(f.result(5) for f in done)
+    assert all(len(store.load(sid)[1]) == 3 for sid in ids)
+
+
+def test_checkpoints_expire_after_the_idle_timeout(store: SessionStore) -> None:
+    assert store.acquire("s1", "w1", 5)
+    assert store.save([("s1", b"ckpt", 0)], "w1", 0.3) == [True]
+    assert store.append("s1", b"1|{}", "w1", 0.3, 5).result(5)
+    time.sleep(0.45)
+    assert store.load("s1") == (None, [])
+
+
+def test_delete_forgets_everything(store: SessionStore) -> None:
+    assert store.acquire("s1", "w1", 5)
+    store.save([("s1", b"ckpt", 0)], "w1", 60)
+    store.delete("s1")
+    assert store.load("s1") == (None, [])
+    assert store.acquire("s1", "w2", 5)
+
+
+def test_an_unreachable_store_says_where_it_looked() -> None:
+    port = free_port()
+    with pytest.raises(StoreUnavailable, match=f"127.0.0.1:{port}"):
+        open_store(f"redis://:secret@127.0.0.1:{port}/0")
+    try:
+        open_store(f"redis://:secret@127.0.0.1:{port}/0")
+    except StoreUnavailable as exc:
+        assert "secret" not in str(exc)
+    with pytest.raises(ValueError, match="neither 'memory'"):
+        open_store("postgres://x")
+
+
+def test_sessions_move_between_managers_through_redis(url: str) -> None:
+    """The manager-level handover of test_checkpoint.py, through a real Redis."""
+    from tests.service.test_checkpoint import SPEC, frame, manager
+
+    redis.Redis.from_url(url).flushdb()
+
+    async def main() -> None:
+        a, b = manager(RedisStore(url)), manager(RedisStore(url))
+        sid = (await a.create(SPEC)).id
+        for i in range(10):
+            assert (await a.process(sid, frame(i))).seq == i + 1
+        await a.sharing.shutdown()  # clean stop: checkpoint, release
+        out = await b.process(sid, frame(10))
+        assert out.seq == 11 and out.estimate.converged
+        for m in (a, b):
+            m.close()
+
+    asyncio.run(main())
