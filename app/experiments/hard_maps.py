@@ -13,7 +13,8 @@ hard on purpose:
 * ``twin_offices``: two identical offices off one corridor; only the corridor's two
   ends differ. The walk starts inside Office 1.
 * ``door_corridor``: a 40 m corridor with a door every 4 m on each side (staggered);
-  only its two ends differ, more than 15 m (the camera's range) from the middle.
+  only an extinguisher, a plant and the two ends differ (the ends lie on the axis, so
+  their bearings tell nothing about the position along it).
 * ``two_wings``: two 25 m wings of doors and windows joined by a hall, the second a
   translated copy of the first except for one object in each wing.
 """
@@ -30,13 +31,19 @@ from app.simulation.scenarios import PAPER_PATH
 
 @dataclass(frozen=True)
 class HardMap:
-    """A map, a walk on it, and where a kidnapper carries the person (x, y, deg)."""
+    """A map, a walk on it, and where a kidnapper carries the person (x, y, deg).
+
+    The simulator walks on from the kidnap pose straight to the next waypoint, so the
+    pose is chosen with that leg clear of walls.
+    """
 
     map: SemanticMap
     path: tuple[tuple[float, float], ...]
     kidnap_pose: tuple[float, float, float]
     #: True when nothing but a few objects breaks a symmetry of the map.
     symmetric: bool
+    #: When the kidnapper strikes (s).
+    kidnap_at_s: float = 30.0
 
 
 def _box(x0: float, y0: float, x1: float, y1: float) -> list[dict[str, float]]:
@@ -148,7 +155,7 @@ def twin_offices() -> HardMap:
         (17.0, 4.5),
         (19.0, 5.5),
     )
-    return HardMap(parse_map(spec), path, (15.0, 7.0, -90.0), True)
+    return HardMap(parse_map(spec), path, (16.0, 6.0, -90.0), True)
 
 
 def door_corridor() -> HardMap:
@@ -156,6 +163,9 @@ def door_corridor() -> HardMap:
     objects = [_obj("door", x, width) for x in range(2, 40, 4)]
     objects += [_obj("door", x, 0.0) for x in range(4, 40, 4)]
     objects += [_obj("window", 0.0, width / 2), _obj("exit", length, width / 2)]
+    # Two things off the corridor's axis that tell places apart when passed (its ends
+    # do not: from anywhere on the axis they lie straight ahead or straight behind).
+    objects += [_obj("extinguisher", 11.0, 0.0), _obj("plant", 27.0, width)]
     spec = {
         "name": "door_corridor",
         "walls": _box(0.0, 0.0, length, width),
@@ -199,12 +209,20 @@ def two_wings() -> HardMap:
         ],
     }
     path = ((25.0, 1.1), (5.0, 1.1), (1.5, 1.1), (1.5, 6.0))
-    return HardMap(parse_map(spec), path, (15.0, 11.1, 180.0), True)
+    return HardMap(parse_map(spec), path, (21.0, 1.1, 180.0), True)
 
 
 def paper_office() -> HardMap:
     semantic_map = load_map(bundled_maps_dir() / "paper_office.json")
     return HardMap(semantic_map, PAPER_PATH, (8.5, 5.0, 180.0), False)
+
+
+def building_floor() -> HardMap:
+    """The bundled two-wing office floor with the building suite's walk and kidnap."""
+    from app.experiments import building
+
+    semantic_map = load_map(bundled_maps_dir() / f"{building.MAP_NAME}.json")
+    return HardMap(semantic_map, building.WALK, building.KIDNAP_POSE, False, building.KIDNAP_AT_S)
 
 
 BUILDERS = {
@@ -215,6 +233,7 @@ BUILDERS = {
     "twin_offices": twin_offices,
     "door_corridor": door_corridor,
     "two_wings": two_wings,
+    "two_wing_office": building_floor,
 }
 
 _CACHE: dict[str, HardMap] = {}

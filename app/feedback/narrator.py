@@ -46,6 +46,8 @@ MIN_GAP_S = 2.0
 MIN_ALTERNATIVE_WEIGHT = 0.1
 #: Above this position std (m) distances are hedged with "roughly".
 CERTAIN_STD_M = 0.25
+#: ... and above this protection radius (m): converged, but the belief a little wider.
+CERTAIN_PROTECTION_M = 1.0
 
 
 @dataclass(frozen=True)
@@ -204,7 +206,9 @@ class Narrator:
         fov: tuple[float, float],
     ) -> Feedback:
         opts = self.options
-        certain = max(estimate.std_x_m, estimate.std_y_m) <= CERTAIN_STD_M
+        certain = max(estimate.std_x_m, estimate.std_y_m) <= CERTAIN_STD_M and (
+            estimate.protection_m is None or estimate.protection_m <= CERTAIN_PROTECTION_M
+        )
         ordered = self._ordered_objects(estimate, dets, fov)
         pose_xy = np.array([estimate.x, estimate.y])
         items: list[FeedbackItem] = []

@@ -297,9 +297,11 @@ class ConvergenceGate:
     no frame that most detections contradict), dead reckoning has not lasted longer
     than ``hold_without_evidence`` frames, the odometry has not broken off (a frame
     without it after frames with it: the person may have been carried anywhere), and
-    the alternatives stay below ``hold_alternatives``. A false detection explained by
-    clutter does not count against the estimate; a kidnap, a pose drifting away from
-    the evidence, or an alternative place gaining probability does.
+    the alternatives stay below ``hold_alternatives`` (counting those that survived
+    their probation). Only frames with detections count towards a light cluster
+    (frames without any leave freshly injected particles unweighed). A false detection
+    explained by clutter does not count against the estimate; a kidnap, a pose
+    drifting away from the evidence, or an alternative place gaining probability does.
     """
 
     gain_fit: float = 2.0
@@ -332,6 +334,7 @@ class ConvergenceGate:
         self._last: Estimate | None = None
         self._held = False
         self._light = 0
+        self.lost_because: tuple[str, ...] = ()
 
     def checkpoint(self) -> dict[str, Any]:
         """The gate's memory, as plain data."""
@@ -358,6 +361,8 @@ class ConvergenceGate:
         alternatives: float = 0.0,
         searched_ago: int | None = 0,
         motion_lost: bool = False,
+        confirmed_alternatives: float | None = None,
+        evidence_frame: bool = True,
     ) -> Estimate:
         """``raw`` with ``converged`` decided by the rules above."""
         last = self._last
@@ -367,23 +372,29 @@ class ConvergenceGate:
         if self._held:
             top = raw.hypotheses[0] if raw.hypotheses else None
             light = top is None or top.weight < self.hold_mass
-            self._light = self._light + 1 if light else 0
-            self._held = (
-                top is not None
-                and self._light < self.hold_light_frames
-                and max(raw.std_x_m, raw.std_y_m) <= self.hold_std_xy_m
-                and raw.std_theta_rad <= self.hold_std_theta_rad
-                and step <= moved_m + self.hold_jump_m
-                and quality is not None
-                and quality.fit <= self.hold_fit
-                and quality.unexplained <= self.hold_unexplained
-                and not quality.bad_frame
-                and frames_without_evidence <= self.hold_without_evidence
-                and alternatives <= self.hold_alternatives
-                and not motion_lost
-            )
+            if light and evidence_frame:
+                self._light += 1
+            elif not light:
+                self._light = 0
+            against = alternatives if confirmed_alternatives is None else confirmed_alternatives
+            reasons = {
+                "light": top is None or self._light >= self.hold_light_frames,
+                "wide": max(raw.std_x_m, raw.std_y_m) > self.hold_std_xy_m
+                or raw.std_theta_rad > self.hold_std_theta_rad,
+                "jump": step > moved_m + self.hold_jump_m,
+                "misfit": quality is None
+                or quality.fit > self.hold_fit
+                or quality.unexplained > self.hold_unexplained,
+                "bad frame": quality is not None and quality.bad_frame,
+                "dead reckoning": frames_without_evidence > self.hold_without_evidence,
+                "alternative": against > self.hold_alternatives,
+                "odometry lost": motion_lost,
+            }
+            self._held = not any(reasons.values())
             if not self._held:
                 self._streak = 0
+                #: Why ``converged`` was last lost (for diagnostics and the suite).
+                self.lost_because = tuple(k for k, v in reasons.items() if v)
             return replace(raw, converged=self._held)
         fits = (
             quality is not None

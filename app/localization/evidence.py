@@ -3,36 +3,44 @@
 A particle filter's weight share says nothing about a mode that resampling has
 already killed: in a symmetric or repetitive building the mirror mode dies by chance,
 not by evidence. So besides the filter's own cloud (the *main* belief), this module
-keeps a small set of **alternative hypotheses**, each a little particle cloud of its own
-with the accumulated log-likelihood ratio ``llr`` of everything observed since it was
-found, against the main belief:
+keeps a small set of **alternative hypotheses**, each with the accumulated
+log-likelihood ratio ``llr`` of everything observed since it was found, against the
+main belief:
 
+* **The anchor.** A cloud of ``particles`` poses drawn from the filter's heaviest
+  cluster, tracked like a little filter (same motion model, same compiled sensor
+  kernel, resampled every frame) and redrawn when it drifts off that cluster.
+* **Alternatives are rigid motions of the anchor.** An alternative is the rigid motion
+  (turn, shift) that carries the anchor onto another place. A rigid motion of the map
+  commutes with body-frame odometry, so the carried cloud moves exactly as the anchor
+  does; each frame its evidence is the log of the mean likelihood of the carried
+  particles (moves through walls included), and ``llr`` gains the difference to the
+  anchor's. Both sides of the ratio use the *same* particles: under an exact symmetry
+  of the map the two are equal to rounding (independent small clouds drifted apart by
+  units of evidence within seconds), and the cost is one kernel call over the anchor
+  and its copies.
 * **Found** by a periodic global consistency search (every ``search_every`` frames while
-  the main belief is a tight mode): candidate poses all over the free space with the
-  heading that points one detection at an object of its class (as in sensor
-  resetting), scored with the compiled sensor kernel on the current frame; the best
-  are refined and scored again on the last ``window`` frames, chained back by the
-  odometry. A candidate away from the main mode whose window evidence is within
-  ``seed_llr`` of the main mode's (scored the same way) becomes an alternative, its
-  ``llr`` starting at that difference. The window forgets what came before it; the
-  earlier searches did not: once the main mode has been searched against, a place
-  they did not find was at most ``seed_llr`` as likely as the main mode then, so a
-  newcomer starts with that prior added (the first search of a mode adds none).
-* **Tracked** every frame like the filter: moved with the same odometry and motion
-  model, weighted by the same sensor kernel. Its frame evidence (the log of its
-  prior-weighted mean likelihood, moves through walls included) minus the main
-  belief's is added to ``llr``; so evidence for and against accumulates over the whole
-  walk, at a few hundred particles per alternative. The main belief's frame evidence
-  comes from an *anchor*: a cloud of the same size drawn from the filter's heaviest
-  cluster and tracked the same way (redrawn whenever it leaves that cluster), so that
-  both sides of the ratio carry the same small-sample bias (a log of a mean of a few
-  hundred peaked likelihoods is biased low; against the filter's thousands of
-  particles it drifted a true alternative down by about one unit a second).
-* **Dropped** only when its evidence against falls below ``drop_llr``, or when the
-  main belief has come to cover it.
-* **Swapped** with the main belief when its evidence for exceeds ``switch_llr``: the
+  the main mode is tight): candidate poses all over the free space with the heading
+  that points one detection at an object of its class (as in sensor resetting), scored
+  on the current frame; the best are refined and scored on the last ``window`` frames
+  chained back by the odometry, then polished by a deterministic pattern search, as
+  are the main mode and every tracked alternative (the motions are re-fitted, so a
+  copy a few centimetres off does not lose evidence for nothing). A finalist away
+  from the main mode whose window evidence is within ``seed_llr`` of the main mode's
+  becomes an alternative, if the main mode's whole walk so far, carried onto it, stays
+  in the free space (the odometry is the same for both: a shifted copy of a walk
+  through a corridor's far end is no alternative). It starts at its window
+  difference, never ahead (the best of thousands fits by selection), plus a prior:
+  once the main mode has been searched against, a place earlier searches did not find
+  was at most ``seed_llr`` as likely then. Places dropped earlier are remembered (as
+  motions relative to the main mode) and not found again as newcomers.
+* **Dropped** only when the evidence against falls below ``drop_llr`` (or every copy
+  walks through a wall), or when the main belief has come to cover the place.
+* **Swapped** with the main belief when the evidence for exceeds ``switch_llr``: the
   filter's cloud is replaced by the alternative's, and the old main mode becomes an
-  alternative carrying the opposite evidence.
+  alternative carrying the opposite evidence. When the filter's heaviest cluster moves
+  to another place by itself, the ratios are re-expressed against it (or the old place
+  becomes an alternative at even odds), never silently re-referenced.
 
 The probability of the alternatives under the whole belief, ``e^llr / (1 + sum e^llr)``
 summed (the main belief's prior counted equal to each alternative's), gates
@@ -80,24 +88,34 @@ class EvidenceSettings:
     max_candidates: int = 6_000
     #: Best candidates refined and scored on the window.
     shortlist: int = 32
-    #: Jittered copies per refinement round: (count, position std m, heading std rad).
-    refine: tuple[tuple[int, float, float], ...] = (
-        (16, 0.2, float(np.radians(5.0))),
-        (16, 0.07, float(np.radians(2.0))),
-        (16, 0.025, float(np.radians(0.7))),
-    )
-    #: Particles per alternative.
-    particles: int = 200
-    #: Spread of a new alternative's cloud (m, rad).
-    seed_std_m: float = 0.1
-    seed_std_rad: float = float(np.radians(2.0))
-    max_alternatives: int = 6
+    #: Jittered copies per coarse refinement round of the shortlist: (count, position
+    #: std m, heading std rad).
+    refine: tuple[tuple[int, float, float], ...] = ((16, 0.2, float(np.radians(5.0))),)
+    #: The best ``finalists`` (distinct places) are then refined finely, and so is the
+    #: main mode: a newcomer placed 0.2 m off would start several units of evidence
+    #: behind a main mode that the filter has had time to centre.
+    finalists: int = 6
+    #: Pattern search that polishes a pose (the finalists, the main mode, every
+    #: alternative): first steps (m, rad), halved this many times. Deterministic, so
+    #: that the two sides of an exact symmetry land on exactly symmetric poses.
+    polish_step_m: float = 0.08
+    polish_step_rad: float = float(np.radians(2.0))
+    polish_rounds: int = 6
+    #: Particles of the anchor (each alternative carries a copy).
+    particles: int = 150
+    max_alternatives: int = 8
+    #: Frames an alternative is tracked before it can take ``converged`` away.
+    probation: int = 5
     #: A candidate within this log-evidence of the main mode over the window is kept.
     seed_llr: float = -6.0
     #: An alternative whose evidence against falls below this is dropped.
-    drop_llr: float = -12.0
+    drop_llr: float = -20.0
     #: An alternative this much more likely than the main belief replaces it.
     switch_llr: float = float(np.log(20.0))
+    #: Frames of the main mode's walk kept to test a newcomer against (60 s).
+    trail: int = 300
+    #: Dropped alternatives remembered (while the main mode stays the same).
+    max_graves: int = 32
     #: Distinct from the main mode (and from each other) beyond these.
     distinct_m: float = 1.0
     distinct_rad: float = float(np.radians(45.0))
@@ -148,11 +166,17 @@ class EvidenceTracker:
 
     def reset(self) -> None:
         """Forget every alternative and the history (a new start)."""
-        p = self.settings.particles
-        self.x = np.empty((0, p))
-        self.y = np.empty((0, p))
-        self.theta = np.empty((0, p))
+        #: Per alternative, the rigid motion (turn, shift x, shift y) that carries the
+        #: anchor onto it, shape (A, 3).
+        self.moves = np.empty((0, 3))
         self.llr = np.empty(0)
+        #: Frames each alternative has been tracked.
+        self.age = np.empty(0, dtype=np.int64)
+        #: Rigid motions of alternatives dropped by the evidence while the main mode
+        #: stayed the same: found again, they are known dead, not newcomers.
+        self._graves = np.empty((0, 3))
+        #: The main mode's positions since it formed (the walk so far, as it believes).
+        self._trail: deque[tuple[float, float]] = deque(maxlen=self.settings.trail)
         #: The anchor cloud of the main belief, rows x, y, theta; None until drawn.
         self._anchor: NDArray[np.float64] | None = None
         self._history: deque[tuple[Odometry | None, Observation, CompassReading | None]] = deque(
@@ -169,13 +193,15 @@ class EvidenceTracker:
 
     # ---------------------------------------------------------- checkpoints
     def checkpoint(self) -> dict[str, Any]:
-        """The alternatives, the anchor and the recent frames (a window of prepared
-        observations), as plain data and arrays; the random generator is the filter's."""
+        """The anchor, the alternatives (motions, evidence, ages), the dropped ones, the
+        main mode's trail and the recent frames (prepared observations), as plain data
+        and arrays; the random generator is the filter's."""
         return {
-            "x": self.x,
-            "y": self.y,
-            "theta": self.theta,
+            "moves": self.moves,
             "llr": self.llr,
+            "age": self.age,
+            "graves": self._graves,
+            "trail": [list(p) for p in self._trail],
             "anchor": self._anchor,
             "history": [
                 [to_plain(odo), to_plain(obs), to_plain(compass)]
@@ -191,18 +217,21 @@ class EvidenceTracker:
 
     def restore(self, state: Mapping[str, Any]) -> None:
         """Continue from a :meth:`checkpoint` of a tracker with the same map and config."""
-        self.x, self.y, self.theta, self.llr = (
-            np.array(state[k], dtype=np.float64) for k in ("x", "y", "theta", "llr")
-        )
+        self.moves = np.array(state["moves"], dtype=np.float64).reshape(-1, 3)
+        self.llr = np.array(state["llr"], dtype=np.float64)
+        self.age = np.array(state["age"], dtype=np.int64)
+        self._graves = np.array(state["graves"], dtype=np.float64).reshape(-1, 3)
+        self._trail.clear()
+        self._trail.extend((float(x), float(y)) for x, y in state["trail"])
         anchor = state["anchor"]
         self._anchor = None if anchor is None else np.array(anchor, dtype=np.float64)
         self._history.clear()
-        for odo, obs, *compass in state["history"]:  # older checkpoints hold no compass
+        for odo, obs, compass in state["history"]:
             self._history.append(
                 (
                     from_plain(Odometry | None, odo),
                     from_plain(Observation, obs),
-                    from_plain(CompassReading | None, compass[0]) if compass else None,
+                    from_plain(CompassReading | None, compass),
                 )
             )
         self._since_search = int(state["since_search"])
@@ -230,35 +259,45 @@ class EvidenceTracker:
         """Probability that the person is at one of the alternatives, not the main mode."""
         return float(self.probabilities().sum())
 
+    @property
+    def confirmed_share(self) -> float:
+        """:attr:`alternative_share` of the alternatives tracked for ``probation`` frames.
+
+        The best of thousands of candidates fits a short window better than a typical
+        look-alike would, by selection alone; one that then keeps its evidence for a
+        second of tracking is a real competitor.
+        """
+        p = self.probabilities()
+        return float(p[self.age >= self.settings.probation].sum())
+
+    def clouds(self) -> tuple[NDArray[np.float64], ...]:
+        """The alternatives' clouds (the anchor carried onto each), each shape (A, P)."""
+        assert self._anchor is not None
+        return _carry(self.moves, *self._anchor)
+
     def hypotheses(self) -> list[Hypothesis]:
         """One :class:`Hypothesis` per alternative, weight = its probability."""
-        out = []
-        for a, p in enumerate(self.probabilities()):
-            c, s = np.cos(self.theta[a]).mean(), np.sin(self.theta[a]).mean()
-            spread = float(np.hypot(self.x[a].std(), self.y[a].std()))
-            out.append(
-                Hypothesis(
-                    float(self.x[a].mean()),
-                    float(self.y[a].mean()),
-                    float(np.arctan2(s, c)),
-                    float(p),
-                    spread,
-                )
-            )
-        return out
+        if not self.count or self._anchor is None:
+            return []
+        cx, cy, ct = self._centres()
+        spread = float(np.hypot(self._anchor[0].std(), self._anchor[1].std()))
+        return [
+            Hypothesis(float(cx[i]), float(cy[i]), float(ct[i]), float(p), spread)
+            for i, p in enumerate(self.probabilities())
+        ]
 
     def farthest_m(self, x: float, y: float) -> float:
         """Distance from (x, y) that holds every alternative's particles."""
-        if not self.count:
+        if not self.count or self._anchor is None:
             return 0.0
-        return float(np.max(np.hypot(self.x - x, self.y - y)))
+        ax, ay, _ = self.clouds()
+        return float(np.max(np.hypot(ax - x, ay - y)))
 
     # ------------------------------------------------------------ one frame
     def update(
         self,
         odometry: Odometry | None,
         obs: Observation,
-        main_log_evidence: float,
         main: Hypothesis | None,
         main_tight: bool,
         particles: tuple[NDArray[np.float64], ...],
@@ -269,129 +308,185 @@ class EvidenceTracker:
         Args:
             odometry: this frame's odometry (as given to the filter).
             obs: this frame's observation (may be empty: no evidence).
-            main_log_evidence: the main belief's log evidence for this frame (its
-                prior-weighted mean likelihood, moves through walls included).
             main: the main belief's heaviest mode, None when it has none.
             main_tight: whether the main mode is tight enough to search against.
             particles: the filter's x, y, theta and normalized weights (to draw the
                 anchor from).
-            heading: this frame's compass reading, evidence about every cloud's heading
-                like the detections (app.localization.compass), or None.
+            heading: this frame's compass reading, weighed like the filter does.
         """
         # Frames without detections are kept too: their odometry chains the window.
         self._history.append((odometry, obs, heading))
         if self.searched_ago is not None:
             self.searched_ago += 1
-        if self.count or self._anchor is not None:
-            self._track(odometry, obs, main_log_evidence, heading)
+        if self._anchor is not None:
+            self._track(odometry, obs, heading)
         if main is not None:
+            self._follow_main(main, particles)
             self._forget_covered(main)
-            self._keep_anchor(main, particles)
         last, self._last_main = self._last_main, main
         if (
             not main_tight
             or main is None
             or last is None
             or odometry is None
-            or not self._near(
-                np.array([main.x]), np.array([main.y]), np.array([main.theta_rad]), last
-            )[0]
+            or not _near(main.x, main.y, main.theta_rad, last, self.settings)
         ):
-            # A new main mode (or none): its searches start again.
+            # A new main mode (or none): its searches, its dead and its walk start again.
             self.mode_searches = 0
+            self._graves = np.empty((0, 3))
+            self._trail.clear()
+        if main is not None:
+            self._trail.append((main.x, main.y))
         self._since_search += 1
         if (
             main is not None
             and main_tight
+            and self._anchor is not None
             and not obs.empty
             and self._since_search >= self.settings.search_every
         ):
             self._search(main)
         return bool(self.count and self.llr.max() >= self.settings.switch_llr)
 
-    def _keep_anchor(self, main: Hypothesis, particles: tuple[NDArray[np.float64], ...]) -> None:
-        """Redraw the anchor from the filter's heaviest cluster when it has left it."""
-        st = self.settings
-        if self._anchor is not None:
-            c = self._anchor
-            mean_t = np.arctan2(np.sin(c[2]).mean(), np.cos(c[2]).mean())
-            if (
-                np.hypot(c[0].mean() - main.x, c[1].mean() - main.y) < st.distinct_m / 2
-                and abs(float(wrap_angle(mean_t - main.theta_rad))) < st.distinct_rad / 2
-            ):
-                return
-        x, y, t, w = particles
-        near = self._near(x, y, t, main)
-        w = np.where(near, w, 0.0)
-        if w.sum() <= 0.0:
-            self._anchor = None
-            return
-        idx = systematic_resample(w / w.sum(), st.particles, self.rng)
-        self._anchor = np.vstack([x[idx], y[idx], t[idx]])
-
     def _track(
-        self,
-        odometry: Odometry | None,
-        obs: Observation,
-        main_ev: float,
-        heading: CompassReading | None = None,
+        self, odometry: Odometry | None, obs: Observation, heading: CompassReading | None
     ) -> None:
-        anchored = self._anchor is not None
-        rows = [self.x, self.y, self.theta]
-        if self._anchor is not None:
-            rows = [np.vstack([self._anchor[k][None], rows[k]]) for k in range(3)]
-        a, p = rows[0].shape
-        fx, fy, ft = (v.reshape(-1) for v in rows)
-        nx, ny, nt = sample_motion(fx, fy, ft, odometry, self.config, self.rng)
-        log_w = motion_log_penalty(fx, fy, nx, ny, self.map)
+        """Move the anchor by the odometry; weigh it and its carried copies."""
+        assert self._anchor is not None
+        x0, y0, t0 = self._anchor
+        nx, ny, nt = sample_motion(x0, y0, t0, odometry, self.config, self.rng)
+        a, p = self.count, x0.size
+        # The copies move with the same body-frame motion: a rigid motion of the map
+        # commutes with it, so the carried cloud is the moved cloud carried.
+        sx, sy, _ = _carry(self.moves, x0, y0, t0)
+        ex, ey, et = _carry(self.moves, nx, ny, nt)
+        fx = np.concatenate([nx, ex.reshape(-1)])
+        fy = np.concatenate([ny, ey.reshape(-1)])
+        ft = np.concatenate([nt, et.reshape(-1)])
+        log_w = motion_log_penalty(
+            np.concatenate([x0, sx.reshape(-1)]), np.concatenate([y0, sy.reshape(-1)]),
+            fx, fy, self.map,
+        )  # fmt: skip
         if not obs.empty:
             log_w = log_w + sensor_kernel.log_likelihood(
-                nx, ny, nt, obs, self.map, self.config, self.grid
+                fx, fy, ft, obs, self.map, self.config, self.grid
             )
         if heading is not None:
-            log_w = log_w + compass_log_likelihood(nt, heading)
-        log_w = log_w.reshape(a, p)
+            log_w = log_w + compass_log_likelihood(ft, heading)
+        log_w = log_w.reshape(a + 1, p)
         ev = _log_mean_exp_rows(log_w)
-        if anchored and np.isfinite(ev[0]):
-            main_ev = float(ev[0])
-        first = 1 if anchored else 0
-        self.llr = self.llr + (ev[first:] - main_ev)
-        alive = np.isfinite(ev)
-        alive[first:] &= self.llr >= self.settings.drop_llr
-        # Resample each alternative's cloud on its own (systematic, equal weights after).
-        nx, ny, nt = (v.reshape(a, p) for v in (nx, ny, nt))
-        for i in np.flatnonzero(alive):
-            w = np.exp(log_w[i] - ev[i]) / p
-            idx = systematic_resample(w / w.sum(), p, self.rng)
-            nx[i], ny[i], nt[i] = nx[i, idx], ny[i, idx], nt[i, idx]
-        if anchored:
-            self._anchor = np.vstack([nx[0], ny[0], nt[0]]) if alive[0] else None
-        keep = alive[first:]
-        self.x, self.y, self.theta = nx[first:][keep], ny[first:][keep], nt[first:][keep]
-        self.llr = self.llr[keep]
+        if not np.isfinite(ev[0]):
+            self._anchor = None  # the anchor walked through a wall: draw it again
+            return
+        self.llr = self.llr + (ev[1:] - ev[0])
+        self.age = self.age + 1
+        keep = np.isfinite(ev[1:]) & (self.llr >= self.settings.drop_llr)
+        graves = np.vstack([self._graves, self.moves[~keep]])
+        self._graves = graves[-self.settings.max_graves :]
+        self._keep(keep)
+        w = np.exp(log_w[0] - log_w[0].max())
+        idx = systematic_resample(w / w.sum(), p, self.rng)
+        self._anchor = np.vstack([nx[idx], ny[idx], nt[idx]])
+
+    def _keep(self, keep: NDArray[np.bool_]) -> None:
+        self.moves, self.llr, self.age = self.moves[keep], self.llr[keep], self.age[keep]
+
+    def _anchor_pose(self) -> tuple[float, float, float]:
+        assert self._anchor is not None
+        x, y, t = self._anchor
+        return (
+            float(x.mean()),
+            float(y.mean()),
+            float(np.arctan2(np.sin(t).mean(), np.cos(t).mean())),
+        )
 
     def _centres(self) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
-        c = np.cos(self.theta).mean(axis=1)
-        s = np.sin(self.theta).mean(axis=1)
-        return self.x.mean(axis=1), self.y.mean(axis=1), np.arctan2(s, c)
+        """Each alternative's centre pose (x, y, theta), each shape (A,)."""
+        ax, ay, at = self._anchor_pose()
+        cx, cy, ct = _carry(self.moves, np.array([ax]), np.array([ay]), np.array([at]))
+        return cx[:, 0], cy[:, 0], ct[:, 0]
 
-    def _near(
-        self, x: NDArray[np.float64], y: NDArray[np.float64], t: NDArray[np.float64], h: Hypothesis
-    ) -> NDArray[np.bool_]:
+    def _set_anchor(self, cloud: NDArray[np.float64]) -> None:
+        """Replace the anchor, leaving every alternative's place where it was."""
+        old = self._anchor
+        places = self._centres() if old is not None and self.count else None
+        self._anchor = cloud
+        if places is not None:
+            self.moves = _moves_onto(self._anchor_pose(), *places)
+
+    def _draw_anchor(self, main: Hypothesis, particles: tuple[NDArray[np.float64], ...]) -> bool:
+        """Draw the anchor from the filter's particles of the main mode; False if none."""
+        x, y, t, w = particles
+        w = np.where(_near(x, y, t, main, self.settings), w, 0.0)
+        if w.sum() <= 0.0:
+            return False
+        idx = systematic_resample(w / w.sum(), self.settings.particles, self.rng)
+        self._set_anchor(np.vstack([x[idx], y[idx], t[idx]]))
+        return True
+
+    def _follow_main(self, main: Hypothesis, particles: tuple[NDArray[np.float64], ...]) -> None:
+        """Keep the anchor on the filter's heaviest cluster, and the ratios meaningful.
+
+        The anchor is redrawn from the cluster when it has drifted from it (same place).
+        When the filter's heaviest cluster moves to another place, the evidence is not
+        re-referenced silently: if that place is an alternative, the two swap roles and
+        every ratio is re-expressed against it; otherwise the old anchor's place becomes
+        an alternative with even odds, and evidence decides between them from now on.
+        """
         st = self.settings
-        return (np.hypot(x - h.x, y - h.y) < st.distinct_m) & (
-            np.abs(wrap_angle(t - h.theta_rad)) < st.distinct_rad
-        )
+        if self._anchor is None:
+            self._draw_anchor(main, particles)
+            return
+        ax, ay, at = self._anchor_pose()
+        anchor = Hypothesis(ax, ay, at, 0.0)
+        if _near(main.x, main.y, main.theta_rad, anchor, st):
+            close = (
+                np.hypot(ax - main.x, ay - main.y) < st.distinct_m / 2
+                and abs(float(wrap_angle(at - main.theta_rad))) < st.distinct_rad / 2
+            )
+            if not close:
+                self._draw_anchor(main, particles)
+            return
+        hit = np.flatnonzero(_near(*self._centres(), main, st)) if self.count else np.empty(0)
+        if hit.size:
+            self._make_main(int(hit[np.argmax(self.llr[hit])]))
+            return
+        if self._draw_anchor(main, particles):
+            # The old anchor's place, now an alternative, carried from the new anchor.
+            back = _moves_onto(self._anchor_pose(), np.array([ax]), np.array([ay]), np.array([at]))
+            self._append(back[0], 0.0)
+
+    def _make_main(self, i: int) -> None:
+        """Alternative ``i`` becomes the main mode; the old main an alternative."""
+        ax, ay, at = self._anchor_pose()
+        shift = float(self.llr[i])
+        assert self._anchor is not None
+        cx, cy, ct = _carry(self.moves[i : i + 1], *self._anchor)
+        places = self._centres()
+        self._anchor = np.vstack([cx[0], cy[0], ct[0]])
+        px, py, pt = (v.copy() for v in places)
+        px[i], py[i], pt[i] = ax, ay, at
+        self.moves = _moves_onto(self._anchor_pose(), px, py, pt)
+        self.llr = self.llr - shift
+        self.llr[i] = -shift
+        self.age[i] = 0
+        self.mode_searches = 0
+        self._graves = np.empty((0, 3))
+
+    def _near_any(self, h: Hypothesis) -> bool:
+        """Whether ``h`` is a tracked alternative's place, or a dropped one's."""
+        if self.count and _near(*self._centres(), h, self.settings).any():
+            return True
+        if not self._graves.shape[0]:
+            return False
+        ax, ay, at = (np.array([v]) for v in self._anchor_pose())
+        gx, gy, gt = _carry(self._graves, ax, ay, at)
+        return bool(_near(gx[:, 0], gy[:, 0], gt[:, 0], h, self.settings).any())
 
     def _forget_covered(self, main: Hypothesis) -> None:
         """Drop alternatives the main mode has come to cover (the filter holds them)."""
-        if not self.count:
-            return
-        x, y, t = self._centres()
-        keep = ~self._near(x, y, t, main)
-        self.x, self.y, self.theta, self.llr = (
-            self.x[keep], self.y[keep], self.theta[keep], self.llr[keep]
-        )  # fmt: skip
+        if self.count and self._anchor is not None:
+            self._keep(~_near(*self._centres(), main, self.settings))
 
     # --------------------------------------------------------------- search
     def window_score(
@@ -415,12 +510,19 @@ class EvidenceTracker:
         return total
 
     def _refined(
-        self, x: NDArray[np.float64], y: NDArray[np.float64], t: NDArray[np.float64]
-    ) -> tuple[NDArray[np.float64], ...]:
-        """Each pose moved to the best of its jittered copies over the window."""
+        self,
+        x: NDArray[np.float64],
+        y: NDArray[np.float64],
+        t: NDArray[np.float64],
+        rounds: tuple[tuple[int, float, float], ...] | None,
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+        """Each pose moved to the best of its jittered copies over the window (``rounds``
+        of random jitter), or polished by pattern search (``rounds`` None)."""
+        if rounds is None:
+            return self._polished(x, y, t)
         score = self.window_score(x, y, t)
         m = x.shape[0]
-        for count, std_m, std_rad in self.settings.refine:
+        for count, std_m, std_rad in rounds:
             jx = x[:, None] + self.rng.normal(0.0, std_m, (m, count))
             jy = y[:, None] + self.rng.normal(0.0, std_m, (m, count))
             jt = wrap_angle(t[:, None] + self.rng.normal(0.0, std_rad, (m, count)))
@@ -438,6 +540,33 @@ class EvidenceTracker:
             score = np.where(better, js[np.arange(m), best], score)
         return x, y, t, score
 
+    def _polished(
+        self, x: NDArray[np.float64], y: NDArray[np.float64], t: NDArray[np.float64]
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+        """Pattern search over the window: each round tries the 27 steps of -1, 0, +1 in
+        x, y and heading around each pose, moves to the best, and halves the steps."""
+        st = self.settings
+        m = x.shape[0]
+        grid = np.array(np.meshgrid([-1.0, 0.0, 1.0], [-1.0, 0.0, 1.0], [-1.0, 0.0, 1.0]))
+        dx, dy, dt = (g.reshape(-1) for g in grid)  # 27 steps, (0, 0, 0) among them
+        step_m, step_rad = st.polish_step_m, st.polish_step_rad
+        score = self.window_score(x, y, t)
+        for _ in range(st.polish_rounds):
+            jx = x[:, None] + step_m * dx[None, :]
+            jy = y[:, None] + step_m * dy[None, :]
+            jt = wrap_angle(t[:, None] + step_rad * dt[None, :])
+            js = self.window_score(jx.reshape(-1), jy.reshape(-1), jt.reshape(-1)).reshape(m, 27)
+            js = np.where(self.map.free_space.is_free(jx, jy), js, -np.inf)
+            best = np.argmax(js, axis=1)
+            rows = np.arange(m)
+            better = js[rows, best] > score
+            x = np.where(better, jx[rows, best], x)
+            y = np.where(better, jy[rows, best], y)
+            t = np.where(better, jt[rows, best], t)
+            score = np.maximum(score, js[rows, best])
+            step_m, step_rad = step_m / 2.0, step_rad / 2.0
+        return x, y, t, score
+
     def _search(self, main: Hypothesis) -> None:
         """One global consistency search (module docstring); may add alternatives."""
         st = self.settings
@@ -447,103 +576,143 @@ class EvidenceTracker:
         prior = st.seed_llr if self.mode_searches else 0.0
         self.mode_searches += 1
         obs = self._history[-1][1]
+        mx, my, mt, ms = self._refined(
+            np.array([main.x]), np.array([main.y]), np.array([main.theta_rad]), None
+        )
+        self._recentre(float(mx[0]), float(my[0]), float(mt[0]))
         fs = self.map.free_space
         area = fs.free_cells.size * fs.resolution_m**2
         n = int(np.clip(st.candidates_per_m2 * area, st.min_candidates, st.max_candidates))
         cx, cy, ct = sample_from_observation(
             n, obs, self.map, self.rng, self.config.bearing_std_rad("")
         )
-        away = ~self._near(cx, cy, ct, main)
+        away = ~_near(cx, cy, ct, main, st)
         cx, cy, ct = cx[away], cy[away], ct[away]
         if not cx.size:
             return
         score = sensor_kernel.log_likelihood(cx, cy, ct, obs, self.map, self.config, self.grid)
         k = min(st.shortlist, cx.size)
         top = np.argpartition(-score, k - 1)[:k]
-        rx, ry, rt, rs = self._refined(cx[top], cy[top], ct[top])
-        mx, my, mt, ms = self._refined(
-            np.array([main.x]), np.array([main.y]), np.array([main.theta_rad])
-        )
+        rx, ry, rt, rs = self._refined(cx[top], cy[top], ct[top], st.refine)
+        picked: list[int] = []
+        for i in np.argsort(-rs):
+            h = Hypothesis(float(rx[i]), float(ry[i]), float(rt[i]), 0.0)
+            if not np.isfinite(rs[i]) or len(picked) >= st.finalists:
+                break
+            if picked and _near(rx[picked], ry[picked], rt[picked], h, st).any():
+                continue
+            picked.append(int(i))
+        if not picked:
+            return
+        rx, ry, rt, rs = self._refined(rx[picked], ry[picked], rt[picked], None)
         main_score = float(ms[0])
-        order = np.argsort(-rs)
-        ex, ey, et = self._centres() if self.count else (np.empty(0),) * 3
-        for i in order:
+        main_h = Hypothesis(float(mx[0]), float(my[0]), float(mt[0]), 0.0)
+        for i in np.argsort(-rs):
             gain = float(rs[i] - main_score)
             if gain + prior < st.seed_llr or not np.isfinite(gain):
                 break
             h = Hypothesis(float(rx[i]), float(ry[i]), float(rt[i]), 0.0)
-            if self._near(np.array([mx[0]]), np.array([my[0]]), np.array([mt[0]]), h)[0]:
+            if _near(np.array([h.x]), np.array([h.y]), np.array([h.theta_rad]), main_h, st)[0]:
                 continue
-            if ex.size and self._near(ex, ey, et, h).any():
+            move = _moves_onto(
+                self._anchor_pose(), np.array([h.x]), np.array([h.y]), np.array([h.theta_rad])
+            )[0]
+            if self._near_any(h) or not self._walk_fits(move):
                 continue
-            self._add(h, gain + prior)
-            ex, ey, et = self._centres()
+            # The best of thousands of candidates fits the window better than the main
+            # mode by selection alone: a newcomer never starts ahead; tracked evidence
+            # will show whether it is.
+            self._append(move, min(gain, 0.0) + prior)
 
-    def _add(self, h: Hypothesis, llr: float) -> None:
+    def _walk_fits(self, move: NDArray[np.float64]) -> bool:
+        """Whether the main mode's walk so far, carried by ``move``, stays in the free
+        space: a place is only an alternative if the whole walk could have led there
+        (the odometry is the same for both; the window alone forgets the rest)."""
+        if not self._trail:
+            return True
+        tx, ty = (np.array(v) for v in zip(*self._trail, strict=True))
+        cx, cy, _ = _carry(move[None], tx, ty, np.zeros_like(tx))
+        return bool(self.map.free_space.is_free(cx[0], cy[0]).all())
+
+    def _recentre(self, x: float, y: float, theta: float) -> None:
+        """Move the anchor onto the main mode's refined pose, and every alternative onto
+        its own (refined the same way): a little cloud off by a few centimetres would
+        otherwise lose evidence for nothing until it had drifted back."""
+        assert self._anchor is not None
+        places = self._refined(*self._centres(), None)[:3] if self.count else None
+        move = _moves_onto(self._anchor_pose(), np.array([x]), np.array([y]), np.array([theta]))
+        cx, cy, ct = _carry(move, *self._anchor)
+        self._anchor = np.vstack([cx[0], cy[0], ct[0]])
+        if places is not None:
+            self.moves = _moves_onto(self._anchor_pose(), *places)
+
+    def _append(self, move: NDArray[np.float64], llr: float) -> None:
+        """Add one alternative (dropping the weakest when full)."""
         st = self.settings
-        p = st.particles
-        if self._anchor is not None:
-            # The anchor's cloud moved rigidly onto the candidate: both sides of the
-            # ratio then start with the same spread (no Occam penalty for a newcomer).
-            ax, ay, at = self._anchor
-            mx, my = ax.mean(), ay.mean()
-            turn = h.theta_rad - float(np.arctan2(np.sin(at).mean(), np.cos(at).mean()))
-            c, s = np.cos(turn), np.sin(turn)
-            x = h.x + c * (ax - mx) - s * (ay - my)
-            y = h.y + s * (ax - mx) + c * (ay - my)
-            t = wrap_angle(at + turn)
-        else:
-            x = h.x + self.rng.normal(0.0, st.seed_std_m, p)
-            y = h.y + self.rng.normal(0.0, st.seed_std_m, p)
-            t = wrap_angle(h.theta_rad + self.rng.normal(0.0, st.seed_std_rad, p))
         if self.count >= st.max_alternatives:
             worst = int(np.argmin(self.llr))
             if self.llr[worst] >= llr:
                 return
-            keep = np.arange(self.count) != worst
-            self.x, self.y, self.theta, self.llr = (
-                self.x[keep], self.y[keep], self.theta[keep], self.llr[keep]
-            )  # fmt: skip
-        self.x = np.vstack([self.x, x[None]])
-        self.y = np.vstack([self.y, y[None]])
-        self.theta = np.vstack([self.theta, t[None]])
+            self._keep(np.arange(self.count) != worst)
+        self.moves = np.vstack([self.moves, move[None]])
         self.llr = np.append(self.llr, llr)
+        self.age = np.append(self.age, 0)
 
     # ----------------------------------------------------------------- swap
-    def swap(
-        self,
-        main_x: NDArray[np.float64],
-        main_y: NDArray[np.float64],
-        main_theta: NDArray[np.float64],
-        main_w: NDArray[np.float64],
-        n: int,
-    ) -> tuple[NDArray[np.float64], ...]:
-        """Replace the main belief by the strongest alternative; return its cloud (n).
+    def swap(self, n: int) -> tuple[NDArray[np.float64], ...]:
+        """Make the strongest alternative the main belief; return its cloud (n particles).
 
-        The old main belief (particles and normalized weights given) becomes an
-        alternative with the opposite evidence; the others are re-expressed against
-        the new main belief.
+        The old main belief becomes an alternative with the opposite evidence; the
+        others are re-expressed against the new main belief.
         """
-        st = self.settings
         best = int(np.argmax(self.llr))
-        shift = float(self.llr[best])
-        pick = self.rng.integers(0, st.particles, n)
-        jitter = 0.02
-        nx = self.x[best, pick] + self.rng.normal(0.0, jitter, n)
-        ny = self.y[best, pick] + self.rng.normal(0.0, jitter, n)
-        nt = wrap_angle(self.theta[best, pick] + self.rng.normal(0.0, jitter, n))
-        new_anchor = np.vstack([self.x[best], self.y[best], self.theta[best]])
-        if self._anchor is not None:
-            self.x[best], self.y[best], self.theta[best] = self._anchor
-        else:
-            idx = systematic_resample(main_w, st.particles, self.rng)
-            self.x[best], self.y[best], self.theta[best] = main_x[idx], main_y[idx], main_theta[idx]
-        self._anchor = new_anchor
-        self.llr = self.llr - shift
-        self.llr[best] = -shift
+        self._make_main(best)
         self.swaps += 1
-        self.mode_searches = 0
+        assert self._anchor is not None
+        pick = self.rng.integers(0, self._anchor.shape[1], n)
+        jitter = 0.02
+        nx = self._anchor[0, pick] + self.rng.normal(0.0, jitter, n)
+        ny = self._anchor[1, pick] + self.rng.normal(0.0, jitter, n)
+        nt = wrap_angle(self._anchor[2, pick] + self.rng.normal(0.0, jitter, n))
         return nx, ny, nt
+
+
+def _near(
+    x: NDArray[np.float64] | float,
+    y: NDArray[np.float64] | float,
+    t: NDArray[np.float64] | float,
+    h: Hypothesis,
+    st: EvidenceSettings,
+) -> NDArray[np.bool_]:
+    """Whether poses are the same place as ``h`` (within ``distinct_m`` and ``_rad``)."""
+    return (np.hypot(np.asarray(x) - h.x, np.asarray(y) - h.y) < st.distinct_m) & (
+        np.abs(wrap_angle(np.asarray(t) - h.theta_rad)) < st.distinct_rad
+    )
+
+
+def _carry(
+    moves: NDArray[np.float64],
+    x: NDArray[np.float64],
+    y: NDArray[np.float64],
+    t: NDArray[np.float64],
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """Poses carried by each rigid motion (turn, shift x, shift y), each shape (A, N)."""
+    turn, sx, sy = moves[:, 0:1], moves[:, 1:2], moves[:, 2:3]
+    c, s = np.cos(turn), np.sin(turn)
+    return c * x - s * y + sx, s * x + c * y + sy, wrap_angle(t + turn)
+
+
+def _moves_onto(
+    source: tuple[float, float, float],
+    x: NDArray[np.float64],
+    y: NDArray[np.float64],
+    t: NDArray[np.float64],
+) -> NDArray[np.float64]:
+    """The rigid motions carrying the pose ``source`` onto each pose (x, y, t), (A, 3)."""
+    sx, sy, st = source
+    turn = wrap_angle(np.asarray(t) - st)
+    c, s = np.cos(turn), np.sin(turn)
+    return np.column_stack([turn, x - (c * sx - s * sy), y - (s * sx + c * sy)])
 
 
 def main_mode(hypotheses: Sequence[Hypothesis]) -> Hypothesis | None:

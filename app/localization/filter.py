@@ -119,9 +119,6 @@ class ParticleFilter:
             self.evidence.reset()
         #: How well the estimate explains the detections (smoothed); None before any.
         self.quality: FitQuality | None = None
-        #: log of this frame's evidence under the belief (prior-weighted mean likelihood,
-        #: moves through walls included).
-        self.log_evidence = 0.0
         self._had_odometry = False
         self.frames_without_evidence = 0
         #: How often every particle became impossible and the filter started again.
@@ -146,9 +143,7 @@ class ParticleFilter:
         self.x, self.y, self.theta = sample_motion(
             self.x, self.y, self.theta, odometry, self.config, self.rng
         )
-        before = log_sum_exp(self.log_w)
         self.log_w = self.log_w + motion_log_penalty(x0, y0, self.x, self.y, self.map)
-        self.log_evidence = log_sum_exp(self.log_w) - before
         if not np.isfinite(self.log_w).any():
             # Every hypothesis walked through a wall or off the map: the belief is
             # wrong everywhere. Start again from no knowledge rather than keep ghosts.
@@ -194,7 +189,6 @@ class ParticleFilter:
         self.log_w = self.log_w + log_lik
         # log of the prior-weighted mean likelihood: lse(w + l) - lse(w)
         mean_ll = log_sum_exp(self.log_w) - before
-        self.log_evidence += mean_ll
         per_class = mean_ll / max(obs.group_kappa.size, 1)
         if not np.isfinite(per_class):
             per_class = -1e3
@@ -267,17 +261,16 @@ class ParticleFilter:
         self.predict(odometry)
         inject = self.correct(detections)
         if heading is not None:
-            before = log_sum_exp(self.log_w)
             self.log_w = self.log_w + compass_log_likelihood(self.theta, heading)
-            self.log_evidence += log_sum_exp(self.log_w) - before
         w = self.weights
         ess = effective_sample_size(w)
         raw = estimate_pose(self.x, self.y, self.theta, w, ess=ess, rng=self.rng)
-        share: float = 0.0
+        share, confirmed = 0.0, 0.0
         searched_ago: int | None = 0
         if self.evidence is not None:
             raw, w, ess = self._weigh_alternatives(odometry, raw, w, ess, heading)
             share, searched_ago = self.evidence.alternative_share, self.evidence.searched_ago
+            confirmed = self.evidence.confirmed_share
         self._update_fit(raw)
         moved = 1.0 if odometry is None else float(np.hypot(odometry.forward_m, odometry.left_m))
         turned = np.pi if odometry is None else odometry.turn_rad
@@ -292,6 +285,8 @@ class ParticleFilter:
             share,
             searched_ago,
             motion_lost=lost,
+            confirmed_alternatives=confirmed,
+            evidence_frame=self.frames_without_evidence == 0,
         )
         if self.evidence is not None:
             est = with_alternatives(est, self.evidence.hypotheses(), share)
@@ -317,11 +312,10 @@ class ParticleFilter:
         top = raw.hypotheses[0] if raw.hypotheses else None
         tight = top is not None and top.std_xy_m <= SEARCH_MAX_SPREAD_M
         particles = (self.x, self.y, self.theta, w)
-        if not self.evidence.update(
-            odometry, self.last_observation, self.log_evidence, top, tight, particles, heading
-        ):
+        obs = self.last_observation
+        if not self.evidence.update(odometry, obs, top, tight, particles, heading):
             return raw, w, ess
-        self.x, self.y, self.theta = self.evidence.swap(self.x, self.y, self.theta, w, self.n)
+        self.x, self.y, self.theta = self.evidence.swap(self.n)
         self.log_w = np.zeros(self.n)
         self._gate.reset()
         self.quality = None
@@ -366,7 +360,6 @@ class ParticleFilter:
             "gate": self._gate.checkpoint(),
             "seed_from_observation": self._seed_from_observation,
             "quality": to_plain(self.quality),
-            "log_evidence": self.log_evidence,
             "had_odometry": self._had_odometry,
             "evidence": None if self.evidence is None else self.evidence.checkpoint(),
             "frames_without_evidence": self.frames_without_evidence,
@@ -389,7 +382,6 @@ class ParticleFilter:
         self._gate.restore(state["gate"])
         self._seed_from_observation = bool(state["seed_from_observation"])
         self.quality = from_plain(FitQuality | None, state["quality"])
-        self.log_evidence = float(state["log_evidence"])
         self._had_odometry = bool(state["had_odometry"])
         if self.evidence is not None and state["evidence"] is not None:
             self.evidence.restore(state["evidence"])

@@ -175,3 +175,19 @@ def test_paper_office_walk_sentence() -> None:
     # Near the south-west table, facing east: the door is far ahead-left.
     fb = n.update(located(2.0, 1.2), [Detection("door", math.radians(28))], timestamp_s=0)
     assert "Main entrance at 11 o'clock, about 9 metres." in fb.text
+
+
+def test_hedging_when_the_protection_radius_is_wide() -> None:
+    """Converged and tight, but the whole belief a little wider: 'roughly', not 'no longer sure'."""
+    from dataclasses import replace
+
+    n = Narrator(TWO_OFFICES)
+    fb = n.update(
+        replace(located(7, 2.5), protection_m=1.5), [Detection("door", 0.0)], timestamp_s=0
+    )
+    assert "roughly 3 metres" in fb.text and "no longer sure" not in fb.text
+    n = Narrator(TWO_OFFICES)
+    fb = n.update(
+        replace(located(7, 2.5), protection_m=0.3), [Detection("door", 0.0)], timestamp_s=0
+    )
+    assert "about 3 metres" in fb.text
