@@ -30,39 +30,27 @@ from pathlib import Path
 import numpy as np
 
 from app.experiments import integrity as m
+
+# The floor's walk and kidnap live with the other suites' maps (one place, no import
+# cycle: the integrity suite walks the same floor).
+from app.experiments.hard_maps import (
+    BUILDING_KIDNAP_AT_S as KIDNAP_AT_S,
+)
+from app.experiments.hard_maps import (
+    BUILDING_KIDNAP_POSE as KIDNAP_POSE,
+)
+from app.experiments.hard_maps import (
+    BUILDING_MAP_NAME as MAP_NAME,
+)
+from app.experiments.hard_maps import (
+    BUILDING_WALK as WALK,
+)
 from app.localization.config import FilterConfig
 from app.localization.filter import ParticleFilter
 from app.maps.check import load_map
 from app.maps.model import SemanticMap
 from app.resources import bundled_maps_dir
 from app.simulation.simulator import SimulationConfig, simulate
-
-MAP_NAME = "two_wing_office"
-#: Doorways of the rooms visited (x on the corridor walls y = 11 and y = 13).
-WALK: tuple[tuple[float, float], ...] = (
-    (3.0, 12.0),  # west corridor: global start
-    (6.667, 12.0),
-    (6.667, 15.5),  # meeting room Rhine
-    (8.5, 16.5),
-    (6.667, 15.5),
-    (6.667, 12.0),
-    (10.333, 12.0),
-    (10.333, 8.5),  # office W2
-    (10.333, 12.0),
-    (19.0, 12.0),  # lobby
-    (19.0, 6.0),
-    (19.0, 12.0),
-    (27.667, 12.0),  # east corridor
-    (27.667, 16.0),  # office E2
-    (27.667, 12.0),
-    (31.333, 12.0),
-    (31.333, 8.0),  # print room
-    (31.333, 12.0),
-    (35.0, 12.0),
-)
-#: The kidnap: walking the east corridor at this time, carried to the west corridor.
-KIDNAP_AT_S = 112.0
-KIDNAP_POSE = (4.0, 12.0, 0.0)
 
 #: Condition name -> (field of view, simulation changes).
 CONDITIONS: dict[str, tuple[float, dict[str, object]]] = {

@@ -217,12 +217,39 @@ def paper_office() -> HardMap:
     return HardMap(semantic_map, PAPER_PATH, (8.5, 5.0, 180.0), False)
 
 
+#: The bundled floor of the building suite (``--suite building``), its walk (x on the
+#: corridor walls y = 11 and y = 13 are the doorways of the rooms visited) and its kidnap:
+#: walking the east corridor at this time, carried to the west corridor.
+BUILDING_MAP_NAME = "two_wing_office"
+BUILDING_WALK: tuple[tuple[float, float], ...] = (
+    (3.0, 12.0),  # west corridor: global start
+    (6.667, 12.0),
+    (6.667, 15.5),  # meeting room Rhine
+    (8.5, 16.5),
+    (6.667, 15.5),
+    (6.667, 12.0),
+    (10.333, 12.0),
+    (10.333, 8.5),  # office W2
+    (10.333, 12.0),
+    (19.0, 12.0),  # lobby
+    (19.0, 6.0),
+    (19.0, 12.0),
+    (27.667, 12.0),  # east corridor
+    (27.667, 16.0),  # office E2
+    (27.667, 12.0),
+    (31.333, 12.0),
+    (31.333, 8.0),  # print room
+    (31.333, 12.0),
+    (35.0, 12.0),
+)
+BUILDING_KIDNAP_AT_S = 112.0
+BUILDING_KIDNAP_POSE = (4.0, 12.0, 0.0)
+
+
 def building_floor() -> HardMap:
     """The bundled two-wing office floor with the building suite's walk and kidnap."""
-    from app.experiments import building
-
-    semantic_map = load_map(bundled_maps_dir() / f"{building.MAP_NAME}.json")
-    return HardMap(semantic_map, building.WALK, building.KIDNAP_POSE, False, building.KIDNAP_AT_S)
+    semantic_map = load_map(bundled_maps_dir() / f"{BUILDING_MAP_NAME}.json")
+    return HardMap(semantic_map, BUILDING_WALK, BUILDING_KIDNAP_POSE, False, BUILDING_KIDNAP_AT_S)
 
 
 BUILDERS = {
