@@ -23,7 +23,6 @@ import json
 import time
 from collections import defaultdict
 from collections.abc import Callable
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -36,6 +35,7 @@ from app.experiments.hard_maps import (
     BUILDING_MAP_NAME,
     BUILDING_WALK,
 )
+from app.experiments.runner import map_jobs
 from app.localization.config import FilterConfig
 from app.localization.filter import ParticleFilter
 from app.maps.check import load_map
@@ -140,20 +140,7 @@ def run_suite(
     progress: Callable[[], object] | None = None,
 ) -> list[BuildingRun]:
     jobs = [(c, seed, particles) for c in conditions for seed in range(seeds)]
-    if workers <= 1:
-        out = []
-        for job in jobs:
-            out.append(_job(job))
-            if progress:
-                progress()
-        return out
-    results = []
-    with ProcessPoolExecutor(max_workers=workers) as pool:
-        for run in pool.map(_job, jobs, chunksize=1):
-            results.append(run)
-            if progress:
-                progress()
-    return results
+    return map_jobs(_job, jobs, workers, progress)
 
 
 def summarize(runs: list[BuildingRun]) -> list[dict[str, object]]:

@@ -22,13 +22,13 @@ import json
 import time
 from collections import defaultdict
 from collections.abc import Callable
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
 
 from app.experiments.hard_maps import BUILDERS, hard_map
+from app.experiments.runner import map_jobs
 from app.localization.compass import CompassReading
 from app.localization.config import FilterConfig
 from app.localization.filter import ParticleFilter
@@ -214,20 +214,7 @@ def run_suite(
     progress: Callable[[], object] | None = None,
 ) -> list[IntegrityRun]:
     jobs = [(s, seed, particles) for s in todo for seed in range(seeds)]
-    if workers <= 1:
-        out = []
-        for job in jobs:
-            out.append(_job(job))
-            if progress:
-                progress()
-        return out
-    results = []
-    with ProcessPoolExecutor(max_workers=workers) as pool:
-        for run in pool.map(_job, jobs, chunksize=1):
-            results.append(run)
-            if progress:
-                progress()
-    return results
+    return map_jobs(_job, jobs, workers, progress)
 
 
 def flips(run: IntegrityRun) -> int:

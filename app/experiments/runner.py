@@ -2,9 +2,10 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
+from typing import TypeVar
 
 import numpy as np
 
@@ -68,8 +69,36 @@ def run_cell(cell: Cell, seed: int, particles: int) -> Run:
     return Run(cell, seed, t, truth, est, err, head, conv, count)
 
 
+J = TypeVar("J")
+R = TypeVar("R")
+
+
 def _job(args: tuple[Cell, int, int]) -> Run:
     return run_cell(*args)
+
+
+def map_jobs(
+    job: Callable[[J], R],
+    jobs: Sequence[J],
+    workers: int,
+    progress: Callable[[], object] | None = None,
+) -> list[R]:
+    """``job`` over ``jobs`` in ``workers`` processes (in this one when 1), results in the
+    jobs' order; ``progress`` is called after each. ``job`` must be a module-level
+    function (the processes import it)."""
+    results: list[R] = []
+    if workers <= 1:
+        for args in jobs:
+            results.append(job(args))
+            if progress:
+                progress()
+        return results
+    with ProcessPoolExecutor(max_workers=workers) as pool:
+        for run in pool.map(job, jobs, chunksize=1):
+            results.append(run)
+            if progress:
+                progress()
+    return results
 
 
 def run_all(
@@ -78,16 +107,4 @@ def run_all(
     progress: Callable[[], object] | None = None,
 ) -> list[Run]:
     """Run every (cell, seed, particles) job; results in the jobs' order."""
-    results: list[Run] = []
-    if workers <= 1:
-        for job in jobs:
-            results.append(_job(job))
-            if progress:
-                progress()
-        return results
-    with ProcessPoolExecutor(max_workers=workers) as pool:
-        for run in pool.map(_job, jobs, chunksize=1):
-            results.append(run)
-            if progress:
-                progress()
-    return results
+    return map_jobs(_job, jobs, workers, progress)
