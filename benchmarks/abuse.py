@@ -35,6 +35,7 @@ from app.maps.check import load_map
 from app.maps.model import bundled_maps_dir
 from app.simulation.scenarios import paper_config
 from app.simulation.simulator import simulate
+from benchmarks.load import wait_until_healthy
 
 ROOT = Path(__file__).resolve().parents[1]
 HEAVY = "heavy-" + "h" * 32
@@ -61,15 +62,7 @@ def start_server(args: argparse.Namespace, keys: Path) -> tuple[str, subprocess.
          "--no-viser", "--log-level", "warning", "--api-keys", str(keys)],
         cwd=ROOT, env=env,
     )  # fmt: skip
-    deadline = time.time() + 120
-    while time.time() < deadline:
-        try:
-            if httpx.get(f"http://127.0.0.1:{port}/healthz", timeout=1).status_code == 200:
-                return f"127.0.0.1:{port}", proc
-        except httpx.HTTPError:
-            time.sleep(0.2)
-    proc.kill()
-    raise RuntimeError("the server did not start")
+    return wait_until_healthy(port, proc), proc
 
 
 async def create(url: str, key: str, particles: int, seed: int) -> str:

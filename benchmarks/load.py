@@ -50,6 +50,19 @@ def cpu_seconds(pid: int) -> float:
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
+def wait_until_healthy(port: int, proc: subprocess.Popen[bytes], timeout_s: float = 120) -> str:
+    """host:port of a server started on ``port`` once /healthz answers (killed if never)."""
+    deadline = time.time() + timeout_s
+    while time.time() < deadline:
+        try:
+            if httpx.get(f"http://127.0.0.1:{port}/healthz", timeout=1).status_code == 200:
+                return f"127.0.0.1:{port}"
+        except httpx.HTTPError:
+            time.sleep(0.2)
+    proc.kill()
+    raise RuntimeError("the server did not start")
+
+
 def start_server(max_particles: int, store: str) -> tuple[str, subprocess.Popen[bytes]]:
     """`bearings serve` in its own process, as in production (the client gets its own GIL)."""
     port = free_port()
@@ -59,15 +72,7 @@ def start_server(max_particles: int, store: str) -> tuple[str, subprocess.Popen[
          "--log-level", "warning", "--max-sessions", "1000", "--store", store],
         env=env,
     )  # fmt: skip
-    deadline = time.time() + 120
-    while time.time() < deadline:
-        try:
-            if httpx.get(f"http://127.0.0.1:{port}/healthz", timeout=1).status_code == 200:
-                return f"127.0.0.1:{port}", proc
-        except httpx.HTTPError:
-            time.sleep(0.2)
-    proc.kill()
-    raise RuntimeError("the server did not start")
+    return wait_until_healthy(port, proc), proc
 
 
 async def one_session(
