@@ -49,9 +49,17 @@ def compass_log_likelihood(
     The mixture in the module docstring:
     ``log((1 - eps) * exp(kappa * (cos(h - theta) - 1)) + eps * I0e(kappa))``.
     """
+    heading, kappa, log_keep, log_floor = compass_terms(reading, outlier_share)
+    vm = kappa * (np.cos(heading - theta) - 1.0) + log_keep
+    return np.logaddexp(vm, log_floor)
+
+
+def compass_terms(
+    reading: CompassReading, outlier_share: float = OUTLIER_SHARE
+) -> tuple[float, float, float, float]:
+    """The mixture's constants: (heading, kappa, log(1 - eps), log(eps * I0e(kappa)))."""
     std = max(reading.std_rad, math.radians(MIN_STD_DEG))
     kappa = 1.0 / std**2
     log_keep = math.log1p(-outlier_share)
     log_floor = math.log(outlier_share * scaled_bessel_i0(kappa))
-    vm = kappa * (np.cos(reading.heading_rad - theta) - 1.0) + log_keep
-    return np.logaddexp(vm, log_floor)
+    return reading.heading_rad, kappa, log_keep, log_floor

@@ -278,6 +278,8 @@ class FitQuality:
     fit: float
     unexplained: float
     bad_frame: bool = False
+    #: An object in clear view keeps going unreported (:mod:`~app.localization.unseen`).
+    contradicted: bool = False
 
 
 class ConvergenceGate:
@@ -386,6 +388,7 @@ class ConvergenceGate:
                 or quality.fit > self.hold_fit
                 or quality.unexplained > self.hold_unexplained,
                 "bad frame": quality is not None and quality.bad_frame,
+                "unseen object": quality is not None and quality.contradicted,
                 "dead reckoning": frames_without_evidence > self.hold_without_evidence,
                 "alternative": against > self.hold_alternatives,
                 "odometry lost": motion_lost,
@@ -401,6 +404,7 @@ class ConvergenceGate:
             and quality.fit <= self.gain_fit
             and quality.unexplained <= self.gain_unexplained
             and not quality.bad_frame
+            and not quality.contradicted
             and frames_without_evidence <= self.gain_without_evidence
         )
         steady = (

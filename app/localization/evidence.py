@@ -98,9 +98,9 @@ class EvidenceSettings:
     #: Pattern search that polishes a pose (the finalists, the main mode, every
     #: alternative): first steps (m, rad), halved this many times. Deterministic, so
     #: that the two sides of an exact symmetry land on exactly symmetric poses.
-    polish_step_m: float = 0.08
-    polish_step_rad: float = float(np.radians(2.0))
-    polish_rounds: int = 6
+    polish_step_m: float = 0.25
+    polish_step_rad: float = float(np.radians(4.0))
+    polish_rounds: int = 8
     #: Particles of the anchor (each alternative carries a copy).
     particles: int = 150
     max_alternatives: int = 8
@@ -122,20 +122,6 @@ class EvidenceSettings:
 
 
 DEFAULT_EVIDENCE = EvidenceSettings()
-
-
-def chain_back(
-    x: NDArray[np.float64],
-    y: NDArray[np.float64],
-    theta: NDArray[np.float64],
-    odometry: Odometry,
-) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
-    """The poses one frame earlier, undoing ``odometry`` (noise-free), shape (N,) each."""
-    t0 = theta - odometry.turn_rad
-    c, s = np.cos(t0), np.sin(t0)
-    x0 = x - (c * odometry.forward_m - s * odometry.left_m)
-    y0 = y - (s * odometry.forward_m + c * odometry.left_m)
-    return x0, y0, wrap_angle(t0)
 
 
 def _log_mean_exp_rows(a: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -302,6 +288,7 @@ class EvidenceTracker:
         main_tight: bool,
         particles: tuple[NDArray[np.float64], ...],
         heading: CompassReading | None = None,
+        search_ok: bool = True,
     ) -> bool:
         """Move and weigh the alternatives, search when due; True if a swap is due.
 
@@ -313,6 +300,9 @@ class EvidenceTracker:
             particles: the filter's x, y, theta and normalized weights (to draw the
                 anchor from).
             heading: this frame's compass reading, weighed like the filter does.
+            search_ok: whether a global search may run now (the filter says no while
+                its estimate does not explain the detections: converged could not be
+                gained or held anyway, and the search would be wasted).
         """
         # Frames without detections are kept too: their odometry chains the window.
         self._history.append((odometry, obs, heading))
@@ -341,10 +331,15 @@ class EvidenceTracker:
         if (
             main is not None
             and main_tight
+            and search_ok
             and self._anchor is not None
             and not obs.empty
             and self._since_search >= self.settings.search_every
         ):
+            if not self.count:
+                # Moved by the odometry alone meanwhile (see _track): take the
+                # filter's own cloud of the main mode again, tight and weighed.
+                self._draw_anchor(main, particles)
             self._search(main)
         return bool(self.count and self.llr.max() >= self.settings.switch_llr)
 
@@ -356,6 +351,12 @@ class EvidenceTracker:
         x0, y0, t0 = self._anchor
         nx, ny, nt = sample_motion(x0, y0, t0, odometry, self.config, self.rng)
         a, p = self.count, x0.size
+        if not a:
+            # No alternative to weigh against: the anchor only has to follow the main
+            # mode (it is redrawn from the filter's cluster when it drifts, and
+            # re-centred by every search), so the odometry alone moves it.
+            self._anchor = np.vstack([nx, ny, nt])
+            return
         # The copies move with the same body-frame motion: a rigid motion of the map
         # commutes with it, so the carried cloud is the moved cloud carried.
         sx, sy, _ = _carry(self.moves, x0, y0, t0)
@@ -380,6 +381,7 @@ class EvidenceTracker:
             return
         self.llr = self.llr + (ev[1:] - ev[0])
         self.age = self.age + 1
+        self._refit(log_w, np.vstack([nx, ex]), np.vstack([ny, ey]), np.vstack([nt, et]))
         keep = np.isfinite(ev[1:]) & (self.llr >= self.settings.drop_llr)
         graves = np.vstack([self._graves, self.moves[~keep]])
         self._graves = graves[-self.settings.max_graves :]
@@ -387,6 +389,34 @@ class EvidenceTracker:
         w = np.exp(log_w[0] - log_w[0].max())
         idx = systematic_resample(w / w.sum(), p, self.rng)
         self._anchor = np.vstack([nx[idx], ny[idx], nt[idx]])
+
+    def _refit(
+        self,
+        log_w: NDArray[np.float64],
+        x: NDArray[np.float64],
+        y: NDArray[np.float64],
+        t: NDArray[np.float64],
+    ) -> None:
+        """Re-fit each copy's rigid motion to what this frame says, shape (A + 1, P) each
+        (row 0 the anchor).
+
+        The motion becomes the one carrying the anchor's weighted mean pose onto the
+        copy's: a copy placed a little off its place (the best pose of a short window
+        rarely is exact) slides onto it as a filter's cloud would, instead of losing
+        evidence for nothing until the next search. Under an exact symmetry the copy's
+        weights are the anchor's carried, and the motion stays what it was.
+        """
+        top = log_w.max(axis=1, keepdims=True)
+        ok = np.isfinite(top[:, 0])
+        if not ok[0]:
+            return
+        w = np.exp(log_w - np.where(ok, top[:, 0], 0.0)[:, None])
+        total = w.sum(axis=1)
+        mx = (w * x).sum(axis=1) / total
+        my = (w * y).sum(axis=1) / total
+        mt = np.arctan2((w * np.sin(t)).sum(axis=1), (w * np.cos(t)).sum(axis=1))
+        fitted = _moves_onto((float(mx[0]), float(my[0]), float(mt[0])), mx[1:], my[1:], mt[1:])
+        self.moves = np.where(ok[1:, None], fitted, self.moves)
 
     def _keep(self, keep: NDArray[np.bool_]) -> None:
         self.moves, self.llr, self.age = self.moves[keep], self.llr[keep], self.age[keep]
@@ -489,45 +519,58 @@ class EvidenceTracker:
             self._keep(~_near(*self._centres(), main, self.settings))
 
     # --------------------------------------------------------------- search
-    def window_score(
-        self, x: NDArray[np.float64], y: NDArray[np.float64], theta: NDArray[np.float64]
-    ) -> NDArray[np.float64]:
-        """Sum of log-likelihoods over the history window, poses chained back, shape (N,)."""
-        total = np.zeros(x.shape[0])
-        stride = self.settings.window_stride
+    def window(self) -> sensor_kernel.ObservationWindow:
+        """The history window's scored frames (every ``window_stride``-th, newest first,
+        back to the last break in the odometry), each with its pose relative to the
+        newest frame's (the odometry chained back, noise-free)."""
         frames = list(self._history)
+        stride = self.settings.window_stride
+        rel = (0.0, 0.0, 0.0)
+        packed = []
         for k in range(len(frames) - 1, -1, -1):
             odo, obs, heading = frames[k]
             if (len(frames) - 1 - k) % stride == 0:
-                total += sensor_kernel.log_likelihood(
-                    x, y, theta, obs, self.map, self.config, self.grid
-                )
-                if heading is not None:
-                    total += compass_log_likelihood(theta, heading)
+                packed.append((rel, obs, heading))
             if odo is None or k == 0:
                 break
-            x, y, theta = chain_back(x, y, theta, odo)
-        return total
+            # pose_{k-1} = pose_k ⊕ inverse(odo_k); rel_{k-1} = rel_k ⊕ inverse(odo_k).
+            c, s = np.cos(odo.turn_rad), np.sin(odo.turn_rad)
+            bf = -(c * odo.forward_m + s * odo.left_m)
+            bl = -(-s * odo.forward_m + c * odo.left_m)
+            a, b, t = rel
+            ca, sa = np.cos(t), np.sin(t)
+            rel = (a + ca * bf - sa * bl, b + sa * bf + ca * bl, t - odo.turn_rad)
+        return sensor_kernel.pack_window(packed)
+
+    def window_score(
+        self,
+        x: NDArray[np.float64],
+        y: NDArray[np.float64],
+        theta: NDArray[np.float64],
+        window: sensor_kernel.ObservationWindow | None = None,
+    ) -> NDArray[np.float64]:
+        """Sum of log-likelihoods over the history window, poses chained back, shape (N,)."""
+        w = self.window() if window is None else window
+        return sensor_kernel.window_log_likelihood(x, y, theta, w, self.map, self.config, self.grid)
 
     def _refined(
         self,
         x: NDArray[np.float64],
         y: NDArray[np.float64],
         t: NDArray[np.float64],
-        rounds: tuple[tuple[int, float, float], ...] | None,
+        rounds: tuple[tuple[int, float, float], ...],
+        window: sensor_kernel.ObservationWindow,
     ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
         """Each pose moved to the best of its jittered copies over the window (``rounds``
-        of random jitter), or polished by pattern search (``rounds`` None)."""
-        if rounds is None:
-            return self._polished(x, y, t)
-        score = self.window_score(x, y, t)
+        of random jitter), with its window score."""
+        score = self.window_score(x, y, t, window)
         m = x.shape[0]
         for count, std_m, std_rad in rounds:
             jx = x[:, None] + self.rng.normal(0.0, std_m, (m, count))
             jy = y[:, None] + self.rng.normal(0.0, std_m, (m, count))
             jt = wrap_angle(t[:, None] + self.rng.normal(0.0, std_rad, (m, count)))
-            js = self.window_score(jx.reshape(-1), jy.reshape(-1), jt.reshape(-1)).reshape(m, count)
-            js = np.where(self.map.free_space.is_free(jx, jy), js, -np.inf)
+            js = self.window_score(jx.reshape(-1), jy.reshape(-1), jt.reshape(-1), window)
+            js = np.where(self.map.free_space.is_free(jx, jy), js.reshape(m, count), -np.inf)
             best = np.argmax(js, axis=1)
             better = js[np.arange(m), best] > score
             rows = np.flatnonzero(better)
@@ -541,24 +584,29 @@ class EvidenceTracker:
         return x, y, t, score
 
     def _polished(
-        self, x: NDArray[np.float64], y: NDArray[np.float64], t: NDArray[np.float64]
+        self,
+        x: NDArray[np.float64],
+        y: NDArray[np.float64],
+        t: NDArray[np.float64],
+        window: sensor_kernel.ObservationWindow,
     ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
         """Pattern search over the window: each round tries the 27 steps of -1, 0, +1 in
-        x, y and heading around each pose, moves to the best, and halves the steps."""
+        x, y and heading around each pose, moves to the best, and halves the steps.
+        Every pose of a search goes through one call (one compiled scoring per round)."""
         st = self.settings
         m = x.shape[0]
         grid = np.array(np.meshgrid([-1.0, 0.0, 1.0], [-1.0, 0.0, 1.0], [-1.0, 0.0, 1.0]))
         dx, dy, dt = (g.reshape(-1) for g in grid)  # 27 steps, (0, 0, 0) among them
         step_m, step_rad = st.polish_step_m, st.polish_step_rad
-        score = self.window_score(x, y, t)
+        score = self.window_score(x, y, t, window)
+        rows = np.arange(m)
         for _ in range(st.polish_rounds):
             jx = x[:, None] + step_m * dx[None, :]
             jy = y[:, None] + step_m * dy[None, :]
             jt = wrap_angle(t[:, None] + step_rad * dt[None, :])
-            js = self.window_score(jx.reshape(-1), jy.reshape(-1), jt.reshape(-1)).reshape(m, 27)
-            js = np.where(self.map.free_space.is_free(jx, jy), js, -np.inf)
+            js = self.window_score(jx.reshape(-1), jy.reshape(-1), jt.reshape(-1), window)
+            js = np.where(self.map.free_space.is_free(jx, jy), js.reshape(m, 27), -np.inf)
             best = np.argmax(js, axis=1)
-            rows = np.arange(m)
             better = js[rows, best] > score
             x = np.where(better, jx[rows, best], x)
             y = np.where(better, jy[rows, best], y)
@@ -568,18 +616,19 @@ class EvidenceTracker:
         return x, y, t, score
 
     def _search(self, main: Hypothesis) -> None:
-        """One global consistency search (module docstring); may add alternatives."""
+        """One global consistency search (module docstring); may add alternatives.
+
+        The history window is packed once; the main mode, every tracked alternative and
+        the finalists are polished together.
+        """
         st = self.settings
         self._since_search = 0
         self.searched_ago = 0
         self.searches += 1
         prior = st.seed_llr if self.mode_searches else 0.0
         self.mode_searches += 1
+        window = self.window()
         obs = self._history[-1][1]
-        mx, my, mt, ms = self._refined(
-            np.array([main.x]), np.array([main.y]), np.array([main.theta_rad]), None
-        )
-        self._recentre(float(mx[0]), float(my[0]), float(mt[0]))
         fs = self.map.free_space
         area = fs.free_cells.size * fs.resolution_m**2
         n = int(np.clip(st.candidates_per_m2 * area, st.min_candidates, st.max_candidates))
@@ -588,30 +637,38 @@ class EvidenceTracker:
         )
         away = ~_near(cx, cy, ct, main, st)
         cx, cy, ct = cx[away], cy[away], ct[away]
-        if not cx.size:
-            return
-        score = sensor_kernel.log_likelihood(cx, cy, ct, obs, self.map, self.config, self.grid)
-        k = min(st.shortlist, cx.size)
-        top = np.argpartition(-score, k - 1)[:k]
-        rx, ry, rt, rs = self._refined(cx[top], cy[top], ct[top], st.refine)
         picked: list[int] = []
-        for i in np.argsort(-rs):
-            h = Hypothesis(float(rx[i]), float(ry[i]), float(rt[i]), 0.0)
-            if not np.isfinite(rs[i]) or len(picked) >= st.finalists:
-                break
-            if picked and _near(rx[picked], ry[picked], rt[picked], h, st).any():
-                continue
-            picked.append(int(i))
-        if not picked:
-            return
-        rx, ry, rt, rs = self._refined(rx[picked], ry[picked], rt[picked], None)
-        main_score = float(ms[0])
-        main_h = Hypothesis(float(mx[0]), float(my[0]), float(mt[0]), 0.0)
-        for i in np.argsort(-rs):
-            gain = float(rs[i] - main_score)
+        rx = ry = rt = np.empty(0)
+        if cx.size:
+            score = sensor_kernel.log_likelihood(cx, cy, ct, obs, self.map, self.config, self.grid)
+            k = min(st.shortlist, cx.size)
+            top = np.argpartition(-score, k - 1)[:k]
+            rx, ry, rt, rs = self._refined(cx[top], cy[top], ct[top], st.refine, window)
+            for i in np.argsort(-rs):
+                h = Hypothesis(float(rx[i]), float(ry[i]), float(rt[i]), 0.0)
+                if not np.isfinite(rs[i]) or len(picked) >= st.finalists:
+                    break
+                if picked and _near(rx[picked], ry[picked], rt[picked], h, st).any():
+                    continue
+                picked.append(int(i))
+        # One polish: the main mode, the tracked alternatives, the finalists.
+        ax, ay, at = self._centres() if self.count else (np.empty(0),) * 3
+        a = ax.size
+        px, py, pt, ps = self._polished(
+            np.concatenate([[main.x], ax, rx[picked]]),
+            np.concatenate([[main.y], ay, ry[picked]]),
+            np.concatenate([[main.theta_rad], at, rt[picked]]),
+            window,
+        )
+        self._recentre((px[0], py[0], pt[0]), (px[1 : 1 + a], py[1 : 1 + a], pt[1 : 1 + a]))
+        main_score = float(ps[0])
+        main_h = Hypothesis(float(px[0]), float(py[0]), float(pt[0]), 0.0)
+        fx, fy, ft, fsc = px[1 + a :], py[1 + a :], pt[1 + a :], ps[1 + a :]
+        for i in np.argsort(-fsc):
+            gain = float(fsc[i] - main_score)
             if gain + prior < st.seed_llr or not np.isfinite(gain):
                 break
-            h = Hypothesis(float(rx[i]), float(ry[i]), float(rt[i]), 0.0)
+            h = Hypothesis(float(fx[i]), float(fy[i]), float(ft[i]), 0.0)
             if _near(np.array([h.x]), np.array([h.y]), np.array([h.theta_rad]), main_h, st)[0]:
                 continue
             move = _moves_onto(
@@ -634,17 +691,36 @@ class EvidenceTracker:
         cx, cy, _ = _carry(move[None], tx, ty, np.zeros_like(tx))
         return bool(self.map.free_space.is_free(cx[0], cy[0]).all())
 
-    def _recentre(self, x: float, y: float, theta: float) -> None:
+    def _recentre(
+        self,
+        main: tuple[float, float, float],
+        places: tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]],
+    ) -> None:
         """Move the anchor onto the main mode's refined pose, and every alternative onto
-        its own (refined the same way): a little cloud off by a few centimetres would
-        otherwise lose evidence for nothing until it had drifted back."""
+        its own refined place: a little cloud off by a few centimetres would otherwise
+        lose evidence for nothing until it had drifted back."""
         assert self._anchor is not None
-        places = self._refined(*self._centres(), None)[:3] if self.count else None
+        x, y, theta = main
         move = _moves_onto(self._anchor_pose(), np.array([x]), np.array([y]), np.array([theta]))
         cx, cy, ct = _carry(move, *self._anchor)
         self._anchor = np.vstack([cx[0], cy[0], ct[0]])
-        if places is not None:
+        if self.count:
             self.moves = _moves_onto(self._anchor_pose(), *places)
+            self._merge_duplicates()
+
+    def _merge_duplicates(self) -> None:
+        """Of alternatives that refinement has brought onto one place, keep the one with
+        the most evidence: two copies of one place would count it twice."""
+        cx, cy, ct = self._centres()
+        keep = np.ones(self.count, dtype=bool)
+        for i in np.argsort(-self.llr):
+            if not keep[i]:
+                continue
+            h = Hypothesis(float(cx[i]), float(cy[i]), float(ct[i]), 0.0)
+            same = _near(cx, cy, ct, h, self.settings) & keep
+            same[i] = False
+            keep &= ~same
+        self._keep(keep)
 
     def _append(self, move: NDArray[np.float64], llr: float) -> None:
         """Add one alternative (dropping the weakest when full)."""

@@ -39,6 +39,7 @@ from app.localization.resampling import (
 )
 from app.localization.sensor import Observation, normalized_residuals, prepare_observation
 from app.localization.types import Detection, Estimate, InitialPose, Odometry
+from app.localization.unseen import UnseenObjects
 from app.maps.geometry import wrap_angle
 from app.maps.model import SemanticMap
 from app.state import from_plain, to_plain
@@ -92,6 +93,12 @@ class ParticleFilter:
             if self.config.evidence
             else None
         )
+        #: Objects in clear view that the camera keeps not reporting (gates converged).
+        self.unseen = (
+            UnseenObjects(semantic_map, self.config)
+            if self.config.evidence and self.config.visibility
+            else None
+        )
         self.last_observation: Observation | None = None
         if state is None:
             self.reset(initial_pose)
@@ -117,6 +124,8 @@ class ParticleFilter:
         self._gate.reset()
         if self.evidence is not None:
             self.evidence.reset()
+        if self.unseen is not None:
+            self.unseen.reset()
         #: How well the estimate explains the detections (smoothed); None before any.
         self.quality: FitQuality | None = None
         self._had_odometry = False
@@ -163,6 +172,8 @@ class ParticleFilter:
         self._gate.reset()
         if self.evidence is not None:
             self.evidence.reset()
+        if self.unseen is not None:
+            self.unseen.reset()
         self.restarts += 1
 
     def observation_log_likelihood(self, obs: Observation) -> NDArray[np.float64]:
@@ -311,9 +322,17 @@ class ParticleFilter:
         assert self.evidence is not None and self.last_observation is not None
         top = raw.hypotheses[0] if raw.hypotheses else None
         tight = top is not None and top.std_xy_m <= SEARCH_MAX_SPREAD_M
+        # A search serves the gate: it is only worth its cost while the main mode
+        # explains the detections well enough to be (or become) converged.
+        q = self.quality
+        fits = (
+            q is not None
+            and q.fit <= self._gate.hold_fit
+            and q.unexplained <= self._gate.hold_unexplained
+        )
         particles = (self.x, self.y, self.theta, w)
         obs = self.last_observation
-        if not self.evidence.update(odometry, obs, top, tight, particles, heading):
+        if not self.evidence.update(odometry, obs, top, tight, particles, heading, fits):
             return raw, w, ess
         self.x, self.y, self.theta = self.evidence.swap(self.n)
         self.log_w = np.zeros(self.n)
@@ -362,6 +381,7 @@ class ParticleFilter:
             "quality": to_plain(self.quality),
             "had_odometry": self._had_odometry,
             "evidence": None if self.evidence is None else self.evidence.checkpoint(),
+            "unseen": None if self.unseen is None else self.unseen.checkpoint(),
             "frames_without_evidence": self.frames_without_evidence,
             "restarts": self.restarts,
             "steps": self.steps,
@@ -385,6 +405,8 @@ class ParticleFilter:
         self._had_odometry = bool(state["had_odometry"])
         if self.evidence is not None and state["evidence"] is not None:
             self.evidence.restore(state["evidence"])
+        if self.unseen is not None and state.get("unseen") is not None:
+            self.unseen.restore(state["unseen"])
         self.frames_without_evidence = int(state["frames_without_evidence"])
         self.restarts = int(state["restarts"])
         self.steps = int(state["steps"])
@@ -411,6 +433,8 @@ class ParticleFilter:
         if top is None or top.std_xy_m > FIT_MAX_SPREAD_M or obs is None or obs.empty:
             return
         row = self._vis.visible(raw.x, raw.y)[0] if self._vis is not None else None
+        if self.unseen is not None:
+            self.unseen.update(raw.x, raw.y, raw.theta_rad, obs, row)
         r = normalized_residuals(raw.x, raw.y, raw.theta_rad, obs, self.map, self.config, row)
         if self.config.clutter:
             g = obs.det_group
@@ -429,7 +453,8 @@ class ParticleFilter:
         if q is not None:
             fit = q.fit + FIT_SMOOTHING * (fit - q.fit)
             unexplained = q.unexplained + FIT_SMOOTHING * (unexplained - q.unexplained)
-        self.quality = FitQuality(fit, unexplained, bad)
+        contradicted = self.unseen is not None and self.unseen.contradicted
+        self.quality = FitQuality(fit, unexplained, bad, contradicted)
 
 
 def warm_up() -> None:
@@ -437,8 +462,8 @@ def warm_up() -> None:
 
     Runs each compiled path once on a tiny map, so no request waits for a compiler:
     both sensor configurations, motion with and without odometry (and a move long
-    enough for the wall test), resampling, clustering, KLD-sampling and the residual
-    check.
+    enough for the wall test), resampling, clustering, KLD-sampling, the residual
+    check and the evidence window's scoring.
     """
     from app.maps.model import parse_map
 
@@ -462,5 +487,8 @@ def warm_up() -> None:
         pf.resample()
         obs = prepare_observation(door, tiny, cfg)
         normalized_residuals(1.0, 1.0, 0.0, obs, tiny, cfg)
+        compass = CompassReading(0.0, 0.1)
+        window = sensor_kernel.pack_window([((0.0, 0.0, 0.0), obs, compass)])
+        sensor_kernel.window_log_likelihood(pf.x, pf.y, pf.theta, window, tiny, cfg, pf._vis)
         estimate_pose(pf.x, pf.y, pf.theta, pf.weights, rng=pf.rng, max_points=10)
         kld_sample_size(pf.x, pf.y, pf.theta, pf.weights, 10, 50)

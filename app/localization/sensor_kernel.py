@@ -17,10 +17,15 @@ log-likelihood where weights matter). Compiled code is cached on disk;
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
 import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
+from app.localization.compass import CompassReading, compass_terms
 from app.localization.config import FilterConfig
 from app.localization.fastmath import FAST, grid_cell, sincos, softplus
 from app.localization.sensor import Observation
@@ -144,6 +149,46 @@ def _kernel(
                     o_out[i] += scale * (log_floor + softplus(z))
 
 
+#: The kernel's map, visibility and field-of-view arguments: use_vis, grid geometry,
+#: visibility bits, cos(half FOV), check_fov, FOV centre (cos, sin), max range^2, objects.
+SensorSetup = tuple[
+    bool, NDArray[np.float64], NDArray[np.uint64], float, bool, float, float, float,
+    NDArray[np.float64],
+]  # fmt: skip
+
+
+def _sensor_setup(
+    semantic_map: SemanticMap, config: FilterConfig, grid: VisibilityGrid | None
+) -> SensorSetup:
+    """The kernel's map, visibility and field-of-view arguments (``_kernel``'s 2nd-12th)."""
+    if config.visibility and grid is not None:
+        vis_bits = grid.bits
+        rows, cols = grid.shape
+        geometry = np.array(
+            [grid.origin_x, grid.origin_y, 1.0 / grid.resolution_m, rows, cols], dtype=np.float64
+        )
+    else:
+        # No grid: field of view and range still apply (with visibility on), every
+        # object is in line of sight from the one cell.
+        words = max((semantic_map.object_count + 63) // 64, 1)
+        vis_bits = np.full((1, words), ~np.uint64(0))
+        geometry = np.array([0.0, 0.0, 1.0, 1.0, 1.0])
+    check_fov = config.visibility and config.fov_deg < 360.0
+    max_range = config.max_range_m if config.visibility else None
+    max_range_sq = np.inf if max_range is None else max_range**2
+    return (
+        bool(config.visibility),
+        geometry,
+        vis_bits,
+        float(np.cos(np.radians(config.fov_deg) / 2.0)),
+        check_fov,
+        float(np.cos(np.radians(config.fov_centre_deg))),
+        float(np.sin(np.radians(config.fov_centre_deg))),
+        float(max_range_sq),
+        semantic_map.object_xy.reshape(-1, 2),
+    )
+
+
 def log_likelihood(
     x: NDArray[np.float64],
     y: NDArray[np.float64],
@@ -163,36 +208,11 @@ def log_likelihood(
     out = np.zeros(n, dtype=np.float64)
     if obs.empty:
         return out
-    x = np.ascontiguousarray(x, dtype=np.float64)
-    y = np.ascontiguousarray(y, dtype=np.float64)
-    if config.visibility and grid is not None:
-        vis_bits = grid.bits
-        rows, cols = grid.shape
-        geometry = np.array(
-            [grid.origin_x, grid.origin_y, 1.0 / grid.resolution_m, rows, cols], dtype=np.float64
-        )
-    else:
-        # No grid: field of view and range still apply (with visibility on), every
-        # object is in line of sight from the one cell.
-        words = max((semantic_map.object_count + 63) // 64, 1)
-        vis_bits = np.full((1, words), ~np.uint64(0))
-        geometry = np.array([0.0, 0.0, 1.0, 1.0, 1.0])
-    check_fov = config.visibility and config.fov_deg < 360.0
-    max_range = config.max_range_m if config.visibility else None
-    max_range_sq = np.inf if max_range is None else max_range**2
     _kernel(
-        x,
-        y,
+        np.ascontiguousarray(x, dtype=np.float64),
+        np.ascontiguousarray(y, dtype=np.float64),
         np.ascontiguousarray(theta, dtype=np.float64),
-        bool(config.visibility),
-        geometry,
-        vis_bits,
-        float(np.cos(np.radians(config.fov_deg) / 2.0)),
-        check_fov,
-        float(np.cos(np.radians(config.fov_centre_deg))),
-        float(np.sin(np.radians(config.fov_centre_deg))),
-        float(max_range_sq),
-        semantic_map.object_xy.reshape(-1, 2),
+        *_sensor_setup(semantic_map, config, grid),
         obs.det_cos,
         obs.det_sin,
         obs.det_score,
@@ -205,4 +225,159 @@ def log_likelihood(
         obs.members,
         out,
     )
+    return out
+
+
+# ------------------------------------------------------------------ windows
+@dataclass(frozen=True)
+class ObservationWindow:
+    """Several frames' observations, each seen from a pose fixed relative to the one
+    scored (the odometry chained back), packed as flat arrays for one compiled call.
+
+    Frame ``f`` was seen from ``pose ⊕ rel[f]``: ``rel`` holds (forward m, left m, turn
+    rad) in the scored pose's body frame. Its detections are rows
+    ``det_start[f]:det_start[f+1]`` of the ``det_*`` arrays (``det_group`` local to the
+    frame), its classes rows ``group_start[f]:group_start[f+1]`` of the ``group_*``
+    arrays, and their member slices start at ``member_start[start_of_frame[f] + g]``
+    (offsets into the joined ``members``). ``compass`` rows are (heading, kappa,
+    log_keep, log_floor) of :func:`~app.localization.compass.compass_terms`, heading NaN
+    without a reading.
+    """
+
+    rel: NDArray[np.float64]
+    det_start: NDArray[np.int64]
+    group_start: NDArray[np.int64]
+    start_of_frame: NDArray[np.int64]
+    det_cos: NDArray[np.float64]
+    det_sin: NDArray[np.float64]
+    det_score: NDArray[np.float64]
+    det_group: NDArray[np.int64]
+    group_kappa: NDArray[np.float64]
+    group_weight: NDArray[np.float64]
+    group_log_floor: NDArray[np.float64]
+    group_log_keep: NDArray[np.float64]
+    member_start: NDArray[np.int64]
+    members: NDArray[np.int64]
+    compass: NDArray[np.float64]
+
+    @property
+    def frames(self) -> int:
+        return int(self.rel.shape[0])
+
+
+def pack_window(
+    frames: Sequence[tuple[tuple[float, float, float], Observation, CompassReading | None]],
+) -> ObservationWindow:
+    """Join ``(rel, observation, compass)`` frames into one :class:`ObservationWindow`."""
+    det_start, group_start, start_of_frame = [0], [0], []
+    member_start: list[NDArray[np.int64]] = []
+    members: list[NDArray[np.int64]] = []
+    n_members = 0
+    n_starts = 0
+    compass = np.full((len(frames), 4), np.nan)
+    for f, (_, obs, heading) in enumerate(frames):
+        det_start.append(det_start[-1] + obs.det_cos.size)
+        group_start.append(group_start[-1] + obs.group_kappa.size)
+        start_of_frame.append(n_starts)
+        starts = obs.member_start if obs.member_start.size else np.zeros(1, dtype=np.int64)
+        member_start.append(starts.astype(np.int64) + n_members)
+        n_starts += starts.size
+        members.append(obs.members.astype(np.int64))
+        n_members += obs.members.size
+        if heading is not None:
+            compass[f] = compass_terms(heading)
+
+    def joined(name: str, dtype: type) -> NDArray[Any]:
+        parts: list[NDArray[Any]] = [
+            np.asarray(getattr(obs, name), dtype=dtype) for _, obs, _ in frames
+        ]
+        return np.concatenate(parts) if parts else np.empty(0, dtype=dtype)
+
+    return ObservationWindow(
+        rel=np.array([r for r, _, _ in frames], dtype=np.float64).reshape(-1, 3),
+        det_start=np.array(det_start, dtype=np.int64),
+        group_start=np.array(group_start, dtype=np.int64),
+        start_of_frame=np.array(start_of_frame, dtype=np.int64),
+        det_cos=joined("det_cos", np.float64),
+        det_sin=joined("det_sin", np.float64),
+        det_score=joined("det_score", np.float64),
+        det_group=joined("det_group", np.int64),
+        group_kappa=joined("group_kappa", np.float64),
+        group_weight=joined("group_weight", np.float64),
+        group_log_floor=joined("group_log_floor", np.float64),
+        group_log_keep=joined("group_log_keep", np.float64),
+        member_start=np.concatenate(member_start) if member_start else np.zeros(1, np.int64),
+        members=np.concatenate(members) if members else np.empty(0, dtype=np.int64),
+        compass=compass,
+    )
+
+
+@njit(cache=True, fastmath=FAST, nogil=True, error_model="numpy")
+def _window_kernel(
+    x, y, theta, rel, det_start, group_start, start_of_frame, compass,
+    use_vis, grid, vis_bits, cos_half_fov, check_fov, fov_cos, fov_sin, max_range_sq, obj_xy,
+    det_cos, det_sin, det_score, det_group,
+    group_kappa, group_weight, group_log_floor, group_log_keep, member_start, members, out,
+):  # fmt: skip  # pragma: no cover - compiled
+    n = x.shape[0]
+    xs = np.empty(n)
+    ys = np.empty(n)
+    ts = np.empty(n)
+    one = np.empty(n)
+    for i in range(n):
+        out[i] = 0.0
+    for f in range(rel.shape[0]):
+        a, b, c = rel[f, 0], rel[f, 1], rel[f, 2]
+        for i in range(n):
+            s, co = sincos(theta[i])
+            xs[i] = x[i] + co * a - s * b
+            ys[i] = y[i] + s * a + co * b
+            ts[i] = theta[i] + c
+        d0, d1 = det_start[f], det_start[f + 1]
+        if d1 > d0:
+            g0, g1 = group_start[f], group_start[f + 1]
+            m0 = start_of_frame[f]
+            _kernel(
+                xs, ys, ts, use_vis, grid, vis_bits, cos_half_fov, check_fov, fov_cos, fov_sin,
+                max_range_sq, obj_xy, det_cos[d0:d1], det_sin[d0:d1], det_score[d0:d1],
+                det_group[d0:d1], group_kappa[g0:g1], group_weight[g0:g1],
+                group_log_floor[g0:g1], group_log_keep[g0:g1],
+                member_start[m0 : m0 + (g1 - g0) + 1], members, one,
+            )  # fmt: skip
+            for i in range(n):
+                out[i] += one[i]
+        heading = compass[f, 0]
+        if heading == heading:  # a reading (not NaN): the mixture of compass.py
+            kappa, log_keep, log_floor = compass[f, 1], compass[f, 2], compass[f, 3]
+            for i in range(n):
+                vm = kappa * (np.cos(heading - ts[i]) - 1.0) + log_keep
+                hi = max(vm, log_floor)
+                out[i] += hi + np.log1p(np.exp(-abs(vm - log_floor)))
+
+
+def window_log_likelihood(
+    x: NDArray[np.float64],
+    y: NDArray[np.float64],
+    theta: NDArray[np.float64],
+    window: ObservationWindow,
+    semantic_map: SemanticMap,
+    config: FilterConfig,
+    grid: VisibilityGrid | None = None,
+) -> NDArray[np.float64]:
+    """Sum over the window's frames of log P(Z_f | pose ⊕ rel_f, M) (and the compass's
+    log-likelihood where a frame has one), one compiled call, shape (N,)."""
+    out = np.zeros(x.shape[0], dtype=np.float64)
+    if not window.frames or not x.shape[0]:
+        return out
+    w = window
+    _window_kernel(
+        np.ascontiguousarray(x, dtype=np.float64),
+        np.ascontiguousarray(y, dtype=np.float64),
+        np.ascontiguousarray(theta, dtype=np.float64),
+        w.rel, w.det_start, w.group_start, w.start_of_frame, w.compass,
+        *_sensor_setup(semantic_map, config, grid),
+        w.det_cos, w.det_sin, w.det_score, w.det_group,
+        w.group_kappa, w.group_weight, w.group_log_floor, w.group_log_keep,
+        w.member_start, w.members, out,
+    )  # fmt: skip
     return out

@@ -9,9 +9,11 @@ import numpy as np
 import pytest
 
 from app.experiments.hard_maps import rotation_room
+from app.localization.compass import CompassReading, compass_log_likelihood, compass_terms
 from app.localization.config import FilterConfig
-from app.localization.evidence import chain_back
 from app.localization.filter import ParticleFilter
+from app.localization.sensor import log_likelihood_reference, prepare_observation
+from app.localization.tolerances import U64, candidate_flip_mask, log_likelihood_tolerance
 from app.localization.types import Odometry
 from app.maps.model import SemanticMap
 from app.simulation.scenarios import paper_config
@@ -29,14 +31,70 @@ def walk(m: SemanticMap, sim: SimulationConfig, cfg: FilterConfig, seed: int):
     return pf, out
 
 
-def test_chain_back_undoes_a_move() -> None:
-    x, y, t = np.array([1.0]), np.array([2.0]), np.array([0.3])
-    odo = Odometry(0.4, -0.1, 0.2)
-    c, s = np.cos(t), np.sin(t)
-    nx = x + c * odo.forward_m - s * odo.left_m
-    ny = y + s * odo.forward_m + c * odo.left_m
-    bx, by, bt = chain_back(nx, ny, t + odo.turn_rad, odo)
-    assert np.allclose([bx[0], by[0], bt[0]], [1.0, 2.0, 0.3], atol=1e-12)
+def chain_back(x, y, theta, odometry: Odometry):
+    """The poses one frame earlier, undoing ``odometry`` (noise-free): the reference."""
+    t0 = theta - odometry.turn_rad
+    c, s = np.cos(t0), np.sin(t0)
+    return (
+        x - (c * odometry.forward_m - s * odometry.left_m),
+        y - (s * odometry.forward_m + c * odometry.left_m),
+        t0,
+    )
+
+
+@pytest.mark.parametrize("fov", [360.0, 180.0])
+def test_window_score_is_the_chained_sum_of_frames(paper_office: SemanticMap, fov: float) -> None:
+    """One compiled call over the history window equals, per pose, the float64 reference
+    log-likelihood of every scored frame at the pose chained back by the odometry, plus
+    the compass terms, within the kernel's derived bound summed over the frames."""
+    cfg = FilterConfig(fov_deg=fov, particles=200)
+    sim = replace(paper_config("nominal", fov), duration_s=6.0, compass_std_deg=10.0)
+    frames = simulate(paper_office, sim, np.random.default_rng(3))
+    pf = ParticleFilter(paper_office, cfg, rng=np.random.default_rng(4))
+    tracker = pf.evidence
+    assert tracker is not None
+    history = []
+    for f in frames[:15]:
+        heading = None if f.compass_rad is None else CompassReading(f.compass_rad, 0.2)
+        obs = prepare_observation(f.detections, paper_office, cfg)
+        tracker._history.append((f.odometry, obs, heading))
+        history.append((f.odometry, obs, heading))
+    history = history[-tracker.settings.window :]
+    rng = np.random.default_rng(5)
+    pts = paper_office.free_space.sample(300, rng)
+    x, y, th = pts[:, 0], pts[:, 1], rng.uniform(-np.pi, np.pi, 300)
+    got = tracker.window_score(x, y, th)
+    want = np.zeros_like(x)
+    bound = np.zeros_like(x)
+    sure = np.ones(x.shape, dtype=bool)
+    cx, cy, ct = x, y, th
+    scored = 0
+    for k in range(len(history) - 1, -1, -1):
+        odo, obs, heading = history[k]
+        if (len(history) - 1 - k) % tracker.settings.window_stride == 0:
+            scored += 1
+            if not obs.empty:
+                rows = paper_office.visibility.visible(cx, cy)
+                ref = log_likelihood_reference(cx, cy, ct, obs, paper_office, cfg, rows)
+                want += ref
+                # The kernel chains the pose in float64 with its own sine and cosine
+                # before rounding it to float32, so its position may round one unit
+                # away from the reference's: twice the per-frame bound covers that.
+                tol = log_likelihood_tolerance(cx, cy, ct, obs, paper_office, cfg, ref)
+                bound += 2.0 * np.where(np.isfinite(tol), tol, 0.0)
+                sure &= ~candidate_flip_mask(cx, cy, ct, obs, paper_office, cfg)
+            if heading is not None:
+                _, kappa, _, _ = compass_terms(heading)
+                want += compass_log_likelihood(ct, heading)
+                # float64 angles of at most a few pi, rounded a few times.
+                bound += kappa * 16 * np.pi * U64
+        cx, cy, ct = chain_back(cx, cy, ct, odo)
+    assert scored == 5
+    assert np.count_nonzero(~sure) <= 3
+    finite = np.isfinite(want) & sure
+    assert np.array_equal(np.isfinite(got[sure]), np.isfinite(want[sure]))
+    assert (np.abs(got[finite] - want[finite]) <= bound[finite]).all()
+    assert np.ptp(want[finite]) > 10.0  # the poses really differ
 
 
 @pytest.mark.parametrize("seed", [0, 1])

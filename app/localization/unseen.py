@@ -1,0 +1,145 @@
+"""Objects the estimate says are in plain view, that the camera keeps not reporting.
+
+The sensor model of the paper (eqs. 2-3) only weighs what the detector reports: an
+object the pose should see but that is never reported costs nothing. In a room that a
+rotation maps onto itself except for one door, the mirror-image pose then explains
+every detection as well as the true pose, and a false detection that happens to
+point at the mirror's door tips the evidence its way. Yet from the mirror pose that
+door is a few metres straight ahead, frame after frame, and no detection ever points
+at it.
+
+This module keeps that negative evidence for the gate of ``converged`` only (it never
+moves a particle): per object, a decaying count of frames in which the estimate had it
+*clearly in view* (line of sight on the visibility grid, within ``near_m``, at least
+``margin_rad`` inside the field of view, of a class the detector has reported at
+least once in this session) and of those in which a detection of its class pointed at
+it (within ``cutoff_sigmas`` of its bearing). An object in clear view for
+``min_expected`` frames' worth of count yet seen in at most ``max_seen_share`` of them
+marks the estimate as *contradicted*: converged is not gained, and is given up.
+
+Only frames with detections count (a blocked camera reports nothing at all, which says
+nothing about any one object). When the estimate jumps by more than ``jump_m`` the
+counts start again: they were about another place.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from app.localization.config import FilterConfig
+from app.localization.sensor import Observation
+from app.maps.geometry import wrap_angle
+from app.maps.model import SemanticMap
+
+
+@dataclass(frozen=True)
+class UnseenSettings:
+    """What "clearly in view" means, and how much not seeing it takes."""
+
+    near_m: float = 8.0
+    #: Closer than this the bearing to an object's reference point is ill-defined.
+    min_m: float = 0.7
+    margin_rad: float = float(np.radians(10.0))
+    #: A detection within this many of its class's stds of the object's bearing sees it.
+    cutoff_sigmas: float = 4.0
+    #: Per-frame decay of the counts (about 7 frames of memory).
+    decay: float = 0.85
+    min_expected: float = 4.0
+    max_seen_share: float = 0.15
+    jump_m: float = 1.0
+
+
+DEFAULT_UNSEEN = UnseenSettings()
+
+
+class UnseenObjects:
+    """Decaying per-object counts of frames in clear view and frames seen."""
+
+    def __init__(
+        self,
+        semantic_map: SemanticMap,
+        config: FilterConfig,
+        settings: UnseenSettings = DEFAULT_UNSEEN,
+    ) -> None:
+        self.map = semantic_map
+        self.config = config
+        self.settings = settings
+        self.reported = np.zeros(len(semantic_map.classes), dtype=bool)
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the counts (not the classes the detector has reported)."""
+        n = self.map.object_count
+        self.expected = np.zeros(n)
+        self.seen = np.zeros(n)
+        self._at: tuple[float, float] | None = None
+
+    @property
+    def contradicted(self) -> bool:
+        """Whether an object in clear view has gone unreported (module docstring)."""
+        st = self.settings
+        flagged = (self.expected >= st.min_expected) & (
+            self.seen <= st.max_seen_share * self.expected
+        )
+        return bool(flagged.any())
+
+    def update(
+        self,
+        x: float,
+        y: float,
+        theta: float,
+        obs: Observation,
+        visible_row: NDArray[np.bool_] | None,
+    ) -> None:
+        """Count one frame at the estimate (x, y, theta); frames without detections skip."""
+        if obs.empty:
+            return
+        st = self.settings
+        if self._at is not None and np.hypot(x - self._at[0], y - self._at[1]) > st.jump_m:
+            self.reset()
+        self._at = (x, y)
+        index = {c: i for i, c in enumerate(self.map.classes)}
+        for cls in obs.classes:
+            self.reported[index[cls]] = True
+        dx = self.map.object_xy[:, 0] - x
+        dy = self.map.object_xy[:, 1] - y
+        dist = np.hypot(dx, dy)
+        bearing = wrap_angle(np.arctan2(dy, dx) - theta)
+        clear = (dist <= st.near_m) & (dist >= st.min_m) & self.reported[self.map.object_class]
+        if visible_row is not None and self.config.visibility:
+            clear &= visible_row
+        if self.config.fov_deg < 360.0:
+            off_centre = np.abs(wrap_angle(bearing - np.radians(self.config.fov_centre_deg)))
+            clear &= off_centre <= np.radians(self.config.fov_deg) / 2.0 - st.margin_rad
+        seen = np.zeros(self.map.object_count, dtype=bool)
+        group_of = {c: g for g, c in enumerate(obs.classes)}
+        objects = np.flatnonzero(clear)
+        for j in objects:
+            g = group_of.get(self.map.classes[self.map.object_class[j]])
+            if g is None:
+                continue
+            err = np.abs(wrap_angle(obs.det_bearing[obs.det_group == g] - bearing[j]))
+            reach = st.cutoff_sigmas / np.sqrt(obs.group_kappa[g])
+            seen[j] = bool((err <= reach).any())
+        self.expected = st.decay * self.expected + clear
+        self.seen = st.decay * self.seen + (clear & seen)
+
+    def checkpoint(self) -> dict[str, Any]:
+        return {
+            "expected": self.expected,
+            "seen": self.seen,
+            "reported": self.reported,
+            "at": None if self._at is None else list(self._at),
+        }
+
+    def restore(self, state: Mapping[str, Any]) -> None:
+        self.expected = np.array(state["expected"], dtype=np.float64)
+        self.seen = np.array(state["seen"], dtype=np.float64)
+        self.reported = np.array(state["reported"], dtype=bool)
+        at = state["at"]
+        self._at = None if at is None else (float(at[0]), float(at[1]))
