@@ -171,7 +171,7 @@ class EvidenceTracker:
         #: The main mode's positions since it formed (the walk so far, as it believes).
         self._trail: deque[tuple[float, float]] = deque(maxlen=self.settings.trail)
         #: The anchor cloud of the main belief, rows x, y, theta; None until drawn.
-        self._anchor: NDArray[np.float64] | None = None
+        self._anchor = None
         self._history: deque[tuple[Odometry | None, Observation, CompassReading | None]] = deque(
             maxlen=self.settings.window
         )
@@ -235,6 +235,16 @@ class EvidenceTracker:
         self.swaps = int(state["swaps"])
         self.mode_searches = int(state["mode_searches"])
         self._last_main = from_plain(Hypothesis | None, state["last_main"])
+
+    @property
+    def _anchor(self) -> NDArray[np.float64] | None:
+        """The anchor cloud, rows x, y, theta (its mean pose cached until it changes)."""
+        return self._cloud
+
+    @_anchor.setter
+    def _anchor(self, cloud: NDArray[np.float64] | None) -> None:
+        self._cloud = cloud
+        self._pose: tuple[float, float, float] | None = None
 
     # ------------------------------------------------------------ read-outs
     @property
@@ -344,12 +354,15 @@ class EvidenceTracker:
             and bool(_near(main.x, main.y, main.theta_rad, self._last_main, self.settings))
         )
         if self._anchor is not None:
-            self._track(odometry, obs, heading, steady)
+            # While the main belief does not explain the detections, converged can be
+            # neither gained nor held: the places are only carried along.
+            self._track(odometry, obs, heading, steady, weigh=search_ok)
         if main is not None:
-            self._follow_main(main, particles)
+            self._follow_main(main, particles, search_ok)
             self._forget_covered(main)
         if (
             main is not None
+            and search_ok
             and self._anchor is not None
             and not obs.empty
             and (self.age < self.settings.young).any()
@@ -392,17 +405,20 @@ class EvidenceTracker:
         obs: Observation,
         heading: CompassReading | None,
         count: bool = True,
+        weigh: bool = True,
     ) -> None:
         """Move the anchor by the odometry; weigh it and its carried copies (their
-        ratios gain this frame's evidence only if ``count``)."""
+        ratios gain this frame's evidence only if ``count``; nothing is weighed unless
+        ``weigh``)."""
         assert self._anchor is not None
         x0, y0, t0 = self._anchor
         nx, ny, nt = sample_motion(x0, y0, t0, odometry, self.config, self.rng)
         a, p = self.count, x0.size
-        if not a:
-            # No alternative to weigh against: the anchor only has to follow the main
-            # mode (it is redrawn from the filter's cluster when it drifts, and
-            # re-centred by every search), so the odometry alone moves it.
+        if not a or not weigh:
+            # Nothing to weigh (no alternative, or no evidence worth counting): the
+            # anchor only has to follow the main mode (it is redrawn from the filter's
+            # cluster when it drifts, and re-centred by every search), so the odometry
+            # alone moves it, and the copies with it.
             self._anchor = np.vstack([nx, ny, nt])
             return
         # The copies move with the same body-frame motion: a rigid motion of the map
@@ -459,26 +475,29 @@ class EvidenceTracker:
         ok = np.isfinite(top[:, 0])
         if not ok[0]:
             return
-        w = np.exp(log_w - np.where(ok, top[:, 0], 0.0)[:, None])
+        rows = np.flatnonzero(ok)
+        w = np.exp(log_w[rows] - top[rows])
         total = w.sum(axis=1)
-        mx = (w * x).sum(axis=1) / total
-        my = (w * y).sum(axis=1) / total
-        mt = np.arctan2((w * np.sin(t)).sum(axis=1), (w * np.cos(t)).sum(axis=1))
+        mx = (w * x[rows]).sum(axis=1) / total
+        my = (w * y[rows]).sum(axis=1) / total
+        mt = np.arctan2((w * np.sin(t[rows])).sum(axis=1), (w * np.cos(t[rows])).sum(axis=1))
         fitted = _moves_onto((float(mx[0]), float(my[0]), float(mt[0])), mx[1:], my[1:], mt[1:])
-        self.moves = np.where(ok[1:, None], fitted, self.moves)
+        self.moves[rows[1:] - 1] = fitted
 
     def _keep(self, keep: NDArray[np.bool_]) -> None:
         self.moves, self.llr, self.age = self.moves[keep], self.llr[keep], self.age[keep]
         self.seg = self.seg[keep]
 
     def _anchor_pose(self) -> tuple[float, float, float]:
-        assert self._anchor is not None
-        x, y, t = self._anchor
-        return (
-            float(x.mean()),
-            float(y.mean()),
-            float(np.arctan2(np.sin(t).mean(), np.cos(t).mean())),
-        )
+        if self._pose is None:
+            assert self._anchor is not None
+            x, y, t = self._anchor
+            self._pose = (
+                float(x.mean()),
+                float(y.mean()),
+                float(np.arctan2(np.sin(t).mean(), np.cos(t).mean())),
+            )
+        return self._pose
 
     def _centres(self) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
         """Each alternative's centre pose (x, y, theta), each shape (A,)."""
@@ -504,14 +523,18 @@ class EvidenceTracker:
         self._set_anchor(np.vstack([x[idx], y[idx], t[idx]]))
         return True
 
-    def _follow_main(self, main: Hypothesis, particles: tuple[NDArray[np.float64], ...]) -> None:
+    def _follow_main(
+        self, main: Hypothesis, particles: tuple[NDArray[np.float64], ...], fitted: bool = True
+    ) -> None:
         """Keep the anchor on the filter's heaviest cluster, and the ratios meaningful.
 
         The anchor is redrawn from the cluster when it has drifted from it (same place).
         When the filter's heaviest cluster moves to another place, the evidence is not
         re-referenced silently: if that place is an alternative, the two swap roles and
         every ratio is re-expressed against it; otherwise the old anchor's place becomes
-        an alternative with even odds, and evidence decides between them from now on.
+        an alternative with even odds, and evidence decides between them from now on,
+        if it explained the detections (``fitted``): a place that did not is no
+        alternative worth tracking.
         """
         st = self.settings
         if self._anchor is None:
@@ -531,7 +554,7 @@ class EvidenceTracker:
         if hit.size:
             self._make_main(int(hit[np.argmax(self.evidence[hit])]))
             return
-        if self._draw_anchor(main, particles):
+        if self._draw_anchor(main, particles) and fitted:
             # The old anchor's place, now an alternative, carried from the new anchor.
             back = _moves_onto(self._anchor_pose(), np.array([ax]), np.array([ay]), np.array([at]))
             self._append(back[0], 0.0)

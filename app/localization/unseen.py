@@ -70,6 +70,7 @@ class UnseenObjects:
         self.config = config
         self.settings = settings
         self.reported = np.zeros(len(semantic_map.classes), dtype=bool)
+        self._class_index = {c: i for i, c in enumerate(semantic_map.classes)}
         self.reset()
 
     def reset(self) -> None:
@@ -106,9 +107,9 @@ class UnseenObjects:
         if self._at is not None and np.hypot(x - self._at[0], y - self._at[1]) > st.jump_m:
             self.reset()
         self._at = (x, y)
-        index = {c: i for i, c in enumerate(self.map.classes)}
-        for cls in obs.classes:
-            self.reported[index[cls]] = True
+        # The observation's class groups as the map's class indices.
+        group_class = np.array([self._class_index[c] for c in obs.classes], dtype=np.int64)
+        self.reported[group_class] = True
         dx = self.map.object_xy[:, 0] - x
         dy = self.map.object_xy[:, 1] - y
         dist = np.hypot(dx, dy)
@@ -119,16 +120,13 @@ class UnseenObjects:
         if self.config.fov_deg < 360.0:
             off_centre = np.abs(wrap_angle(bearing - np.radians(self.config.fov_centre_deg)))
             clear &= off_centre <= np.radians(self.config.fov_deg) / 2.0 - st.margin_rad
-        seen = np.zeros(self.map.object_count, dtype=bool)
-        group_of = {c: g for g, c in enumerate(obs.classes)}
         objects = np.flatnonzero(clear)
-        for j in objects:
-            g = group_of.get(self.map.classes[self.map.object_class[j]])
-            if g is None:
-                continue
-            err = np.abs(wrap_angle(obs.det_bearing[obs.det_group == g] - bearing[j]))
-            reach = st.cutoff_sigmas / np.sqrt(obs.group_kappa[g])
-            seen[j] = bool((err <= reach).any())
+        # Each object in clear view against every detection of its class at once.
+        same = self.map.object_class[objects][:, None] == group_class[obs.det_group][None, :]
+        err = np.abs(wrap_angle(obs.det_bearing[None, :] - bearing[objects][:, None]))
+        reach = st.cutoff_sigmas / np.sqrt(obs.group_kappa[obs.det_group])
+        seen = np.zeros(self.map.object_count, dtype=bool)
+        seen[objects] = (same & (err <= reach[None, :])).any(axis=1)
         self.expected = st.decay * self.expected + clear
         self.seen = st.decay * self.seen + (clear & seen)
         self.frame_expected = int(objects.size)
