@@ -1,51 +1,58 @@
 """Confidence from evidence: alternative places kept alive, and their evidence counted.
 
-A particle filter's weight share says nothing about a mode that resampling has
-already killed: in a symmetric or repetitive building the mirror mode dies by chance,
-not by evidence. So besides the filter's own cloud (the *main* belief), this module
-keeps a small set of **alternative hypotheses**, each with the accumulated
-log-likelihood ratio ``llr`` of everything observed since it was found, against the
-main belief:
+A particle filter's weight share says nothing about a mode that resampling has already
+killed: in a symmetric or repetitive building the mirror mode dies by chance, not by
+evidence. So besides the filter's own cloud (the *main* belief), this module keeps a
+small set of **alternative hypotheses**, each with the accumulated log-likelihood ratio
+``llr`` of everything observed since it was found, against the main belief:
 
 * **The anchor.** A cloud of ``particles`` poses drawn from the filter's heaviest
-  cluster, tracked like a little filter (same motion model, same compiled sensor
-  kernel, resampled every frame) and redrawn when it drifts off that cluster.
+  cluster, tracked like a little filter (same motion model, same compiled sensor kernel,
+  resampled every frame) and redrawn when it drifts off that cluster.
 * **Alternatives are rigid motions of the anchor.** An alternative is the rigid motion
   (turn, shift) that carries the anchor onto another place. A rigid motion of the map
   commutes with body-frame odometry, so the carried cloud moves exactly as the anchor
   does; each frame its evidence is the log of the mean likelihood of the carried
   particles (moves through walls included), and ``llr`` gains the difference to the
-  anchor's. Both sides of the ratio use the *same* particles: under an exact symmetry
-  of the map the two are equal to rounding (independent small clouds drifted apart by
-  units of evidence within seconds), and the cost is one kernel call over the anchor
-  and its copies.
+  anchor's. Both sides of the ratio use the *same* particles: under an exact symmetry of
+  the map the two are equal to rounding (independent small clouds drifted apart by units
+  of evidence within seconds), and the cost is one kernel call over the anchor and its
+  copies. Evidence counts while the main cluster is steady (tight and where it was);
+  each copy's motion is re-fitted to its weighted mean every frame, and a young
+  alternative's place is polished onto the recent frames every frame.
+* **Counted twice.** ``seg`` counts the same ratio at every search on the frames since
+  the last one, every place first polished onto the poses that explain the recent frames
+  best: it cannot lose evidence to a copy a few decimetres off its place (at a turn the
+  filter's cluster is corrected and the copies lag). :attr:`evidence` is the larger of
+  the two: refuting a place takes both.
 * **Found** by a periodic global consistency search (every ``search_every`` frames while
-  the main mode is tight): candidate poses all over the free space with the heading
-  that points one detection at an object of its class (as in sensor resetting), scored
-  on the current frame; the best are refined and scored on the last ``window`` frames
-  chained back by the odometry, then polished by a deterministic pattern search, as
-  are the main mode and every tracked alternative (the motions are re-fitted, so a
-  copy a few centimetres off does not lose evidence for nothing). A finalist away
-  from the main mode whose window evidence is within ``seed_llr`` of the main mode's
-  becomes an alternative, if the main mode's whole walk so far, carried onto it, stays
-  in the free space (the odometry is the same for both: a shifted copy of a walk
-  through a corridor's far end is no alternative). It starts at its window
-  difference, never ahead (the best of thousands fits by selection), plus a prior:
-  once the main mode has been searched against, a place earlier searches did not find
-  was at most ``seed_llr`` as likely then. Places dropped earlier are remembered (as
-  motions relative to the main mode) and not found again as newcomers.
+  the main mode is tight, once ``min_history`` frames are kept): candidate poses all
+  over the free space with the heading that points one detection at an object of its
+  class (as in sensor resetting), scored on the current frame; the best are refined and
+  scored on the last ``window`` frames chained back by the odometry, then polished by a
+  deterministic pattern search, as are the main mode and every tracked alternative (the
+  motions are re-fitted, so a copy a few centimetres off does not lose evidence for
+  nothing). A finalist away from the main mode whose window evidence is within
+  ``seed_llr`` of the main mode's becomes an alternative, if the main mode's whole walk
+  so far, carried onto it, stays in the free space (the odometry is the same for both: a
+  shifted copy of a walk through a corridor's far end is no alternative). It starts at
+  its window difference, never ahead (the best of thousands fits by selection), plus a
+  prior: once the main mode has been searched against, a place earlier searches did not
+  find was at most ``seed_llr`` as likely then. Places dropped earlier are remembered
+  (as motions relative to the main mode) and not found again as newcomers.
 * **Dropped** only when the evidence against falls below ``drop_llr`` (or every copy
   walks through a wall), or when the main belief has come to cover the place.
-* **Swapped** with the main belief when the evidence for exceeds ``switch_llr``: the
-  filter's cloud is replaced by the alternative's, and the old main mode becomes an
-  alternative carrying the opposite evidence. When the filter's heaviest cluster moves
-  to another place by itself, the ratios are re-expressed against it (or the old place
-  becomes an alternative at even odds), never silently re-referenced.
+* **Swapped** with the main belief when both counts of the evidence for exceed
+  ``switch_llr``: the filter's cloud is replaced by the alternative's, and the old main
+  mode becomes an alternative carrying the opposite evidence. When the filter's heaviest
+  cluster moves to another place by itself, the ratios are re-expressed against it (or
+  the old place becomes an alternative at even odds), never silently re-referenced.
 
-The probability of the alternatives under the whole belief, ``e^llr / (1 + sum e^llr)``
-summed (the main belief's prior counted equal to each alternative's), gates
-``converged`` (see :class:`~app.localization.estimate.ConvergenceGate`) and enters the
-protection radius.
+While the main belief does not explain the detections nothing is searched, weighed or
+kept (converged could be neither gained nor held). The probability of the alternatives
+under the whole belief, ``e^evidence / (1 + sum e^evidence)`` summed (the main belief's
+prior counted equal to each alternative's), gates ``converged`` (see
+:class:`~app.localization.estimate.ConvergenceGate`) and enters the protection radius.
 """
 
 from __future__ import annotations
