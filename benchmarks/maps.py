@@ -2,6 +2,7 @@
 
     python benchmarks/maps.py            # everything, medians of --repeats runs
     python benchmarks/maps.py --json
+    python benchmarks/maps.py --only startup --repeats 10   # one part (repeatable flag)
 
 Measures, on this machine:
 
@@ -222,34 +223,52 @@ def bench_steps(seeds: int) -> dict[str, object]:
     }
 
 
+#: The parts ``--only`` can pick.
+PARTS = ("prepare", "sessions", "startup", "steps")
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=5)
     parser.add_argument("--seeds", type=int, default=2, help="walks per map for the step")
     parser.add_argument("--skip-startup", action="store_true")
+    parser.add_argument(
+        "--only",
+        action="append",
+        choices=PARTS,
+        help="run only this part (repeatable); startup runs --repeats cold/warm pairs then",
+    )
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
-    out: dict[str, object] = {"prepare": bench_prepare(args.repeats)}
-    out["sessions"] = bench_sessions(max(args.repeats, 20))
-    if not args.skip_startup:
-        out["startup"] = bench_startup(max(1, args.repeats // 2))
-    out["steps"] = bench_steps(args.seeds)
+    parts = set(args.only or PARTS) - ({"startup"} if args.skip_startup else set())
+    out: dict[str, object] = {}
+    if "prepare" in parts:
+        out["prepare"] = bench_prepare(args.repeats)
+    if "sessions" in parts:
+        out["sessions"] = bench_sessions(max(args.repeats, 20))
+    if "startup" in parts:
+        out["startup"] = bench_startup(args.repeats if args.only else max(1, args.repeats // 2))
+    if "steps" in parts:
+        out["steps"] = bench_steps(args.seeds)
     if args.json:
         print(json.dumps(out, indent=1))
         return 0
-    print("preparation (free space + visibility), median s:")
-    for r in out["prepare"]:  # type: ignore[union-attr]
-        print(
-            f"  {r['map']:28s} {r['walls']:4d} walls {r['objects']:4d} objects "
-            f"{r['free_m2']:7.1f} m2 free: build {r['build_s']:.3f} s, cache {r['cached_s']:.4f} s"
-        )
-    print("session creation at 10,000 particles, median ms:")
-    for r in out["sessions"]:  # type: ignore[union-attr]
-        print(f"  {r['map']:28s} {r['create_ms']:.2f} ms")
+    if "prepare" in out:
+        print("preparation (free space + visibility), median s:")
+        for r in out["prepare"]:  # type: ignore[union-attr]
+            print(
+                f"  {r['map']:28s} {r['walls']:4d} walls {r['objects']:4d} objects "
+                f"{r['free_m2']:7.1f} m2 free: build {r['build_s']:.3f} s, "
+                f"cache {r['cached_s']:.4f} s"
+            )
+    if "sessions" in out:
+        print("session creation at 10,000 particles, median ms:")
+        for r in out["sessions"]:  # type: ignore[union-attr]
+            print(f"  {r['map']:28s} {r['create_ms']:.2f} ms")
     if "startup" in out:
-        s = out["startup"]
-        print(f"server start to first session: {s}")
-    print(f"filter step, median ms: {out['steps']}")
+        print(f"server start to first session: {out['startup']}")
+    if "steps" in out:
+        print(f"filter step, median ms: {out['steps']}")
     return 0
 
 
