@@ -33,7 +33,7 @@ class AllowedMethods:
         """
         if self._table is None:
             self._table = [
-                (route.path_regex, {m.upper() for m in route.methods})
+                (route.path_regex, {m.upper() for m in route.methods or ()})
                 for router in self.routers
                 for route in router.routes
                 if isinstance(route, APIRoute) and route.include_in_schema
