@@ -3,6 +3,7 @@
     python benchmarks/maps.py            # everything, medians of --repeats runs
     python benchmarks/maps.py --json
     python benchmarks/maps.py --only startup --repeats 10   # one part (repeatable flag)
+    python benchmarks/maps.py --only startup --repeats 10 --against ../main  # old vs new
 
 Measures, on this machine:
 
@@ -129,7 +130,11 @@ def bench_sessions(repeats: int) -> list[dict[str, object]]:
     return rows
 
 
-def _byte_compile_app() -> None:
+#: This checkout (the server timed unless ``--against`` names another one too).
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _byte_compile_app(tree: Path) -> None:
     """Write the app's bytecode, as ``pip install`` does for an installed service.
 
     A shell with ``PYTHONDONTWRITEBYTECODE`` set (this project's VM) never writes it, so
@@ -138,13 +143,14 @@ def _byte_compile_app() -> None:
     """
     import compileall
 
-    compileall.compile_dir(Path(__file__).resolve().parents[1] / "app", quiet=1)
+    compileall.compile_dir(tree / "app", quiet=1)
 
 
-def _start_to_first_session(cache_dir: Path) -> float:
+def _start_to_first_session(cache_dir: Path, tree: Path = ROOT) -> float:
+    """Seconds from launching ``bearings serve`` (the checkout ``tree``) to the first 201."""
     from tests.helpers import free_port
 
-    _byte_compile_app()
+    _byte_compile_app(tree)
     port = free_port()
     env = {**os.environ, "BEARINGS_CACHE_DIR": str(cache_dir)}
     # One client for every try: a fresh httpx.post per try costs ~25 ms of CPU (a new SSL
@@ -155,6 +161,7 @@ def _start_to_first_session(cache_dir: Path) -> float:
             [sys.executable, "-m", "app.cli", "serve", "--port", str(port), "--no-viser",
              "--log-level", "warning"],
             env=env,
+            cwd=tree,
         )  # fmt: skip
         try:
             deadline = t0 + 120
@@ -175,18 +182,27 @@ def _start_to_first_session(cache_dir: Path) -> float:
             proc.wait(timeout=30)
 
 
-def bench_startup(repeats: int) -> dict[str, object]:
-    cold, warm = [], []
-    for _ in range(repeats):
-        with tempfile.TemporaryDirectory() as tmp:
-            cold.append(_start_to_first_session(Path(tmp)))
-            warm.append(_start_to_first_session(Path(tmp)))
-    return {
-        "cold_s": round(statistics.median(cold), 2),
-        "warm_s": round(statistics.median(warm), 2),
-        "cold_runs": [round(v, 2) for v in cold],
-        "warm_runs": [round(v, 2) for v in warm],
-    }
+def bench_startup(repeats: int, against: Path | None = None) -> dict[str, object]:
+    """Cold (empty map cache) then warm (the cache that run filled) starts, ``repeats``
+    times; with ``against``, that checkout's server too, interleaved run by run so both
+    see the same machine load (its numba cache must be warm: run it once beforehand)."""
+    trees = {"this": ROOT} | ({"against": against.resolve()} if against else {})
+    runs: dict[str, dict[str, list[float]]] = {k: {"cold": [], "warm": []} for k in trees}
+    for i in range(repeats):
+        for name in list(trees)[:: 1 if i % 2 == 0 else -1]:
+            with tempfile.TemporaryDirectory() as tmp:
+                runs[name]["cold"].append(_start_to_first_session(Path(tmp), trees[name]))
+                runs[name]["warm"].append(_start_to_first_session(Path(tmp), trees[name]))
+    out: dict[str, object] = {}
+    for name, r in runs.items():
+        prefix = "" if name == "this" else "against_"
+        out |= {
+            f"{prefix}cold_s": round(statistics.median(r["cold"]), 2),
+            f"{prefix}warm_s": round(statistics.median(r["warm"]), 2),
+            f"{prefix}cold_runs": [round(v, 2) for v in r["cold"]],
+            f"{prefix}warm_runs": [round(v, 2) for v in r["warm"]],
+        }
+    return out
 
 
 def _walk_steps_ms(semantic_map: SemanticMap, sim: SimulationConfig, seed: int) -> list[float]:
@@ -238,6 +254,13 @@ def main() -> int:
         choices=PARTS,
         help="run only this part (repeatable); startup runs --repeats cold/warm pairs then",
     )
+    parser.add_argument(
+        "--against",
+        type=Path,
+        metavar="CHECKOUT",
+        help="also time the start-up of another checkout's server (e.g. a worktree of "
+        "main), interleaved with this one's",
+    )
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
     parts = set(args.only or PARTS) - ({"startup"} if args.skip_startup else set())
@@ -247,7 +270,8 @@ def main() -> int:
     if "sessions" in parts:
         out["sessions"] = bench_sessions(max(args.repeats, 20))
     if "startup" in parts:
-        out["startup"] = bench_startup(args.repeats if args.only else max(1, args.repeats // 2))
+        repeats = args.repeats if args.only else max(1, args.repeats // 2)
+        out["startup"] = bench_startup(repeats, args.against)
     if "steps" in parts:
         out["steps"] = bench_steps(args.seeds)
     if args.json:
