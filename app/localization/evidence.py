@@ -80,6 +80,9 @@ class EvidenceSettings:
     search_every: int = 5
     #: Frames of history a search scores, chained back by the odometry.
     window: int = 10
+    #: No search before this many frames: places fitted to a shorter history are often
+    #: a metre off, and lose evidence for it before they are polished onto the spot.
+    min_history: int = 6
     #: Score every ``window_stride``-th frame of the window.
     window_stride: int = 2
     #: Candidate poses per square metre of free space, and the bounds of their count.
@@ -106,6 +109,8 @@ class EvidenceSettings:
     max_alternatives: int = 8
     #: Frames an alternative is tracked before it can take ``converged`` away.
     probation: int = 5
+    #: Frames an alternative's place is polished every frame after it appears.
+    young: int = 15
     #: A candidate within this log-evidence of the main mode over the window is kept.
     seed_llr: float = -6.0
     #: An alternative whose evidence against falls below this is dropped.
@@ -156,6 +161,8 @@ class EvidenceTracker:
         #: anchor onto it, shape (A, 3).
         self.moves = np.empty((0, 3))
         self.llr = np.empty(0)
+        #: Per alternative, the same ratio counted the search's way (see ``evidence``).
+        self.seg = np.empty(0)
         #: Frames each alternative has been tracked.
         self.age = np.empty(0, dtype=np.int64)
         #: Rigid motions of alternatives dropped by the evidence while the main mode
@@ -185,6 +192,7 @@ class EvidenceTracker:
         return {
             "moves": self.moves,
             "llr": self.llr,
+            "seg": self.seg,
             "age": self.age,
             "graves": self._graves,
             "trail": [list(p) for p in self._trail],
@@ -205,6 +213,7 @@ class EvidenceTracker:
         """Continue from a :meth:`checkpoint` of a tracker with the same map and config."""
         self.moves = np.array(state["moves"], dtype=np.float64).reshape(-1, 3)
         self.llr = np.array(state["llr"], dtype=np.float64)
+        self.seg = np.array(state.get("seg", state["llr"]), dtype=np.float64)
         self.age = np.array(state["age"], dtype=np.int64)
         self._graves = np.array(state["graves"], dtype=np.float64).reshape(-1, 3)
         self._trail.clear()
@@ -232,12 +241,29 @@ class EvidenceTracker:
     def count(self) -> int:
         return int(self.llr.size)
 
+    @property
+    def evidence(self) -> NDArray[np.float64]:
+        """Each alternative's log-ratio against the main belief, shape (A,): the larger of
+        the two ways of counting it.
+
+        ``llr`` is counted every frame on the anchor's carried copies: fine-grained, but
+        a copy a little off its place loses evidence for nothing until it is re-fitted
+        (at a turn that makes a sideways error visible, a copy can lose several units
+        in a few frames). ``seg`` is counted at each search on the frames since the
+        last one, with the main mode and every alternative first polished onto the
+        poses that explain the recent frames best: no such loss, at a coarser pace. An
+        alternative counts as refuted only when both agree, and the main belief is
+        replaced only when both do.
+        """
+        return np.maximum(self.llr, self.seg)
+
     def probabilities(self) -> NDArray[np.float64]:
         """Each alternative's probability under the whole belief, shape (A,)."""
         if not self.count:
             return np.empty(0)
-        top = max(0.0, float(self.llr.max()))
-        e = np.exp(self.llr - top)
+        ev = self.evidence
+        top = max(0.0, float(ev.max()))
+        e = np.exp(ev - top)
         return e / (np.exp(-top) + e.sum())
 
     @property
@@ -308,11 +334,27 @@ class EvidenceTracker:
         self._history.append((odometry, obs, heading))
         if self.searched_ago is not None:
             self.searched_ago += 1
+        # Evidence counts while the main belief is one tight cluster that stayed put: in
+        # between (a turn with little in view, a cluster that jumps) the anchor is drawn
+        # from a cloud that does not know where it is, and so are the copies' ratios.
+        steady = (
+            main is not None
+            and main_tight
+            and self._last_main is not None
+            and bool(_near(main.x, main.y, main.theta_rad, self._last_main, self.settings))
+        )
         if self._anchor is not None:
-            self._track(odometry, obs, heading)
+            self._track(odometry, obs, heading, steady)
         if main is not None:
             self._follow_main(main, particles)
             self._forget_covered(main)
+        if (
+            main is not None
+            and self._anchor is not None
+            and not obs.empty
+            and (self.age < self.settings.young).any()
+        ):
+            self._refit_young(main)
         last, self._last_main = self._last_main, main
         if (
             not main_tight
@@ -335,18 +377,24 @@ class EvidenceTracker:
             and self._anchor is not None
             and not obs.empty
             and self._since_search >= self.settings.search_every
+            and len(self._history) >= self.settings.min_history
         ):
             if not self.count:
                 # Moved by the odometry alone meanwhile (see _track): take the
                 # filter's own cloud of the main mode again, tight and weighed.
                 self._draw_anchor(main, particles)
             self._search(main)
-        return bool(self.count and self.llr.max() >= self.settings.switch_llr)
+        return bool(self.count and np.minimum(self.llr, self.seg).max() >= self.settings.switch_llr)
 
     def _track(
-        self, odometry: Odometry | None, obs: Observation, heading: CompassReading | None
+        self,
+        odometry: Odometry | None,
+        obs: Observation,
+        heading: CompassReading | None,
+        count: bool = True,
     ) -> None:
-        """Move the anchor by the odometry; weigh it and its carried copies."""
+        """Move the anchor by the odometry; weigh it and its carried copies (their
+        ratios gain this frame's evidence only if ``count``)."""
         assert self._anchor is not None
         x0, y0, t0 = self._anchor
         nx, ny, nt = sample_motion(x0, y0, t0, odometry, self.config, self.rng)
@@ -379,10 +427,11 @@ class EvidenceTracker:
         if not np.isfinite(ev[0]):
             self._anchor = None  # the anchor walked through a wall: draw it again
             return
-        self.llr = self.llr + (ev[1:] - ev[0])
+        if count:
+            self.llr = self.llr + (ev[1:] - ev[0])
         self.age = self.age + 1
         self._refit(log_w, np.vstack([nx, ex]), np.vstack([ny, ey]), np.vstack([nt, et]))
-        keep = np.isfinite(ev[1:]) & (self.llr >= self.settings.drop_llr)
+        keep = np.isfinite(ev[1:]) & (self.evidence >= self.settings.drop_llr)
         graves = np.vstack([self._graves, self.moves[~keep]])
         self._graves = graves[-self.settings.max_graves :]
         self._keep(keep)
@@ -420,6 +469,7 @@ class EvidenceTracker:
 
     def _keep(self, keep: NDArray[np.bool_]) -> None:
         self.moves, self.llr, self.age = self.moves[keep], self.llr[keep], self.age[keep]
+        self.seg = self.seg[keep]
 
     def _anchor_pose(self) -> tuple[float, float, float]:
         assert self._anchor is not None
@@ -479,7 +529,7 @@ class EvidenceTracker:
             return
         hit = np.flatnonzero(_near(*self._centres(), main, st)) if self.count else np.empty(0)
         if hit.size:
-            self._make_main(int(hit[np.argmax(self.llr[hit])]))
+            self._make_main(int(hit[np.argmax(self.evidence[hit])]))
             return
         if self._draw_anchor(main, particles):
             # The old anchor's place, now an alternative, carried from the new anchor.
@@ -489,7 +539,7 @@ class EvidenceTracker:
     def _make_main(self, i: int) -> None:
         """Alternative ``i`` becomes the main mode; the old main an alternative."""
         ax, ay, at = self._anchor_pose()
-        shift = float(self.llr[i])
+        shift, seg_shift = float(self.llr[i]), float(self.seg[i])
         assert self._anchor is not None
         cx, cy, ct = _carry(self.moves[i : i + 1], *self._anchor)
         places = self._centres()
@@ -499,6 +549,8 @@ class EvidenceTracker:
         self.moves = _moves_onto(self._anchor_pose(), px, py, pt)
         self.llr = self.llr - shift
         self.llr[i] = -shift
+        self.seg = self.seg - seg_shift
+        self.seg[i] = -seg_shift
         self.age[i] = 0
         self.mode_searches = 0
         self._graves = np.empty((0, 3))
@@ -519,12 +571,17 @@ class EvidenceTracker:
             self._keep(~_near(*self._centres(), main, self.settings))
 
     # --------------------------------------------------------------- search
-    def window(self) -> sensor_kernel.ObservationWindow:
+    def window(
+        self, newest: int | None = None, stride: int | None = None
+    ) -> sensor_kernel.ObservationWindow:
         """The history window's scored frames (every ``window_stride``-th, newest first,
         back to the last break in the odometry), each with its pose relative to the
-        newest frame's (the odometry chained back, noise-free)."""
+        newest frame's (the odometry chained back, noise-free); or every ``stride``-th
+        of the ``newest`` frames only."""
         frames = list(self._history)
-        stride = self.settings.window_stride
+        if newest is not None:
+            frames = frames[-newest:]
+        stride = self.settings.window_stride if stride is None else stride
         rel = (0.0, 0.0, 0.0)
         packed = []
         for k in range(len(frames) - 1, -1, -1):
@@ -622,6 +679,10 @@ class EvidenceTracker:
         the finalists are polished together.
         """
         st = self.settings
+        # The frames since the last search of this mode (all of the history at its first).
+        segment = self.window(
+            newest=self._since_search if self.mode_searches else len(self._history), stride=1
+        )
         self._since_search = 0
         self.searched_ago = 0
         self.searches += 1
@@ -654,16 +715,26 @@ class EvidenceTracker:
         # One polish: the main mode, the tracked alternatives, the finalists.
         ax, ay, at = self._centres() if self.count else (np.empty(0),) * 3
         a = ax.size
+        # The main mode is polished from the filter's cluster and from the anchor.
+        bx, by, bt = self._anchor_pose()
         px, py, pt, ps = self._polished(
-            np.concatenate([[main.x], ax, rx[picked]]),
-            np.concatenate([[main.y], ay, ry[picked]]),
-            np.concatenate([[main.theta_rad], at, rt[picked]]),
+            np.concatenate([[bx, main.x], ax, rx[picked]]),
+            np.concatenate([[by, main.y], ay, ry[picked]]),
+            np.concatenate([[bt, main.theta_rad], at, rt[picked]]),
             window,
         )
+        if ps[1] > ps[0]:
+            px[0], py[0], pt[0], ps[0] = px[1], py[1], pt[1], ps[1]
+        px, py, pt, ps = (np.delete(v, 1) for v in (px, py, pt, ps))
+        if a:
+            # Each place where the recent frames put it: the segment's evidence.
+            on_segment = self.window_score(px[: 1 + a], py[: 1 + a], pt[: 1 + a], segment)
+            self.seg = self.seg + (on_segment[1:] - on_segment[0])
         self._recentre((px[0], py[0], pt[0]), (px[1 : 1 + a], py[1 : 1 + a], pt[1 : 1 + a]))
         main_score = float(ps[0])
         main_h = Hypothesis(float(px[0]), float(py[0]), float(pt[0]), 0.0)
         fx, fy, ft, fsc = px[1 + a :], py[1 + a :], pt[1 + a :], ps[1 + a :]
+        self._replace_places(fx, fy, ft, fsc, window)
         for i in np.argsort(-fsc):
             gain = float(fsc[i] - main_score)
             if gain + prior < st.seed_llr or not np.isfinite(gain):
@@ -680,6 +751,57 @@ class EvidenceTracker:
             # mode by selection alone: a newcomer never starts ahead; tracked evidence
             # will show whether it is.
             self._append(move, min(gain, 0.0) + prior)
+
+    def _replace_places(
+        self,
+        x: NDArray[np.float64],
+        y: NDArray[np.float64],
+        t: NDArray[np.float64],
+        score: NDArray[np.float64],
+        window: sensor_kernel.ObservationWindow,
+    ) -> None:
+        """Move a tracked alternative onto a search finalist at its place that explains
+        the window better (its evidence kept): the global search starts from thousands
+        of poses, the local polish from one, which a short early window may have put
+        a metre or more off."""
+        if not self.count or not x.size:
+            return
+        cx, cy, ct = (v.copy() for v in self._centres())
+        current = self.window_score(cx, cy, ct, window)
+        moved = False
+        for i in np.argsort(-score):
+            h = Hypothesis(float(x[i]), float(y[i]), float(t[i]), 0.0)
+            near = np.flatnonzero(_near(cx, cy, ct, h, self.settings))
+            if near.size != 1 or not score[i] > current[near[0]]:
+                continue
+            j = int(near[0])
+            cx[j], cy[j], ct[j], current[j] = h.x, h.y, h.theta_rad, score[i]
+            moved = True
+        if moved:
+            self.moves = _moves_onto(self._anchor_pose(), cx, cy, ct)
+
+    def _refit_young(self, main: Hypothesis) -> None:
+        """Polish every young alternative's place over the window, each frame.
+
+        A place found by a search, or left behind by the main cluster, is often some
+        decimetres off: a copy there loses evidence faster than the weighted-mean
+        re-fit of :meth:`_refit` (which moves it within the anchor's spread) can bring
+        it back. For its first ``young`` frames it is polished like the searches do,
+        against the same recent frames as the main mode (whose place is polished
+        alongside, so the two stay comparable).
+        """
+        young = np.flatnonzero(self.age < self.settings.young)
+        ax, ay, at = self._anchor_pose()
+        cx, cy, ct = (v.copy() for v in self._centres())
+        px, py, pt, ps = self._polished(
+            np.concatenate([[main.x, ax], cx[young]]),
+            np.concatenate([[main.y, ay], cy[young]]),
+            np.concatenate([[main.theta_rad, at], ct[young]]),
+            self.window(),
+        )
+        cx[young], cy[young], ct[young] = px[2:], py[2:], pt[2:]
+        b = int(np.argmax(ps[:2]))  # the main mode from the filter's cluster or the anchor
+        self._recentre((px[b], py[b], pt[b]), (cx, cy, ct))
 
     def _walk_fits(self, move: NDArray[np.float64]) -> bool:
         """Whether the main mode's walk so far, carried by ``move``, stays in the free
@@ -713,7 +835,7 @@ class EvidenceTracker:
         the most evidence: two copies of one place would count it twice."""
         cx, cy, ct = self._centres()
         keep = np.ones(self.count, dtype=bool)
-        for i in np.argsort(-self.llr):
+        for i in np.argsort(-self.evidence):
             if not keep[i]:
                 continue
             h = Hypothesis(float(cx[i]), float(cy[i]), float(ct[i]), 0.0)
@@ -726,12 +848,13 @@ class EvidenceTracker:
         """Add one alternative (dropping the weakest when full)."""
         st = self.settings
         if self.count >= st.max_alternatives:
-            worst = int(np.argmin(self.llr))
-            if self.llr[worst] >= llr:
+            worst = int(np.argmin(self.evidence))
+            if self.evidence[worst] >= llr:
                 return
             self._keep(np.arange(self.count) != worst)
         self.moves = np.vstack([self.moves, move[None]])
         self.llr = np.append(self.llr, llr)
+        self.seg = np.append(self.seg, llr)
         self.age = np.append(self.age, 0)
 
     # ----------------------------------------------------------------- swap
@@ -741,7 +864,7 @@ class EvidenceTracker:
         The old main belief becomes an alternative with the opposite evidence; the
         others are re-expressed against the new main belief.
         """
-        best = int(np.argmax(self.llr))
+        best = int(np.argmin(-np.minimum(self.llr, self.seg)))
         self._make_main(best)
         self.swaps += 1
         assert self._anchor is not None

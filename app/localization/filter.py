@@ -48,8 +48,15 @@ from app.state import from_plain, to_plain
 SEED_SHARE = 0.9
 #: Most particles a checkpoint keeps (a converged filter runs on 2,000: kept whole).
 CHECKPOINT_PARTICLES = 2_000
-#: Weight of the newest frame in the smoothed fit that gates ``converged``.
+#: Weight of the newest frame in the smoothed fit that gates ``converged`` ...
 FIT_SMOOTHING = 0.3
+#: ... when it brings at least this much detection score (a frame with less moves the
+#: smoothed fit proportionally less: a lone weak detection, often a false one, where the
+#: camera sees little else, says little either way).
+FIT_FULL_SCORE = 2.0
+#: Stds of bearing noise added to each side of the field of view when checking the fit:
+#: an object just outside the estimate's view may be just inside the camera's.
+FIT_FOV_MARGIN_STDS = 3.0
 #: The fit is measured while the heaviest cluster is at most this wide (m).
 FIT_MAX_SPREAD_M = 0.7
 #: Without a clutter floor, residuals beyond this many stds count as unexplained.
@@ -87,6 +94,8 @@ class ParticleFilter:
         self._vis = semantic_map.visibility if self.config.visibility else None
         self._recovery = AugmentedMCL(self.config.alpha_slow, self.config.alpha_fast)
         self._gate = ConvergenceGate()
+        margin = 2.0 * FIT_FOV_MARGIN_STDS * self.config.bearing_std_deg
+        self._fit_config = replace(self.config, fov_deg=min(360.0, self.config.fov_deg + margin))
         #: Alternative places and their evidence (None with ``config.evidence`` off).
         self.evidence = (
             EvidenceTracker(semantic_map, self.config, self._vis, rng)
@@ -420,13 +429,20 @@ class ParticleFilter:
         object of its class) is either explained by an object, or better explained by
         the clutter floor (beyond the residual where the two densities cross; 3 stds
         without a floor): a false detection then does not count against the estimate.
-        Tracked, score-weighted and smoothed: the mean squared residual of the
-        explained detections (``fit``) and the share left to clutter
-        (``unexplained``). A frame is bad on its own (a kidnap shows at once) when at
-        least three detections' worth of score arrived and their score-weighted mean
-        squared residual, each clipped at the crossover, reaches ``BAD_FRAME_FIT``: a
-        false detection costs at most the crossover squared (about 14.5 at 2 deg), so
-        it takes mostly contradicting detections.
+        Tracked, score-weighted and smoothed (a frame with little detection score moves
+        them little, see ``FIT_FULL_SCORE``): the mean squared residual of the explained
+        detections (``fit``) and the share left to clutter (``unexplained``). Objects
+        count a few stds beyond the field of view's edges (``FIT_FOV_MARGIN_STDS``).
+        With the unseen-object check on, a frame in which the camera reported what the
+        pose has in clear view counts nothing as unexplained (the rest is clutter), and
+        one with nothing in clear view and nothing explained is no evidence either way.
+        A frame is bad on its own (a kidnap shows at once) when at least three
+        detections' worth of score arrived and their score-weighted mean squared
+        residual, each clipped at the crossover, reaches ``BAD_FRAME_FIT``: a false
+        detection costs at most the crossover squared (about 14.5 at 2 deg), so it takes
+        mostly contradicting detections, and (with the unseen-object check on) at least
+        half of the objects in the estimate's clear view going unreported in that frame:
+        a burst of clutter leaves those reported.
         """
         obs = self.last_observation
         top = raw.hypotheses[0] if raw.hypotheses else None
@@ -435,7 +451,7 @@ class ParticleFilter:
         row = self._vis.visible(raw.x, raw.y)[0] if self._vis is not None else None
         if self.unseen is not None:
             self.unseen.update(raw.x, raw.y, raw.theta_rad, obs, row)
-        r = normalized_residuals(raw.x, raw.y, raw.theta_rad, obs, self.map, self.config, row)
+        r = normalized_residuals(raw.x, raw.y, raw.theta_rad, obs, self.map, self._fit_config, row)
         if self.config.clutter:
             g = obs.det_group
             cutoff = np.sqrt(2.0 * (obs.group_log_keep[g] - obs.group_log_floor[g]))
@@ -448,11 +464,23 @@ class ParticleFilter:
         fit = float(np.sum(score[explained] * r[explained] ** 2) / good) if good > 0 else 9.0
         unexplained = 1.0 - good / total
         clipped = float(np.sum(score * np.minimum(r, cutoff) ** 2) / total)
-        bad = total >= 3.0 and clipped >= BAD_FRAME_FIT
+        # A burst of false detections where the camera still reports what the pose
+        # has in clear view is clutter, not a contradiction.
+        missing = self.unseen is None or self.unseen.frame_contradicts
+        bad = total >= 3.0 and clipped >= BAD_FRAME_FIT and missing
+        a_share = FIT_SMOOTHING * min(1.0, total / FIT_FULL_SCORE)
+        if self.unseen is not None:
+            if self.unseen.frame_expected == 0 and good == 0.0:
+                a_share = 0.0  # nothing in clear view, nothing explained: no evidence
+            elif not self.unseen.frame_contradicts:
+                unexplained = 0.0  # what the pose has in view was reported: clutter
         q = self.quality
         if q is not None:
-            fit = q.fit + FIT_SMOOTHING * (fit - q.fit)
-            unexplained = q.unexplained + FIT_SMOOTHING * (unexplained - q.unexplained)
+            # The fit averages the explained detections, the share all of them: each
+            # moves by the weight of what it averages.
+            a_fit = FIT_SMOOTHING * min(1.0, good / FIT_FULL_SCORE)
+            fit = q.fit + a_fit * (fit - q.fit)
+            unexplained = q.unexplained + a_share * (unexplained - q.unexplained)
         contradicted = self.unseen is not None and self.unseen.contradicted
         self.quality = FitQuality(fit, unexplained, bad, contradicted)
 

@@ -78,6 +78,9 @@ class UnseenObjects:
         self.expected = np.zeros(n)
         self.seen = np.zeros(n)
         self._at: tuple[float, float] | None = None
+        #: The last frame's objects in clear view, and how many of them went unreported.
+        self.frame_expected = 0
+        self.frame_missed = 0
 
     @property
     def contradicted(self) -> bool:
@@ -128,6 +131,14 @@ class UnseenObjects:
             seen[j] = bool((err <= reach).any())
         self.expected = st.decay * self.expected + clear
         self.seen = st.decay * self.seen + (clear & seen)
+        self.frame_expected = int(objects.size)
+        self.frame_missed = int(np.count_nonzero(clear & ~seen))
+
+    @property
+    def frame_contradicts(self) -> bool:
+        """Whether the last frame left at least half of the objects in clear view
+        unreported (or had none in clear view to judge by)."""
+        return self.frame_expected == 0 or 2 * self.frame_missed >= self.frame_expected
 
     def checkpoint(self) -> dict[str, Any]:
         return {
