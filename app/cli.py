@@ -7,11 +7,14 @@ Each subcommand's flags default to the matching ``BEARINGS_*`` setting (see
 from __future__ import annotations
 
 import argparse
+import gc
 import sys
 from collections.abc import Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-from app.config import Settings
+if TYPE_CHECKING:
+    from app.config import Settings
 
 
 def _add_server_flags(p: argparse.ArgumentParser) -> None:
@@ -78,13 +81,22 @@ def _add_server_flags(p: argparse.ArgumentParser) -> None:
 
 def settings_from_args(args: argparse.Namespace) -> Settings:
     """Settings from the environment, overridden by every flag given on the command line."""
+    from app.config import Settings
+
     overrides = {
         k: v for k, v in vars(args).items() if k in Settings.model_fields and v is not None
     }
     return Settings(**overrides)
 
 
-def build_parser() -> argparse.ArgumentParser:
+#: The subcommands, in the order ``bearings --help`` lists them.
+COMMANDS = ("serve", "demo", "experiments", "bench", "map")
+
+
+def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+    """The whole command line; given ``command``, only that subcommand's own flags are
+    filled in, so ``bearings serve`` does not import the experiments, the benchmark or
+    the map tools (they weigh a few hundred milliseconds of start-up)."""
     parser = argparse.ArgumentParser(
         prog="bearings",
         description="Bearing-only semantic self-localization service for blind and "
@@ -101,29 +113,43 @@ def build_parser() -> argparse.ArgumentParser:
     _add_server_flags(demo)
 
     exp = sub.add_parser("experiments", help="reproduce the paper's Tables I-III (and IV)")
-    from app.experiments.cli import add_arguments as add_experiment_arguments
+    if command in (None, "experiments"):
+        from app.experiments.cli import add_arguments as add_experiment_arguments
 
-    add_experiment_arguments(exp)
+        add_experiment_arguments(exp)
 
     bench = sub.add_parser("bench", help="time a full filter step on a generated map")
-    from app.bench import add_arguments as add_bench_arguments
+    if command in (None, "bench"):
+        from app.bench import add_arguments as add_bench_arguments
 
-    add_bench_arguments(bench)
+        add_bench_arguments(bench)
 
     maps = sub.add_parser("map", help="check map files; import ROS occupancy grids and GeoJSON")
-    from app.maps.cli import add_arguments as add_map_arguments
+    if command in (None, "map"):
+        from app.maps.cli import add_arguments as add_map_arguments
 
-    add_map_arguments(maps)
+        add_map_arguments(maps)
     return parser
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = build_parser()
+    argv = sys.argv[1:] if argv is None else list(argv)
+    # The command is the first word that is not a flag (the top level has only --help).
+    command = next((a for a in argv if not a.startswith("-")), None)
+    parser = build_parser(command if command in COMMANDS else None)
     args = parser.parse_args(argv)
     if args.command in ("serve", "demo"):
-        from app.server import run
+        # No garbage collection while the service starts (imports, kernels, maps): it
+        # makes a few hundred thousand long-lived objects and almost no garbage, and
+        # collecting meanwhile cost about 15 % of the start-up. Once started,
+        # BearingsServer.startup freezes what start-up made and turns collection back on.
+        gc.disable()
+        try:
+            from app.server import run
 
-        return run(settings_from_args(args), demo=args.command == "demo")
+            return run(settings_from_args(args), demo=args.command == "demo")
+        finally:
+            gc.enable()
     if args.command == "experiments":
         from app.experiments.cli import run as run_experiments
 

@@ -132,7 +132,12 @@ def create_app(settings: Settings | None = None, *, demo: bool = False) -> FastA
     app.state.keys = keys
     app.state.streams = StreamRegistry()
     app.add_middleware(BodySizeLimit, max_bytes=settings.max_message_bytes)
-    app.add_middleware(AllowedMethods, api=app)
+    routers = [module.router for module in (health, metrics, maps, sessions, speech)]
+    if importlib.util.find_spec("app.api.routes.demo") is not None:
+        from app.api.routes import demo as demo_routes
+
+        routers.append(demo_routes.router)
+    app.add_middleware(AllowedMethods, routers=routers)
     app.add_middleware(AccessControl, keys=keys, allowed_origins=settings.allowed_origins)
     if settings.allowed_origins:  # outermost: answers CORS preflights without a key
         app.add_middleware(
@@ -145,11 +150,7 @@ def create_app(settings: Settings | None = None, *, demo: bool = False) -> FastA
         )
     install_error_handlers(app)
     document_key_errors(app, OPEN_PATHS)
-    for module in (health, metrics, maps, sessions, speech):
-        app.include_router(module.router)
-    if importlib.util.find_spec("app.api.routes.demo") is not None:
-        from app.api.routes import demo as demo_routes
-
-        app.include_router(demo_routes.router)
+    for router in routers:
+        app.include_router(router)
     app.mount("/", StaticFiles(directory=static_dir(), html=True), name="static")
     return app

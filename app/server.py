@@ -11,6 +11,7 @@ its connections, so a SIGTERM answers every frame accepted and closes WebSockets
 from __future__ import annotations
 
 import copy
+import gc
 import logging
 import socket
 import sys
@@ -64,11 +65,30 @@ def uvicorn_config(app: FastAPI, settings: Settings, **overrides: object) -> uvi
 
 
 class BearingsServer(uvicorn.Server):
-    """uvicorn's server, draining the service first when asked to stop."""
+    """uvicorn's server, draining the service first when asked to stop.
 
-    def __init__(self, config: uvicorn.Config, app: FastAPI) -> None:
+    With ``freeze_start_up`` (the ``bearings serve`` process, whose command line turned
+    garbage collection off for the start-up), once the service has started, every object
+    made so far is moved out of the collector's reach (:func:`gc.freeze`) and collection
+    resumes: the first collections then do not walk the few hundred thousand start-up
+    objects (about 0.1 s each, on the first requests), nor does any full collection later.
+    What start-up left in unreachable cycles stays (measured: under 1 MB, no arrays).
+    """
+
+    def __init__(
+        self, config: uvicorn.Config, app: FastAPI, *, freeze_start_up: bool = False
+    ) -> None:
         super().__init__(config)
         self.app = app
+        self.freeze_start_up = freeze_start_up
+
+    async def startup(self, sockets: list[socket.socket] | None = None) -> None:
+        try:
+            await super().startup(sockets)
+        finally:
+            if self.freeze_start_up:
+                gc.freeze()
+                gc.enable()
 
     async def shutdown(self, sockets: list[socket.socket] | None = None) -> None:
         for server in self.servers:  # no new connections while draining
@@ -105,6 +125,6 @@ def run(settings: Settings, *, demo: bool = False) -> int:
             "Demo: a simulated walk in the paper office is running; watch the particles converge."
         )
     sys.setswitchinterval(GIL_SWITCH_INTERVAL_S)
-    server = BearingsServer(uvicorn_config(app, settings), app)
+    server = BearingsServer(uvicorn_config(app, settings), app, freeze_start_up=True)
     server.run()
     return 0

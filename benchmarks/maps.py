@@ -2,6 +2,8 @@
 
     python benchmarks/maps.py            # everything, medians of --repeats runs
     python benchmarks/maps.py --json
+    python benchmarks/maps.py --only startup --repeats 10   # one part (repeatable flag)
+    python benchmarks/maps.py --only startup --repeats 10 --against ../main  # old vs new
 
 Measures, on this machine:
 
@@ -128,49 +130,79 @@ def bench_sessions(repeats: int) -> list[dict[str, object]]:
     return rows
 
 
-def _start_to_first_session(cache_dir: Path) -> float:
+#: This checkout (the server timed unless ``--against`` names another one too).
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _byte_compile_app(tree: Path) -> None:
+    """Write the app's bytecode, as ``pip install`` does for an installed service.
+
+    A shell with ``PYTHONDONTWRITEBYTECODE`` set (this project's VM) never writes it, so
+    every timed start would otherwise compile about a hundred modules from source (about
+    0.1 s). Files already compiled are only checked.
+    """
+    import compileall
+
+    compileall.compile_dir(tree / "app", quiet=1)
+
+
+def _start_to_first_session(cache_dir: Path, tree: Path = ROOT) -> float:
+    """Seconds from launching ``bearings serve`` (the checkout ``tree``) to the first 201."""
     from tests.helpers import free_port
 
+    _byte_compile_app(tree)
     port = free_port()
     env = {**os.environ, "BEARINGS_CACHE_DIR": str(cache_dir)}
-    t0 = time.perf_counter()
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "app.cli", "serve", "--port", str(port), "--no-viser",
-         "--log-level", "warning"],
-        env=env,
-    )  # fmt: skip
-    try:
-        deadline = t0 + 120
-        while time.perf_counter() < deadline:
-            try:
-                r = httpx.post(
-                    f"http://127.0.0.1:{port}/sessions",
-                    json={"map": "two_wing_office", "particles": 10_000},
-                    timeout=5,
-                )
-                if r.status_code == 201:
-                    return time.perf_counter() - t0
-            except httpx.TransportError:
-                pass
-            time.sleep(0.02)
-        raise RuntimeError("the server did not answer within 120 s")
-    finally:
-        proc.terminate()
-        proc.wait(timeout=30)
+    # One client for every try: a fresh httpx.post per try costs ~25 ms of CPU (a new SSL
+    # context each time), which on 2 cores was taken from the server being timed.
+    with httpx.Client(timeout=5) as client:
+        t0 = time.perf_counter()
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "app.cli", "serve", "--port", str(port), "--no-viser",
+             "--log-level", "warning"],
+            env=env,
+            cwd=tree,
+        )  # fmt: skip
+        try:
+            deadline = t0 + 120
+            while time.perf_counter() < deadline:
+                try:
+                    r = client.post(
+                        f"http://127.0.0.1:{port}/sessions",
+                        json={"map": "two_wing_office", "particles": 10_000},
+                    )
+                    if r.status_code == 201:
+                        return time.perf_counter() - t0
+                except httpx.TransportError:
+                    pass
+                time.sleep(0.01)
+            raise RuntimeError("the server did not answer within 120 s")
+        finally:
+            proc.terminate()
+            proc.wait(timeout=30)
 
 
-def bench_startup(repeats: int) -> dict[str, object]:
-    cold, warm = [], []
-    for _ in range(repeats):
-        with tempfile.TemporaryDirectory() as tmp:
-            cold.append(_start_to_first_session(Path(tmp)))
-            warm.append(_start_to_first_session(Path(tmp)))
-    return {
-        "cold_s": round(statistics.median(cold), 2),
-        "warm_s": round(statistics.median(warm), 2),
-        "cold_runs": [round(v, 2) for v in cold],
-        "warm_runs": [round(v, 2) for v in warm],
-    }
+def bench_startup(repeats: int, against: Path | None = None) -> dict[str, object]:
+    """Cold (empty map cache) then warm (the cache that run filled) starts, ``repeats``
+    times; with ``against``, that checkout's server too, interleaved run by run so both
+    see the same machine load (its numba cache must be warm: run it once beforehand)."""
+    trees = {"this": ROOT} | ({"against": against.resolve()} if against else {})
+    runs: dict[str, dict[str, list[float]]] = {k: {"cold": [], "warm": []} for k in trees}
+    for i in range(repeats):
+        for name in list(trees)[:: 1 if i % 2 == 0 else -1]:
+            with tempfile.TemporaryDirectory() as tmp:
+                runs[name]["cold"].append(_start_to_first_session(Path(tmp), trees[name]))
+                runs[name]["warm"].append(_start_to_first_session(Path(tmp), trees[name]))
+    out: dict[str, object] = {}
+    for name, r in runs.items():
+        prefix = "" if name == "this" else "against_"
+        out |= {
+            f"{prefix}cold_s": round(statistics.median(r["cold"]), 2),
+            f"{prefix}warm_s": round(statistics.median(r["warm"]), 2),
+            f"{prefix}cold_runs": [round(v, 2) for v in r["cold"]],
+            f"{prefix}warm_runs": [round(v, 2) for v in r["warm"]],
+        }
+    return out
 
 
 def _walk_steps_ms(semantic_map: SemanticMap, sim: SimulationConfig, seed: int) -> list[float]:
@@ -207,34 +239,60 @@ def bench_steps(seeds: int) -> dict[str, object]:
     }
 
 
+#: The parts ``--only`` can pick.
+PARTS = ("prepare", "sessions", "startup", "steps")
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=5)
     parser.add_argument("--seeds", type=int, default=2, help="walks per map for the step")
     parser.add_argument("--skip-startup", action="store_true")
+    parser.add_argument(
+        "--only",
+        action="append",
+        choices=PARTS,
+        help="run only this part (repeatable); startup runs --repeats cold/warm pairs then",
+    )
+    parser.add_argument(
+        "--against",
+        type=Path,
+        metavar="CHECKOUT",
+        help="also time the start-up of another checkout's server (e.g. a worktree of "
+        "main), interleaved with this one's",
+    )
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
-    out: dict[str, object] = {"prepare": bench_prepare(args.repeats)}
-    out["sessions"] = bench_sessions(max(args.repeats, 20))
-    if not args.skip_startup:
-        out["startup"] = bench_startup(max(1, args.repeats // 2))
-    out["steps"] = bench_steps(args.seeds)
+    parts = set(args.only or PARTS) - ({"startup"} if args.skip_startup else set())
+    out: dict[str, object] = {}
+    if "prepare" in parts:
+        out["prepare"] = bench_prepare(args.repeats)
+    if "sessions" in parts:
+        out["sessions"] = bench_sessions(max(args.repeats, 20))
+    if "startup" in parts:
+        repeats = args.repeats if args.only else max(1, args.repeats // 2)
+        out["startup"] = bench_startup(repeats, args.against)
+    if "steps" in parts:
+        out["steps"] = bench_steps(args.seeds)
     if args.json:
         print(json.dumps(out, indent=1))
         return 0
-    print("preparation (free space + visibility), median s:")
-    for r in out["prepare"]:  # type: ignore[union-attr]
-        print(
-            f"  {r['map']:28s} {r['walls']:4d} walls {r['objects']:4d} objects "
-            f"{r['free_m2']:7.1f} m2 free: build {r['build_s']:.3f} s, cache {r['cached_s']:.4f} s"
-        )
-    print("session creation at 10,000 particles, median ms:")
-    for r in out["sessions"]:  # type: ignore[union-attr]
-        print(f"  {r['map']:28s} {r['create_ms']:.2f} ms")
+    if "prepare" in out:
+        print("preparation (free space + visibility), median s:")
+        for r in out["prepare"]:  # type: ignore[union-attr]
+            print(
+                f"  {r['map']:28s} {r['walls']:4d} walls {r['objects']:4d} objects "
+                f"{r['free_m2']:7.1f} m2 free: build {r['build_s']:.3f} s, "
+                f"cache {r['cached_s']:.4f} s"
+            )
+    if "sessions" in out:
+        print("session creation at 10,000 particles, median ms:")
+        for r in out["sessions"]:  # type: ignore[union-attr]
+            print(f"  {r['map']:28s} {r['create_ms']:.2f} ms")
     if "startup" in out:
-        s = out["startup"]
-        print(f"server start to first session: {s}")
-    print(f"filter step, median ms: {out['steps']}")
+        print(f"server start to first session: {out['startup']}")
+    if "steps" in out:
+        print(f"filter step, median ms: {out['steps']}")
     return 0
 
 

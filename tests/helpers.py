@@ -71,7 +71,12 @@ def free_port() -> int:
 
 @contextmanager
 def serving(
-    app: FastAPI, port: int, *, timeout_s: float = 60.0, log_level: str = "warning"
+    app: FastAPI,
+    port: int,
+    *,
+    timeout_s: float = 60.0,
+    log_level: str = "warning",
+    freeze_start_up: bool = False,
 ) -> Iterator[str]:
     """Run ``app`` with a real uvicorn server on ``port`` in a thread; yield host:port.
 
@@ -84,7 +89,7 @@ def serving(
     config = uvicorn_config(
         app, settings, host="127.0.0.1", port=port, log_level=log_level, log_config=None
     )
-    server = BearingsServer(config, app)
+    server = BearingsServer(config, app, freeze_start_up=freeze_start_up)
     thread = threading.Thread(target=server.run, daemon=True)
     thread.start()
     deadline = time.time() + timeout_s

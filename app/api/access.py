@@ -25,8 +25,10 @@ OPEN_PATHS = frozenset({"/healthz"})
 CHALLENGE = (b"www-authenticate", b'Bearer realm="bearings"')
 
 
-def get_principal(conn: HTTPConnection) -> Principal:
-    """The caller, as the access middleware found it (the open principal without keys)."""
+async def get_principal(conn: HTTPConnection) -> Principal:
+    """The caller, as the access middleware found it (the open principal without keys).
+
+    ``async`` so that FastAPI calls it on the event loop, not in its thread pool."""
     return conn.scope.get(SCOPE_KEY, OPEN)
 
 

@@ -1,4 +1,9 @@
-"""Dependencies shared by the routes, as ``Annotated`` aliases."""
+"""Dependencies shared by the routes, as ``Annotated`` aliases.
+
+Each is ``async``: FastAPI runs a plain ``def`` dependency in its thread pool, a thread
+hop per request (and, on a server's first request, anyio's thread machinery to import)
+for what is an attribute lookup.
+"""
 
 from __future__ import annotations
 
@@ -11,15 +16,15 @@ from app.service.metrics import Metrics
 from app.service.sessions import SessionManager
 
 
-def get_manager(request: Request) -> SessionManager:
+async def get_manager(request: Request) -> SessionManager:
     return request.app.state.manager
 
 
-def get_app_settings(request: Request) -> Settings:
+async def get_app_settings(request: Request) -> Settings:
     return request.app.state.settings
 
 
-def get_metrics(request: Request) -> Metrics:
+async def get_metrics(request: Request) -> Metrics:
     return request.app.state.metrics
 
 

@@ -25,9 +25,6 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 from numpy.typing import NDArray
-from scipy import ndimage
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import dijkstra
 
 from app.guidance.targets import DestinationSpec, Target, resolve
 from app.maps.geometry import points_in_polygon, segments_cross_walls, wrap_deg
@@ -106,6 +103,10 @@ class Plan:
         self.origin = np.array([fs.origin_x, fs.origin_y])
         self.shape = fs.mask.shape
         free = fs.mask
+        # scipy (ndimage here, csgraph in _build) is imported on the first plan, not with
+        # the service: it is a tenth of a second that no server start needs to wait for.
+        from scipy import ndimage
+
         # Distance from each free cell centre to the nearest cell that is not free; the
         # free space already keeps WALL_CLEARANCE_M (0.1 m) plus half a cell from walls.
         room = ndimage.distance_transform_edt(free) * self.res
@@ -127,6 +128,9 @@ class Plan:
         return self.origin + (np.column_stack([c, r]) + 0.5) * self.res
 
     def _build(self, walkable: NDArray[np.bool_]) -> _Layer:
+        from scipy.sparse import coo_matrix
+        from scipy.sparse.csgraph import dijkstra
+
         rows, cols = self.shape
         cells = np.flatnonzero(walkable)
         n = cells.size

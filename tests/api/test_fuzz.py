@@ -64,6 +64,17 @@ def test_wrong_method_on_an_api_path_is_405_with_the_real_allow_header(
     assert client.get("/").status_code == 200  # the demo page is still served
 
 
+def test_allow_names_the_methods_the_openapi_document_declares(client: TestClient) -> None:
+    """The 405 table comes from the routes, not the document: both must agree on every path."""
+    doc = client.get("/openapi.json").json()
+    assert len(doc["paths"]) >= 8
+    for path, operations in doc["paths"].items():
+        assert "patch" not in operations  # PATCH is the wrong method everywhere
+        r = client.patch(re.sub(r"\{[^}]+\}", "abc", path))
+        assert r.status_code == 405, path
+        assert r.headers["allow"] == ", ".join(sorted(m.upper() for m in operations)), path
+
+
 def test_numbers_must_be_numbers(client: TestClient) -> None:
     """Booleans and numeric strings are refused wherever a number is expected."""
     bad_bodies = [

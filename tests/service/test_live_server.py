@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import asyncio
+import gc
 import json
 import time
 from collections.abc import Iterator
@@ -104,3 +105,20 @@ def test_unknown_session_close_reason_over_the_wire(server_url: str) -> None:
     exc = asyncio.run(main())
     assert exc.rcvd is not None and exc.rcvd.code == 1008
     assert "no session" in exc.rcvd.reason
+
+
+def test_start_up_is_frozen_then_collection_resumes() -> None:
+    """`bearings serve` starts with the garbage collector off (app/cli.py); once the
+    service has started, what start-up made is frozen and collection is back on."""
+    port = free_port()
+    app = create_app(make_settings(port=port))
+    gc.disable()
+    try:
+        with serving(app, port, freeze_start_up=True) as url:
+            assert gc.isenabled()
+            assert gc.get_freeze_count() > 0
+            r = httpx.post(f"http://{url}/sessions", json={"map": "paper_office"})
+            assert r.status_code == 201
+    finally:
+        gc.unfreeze()
+        gc.enable()
