@@ -256,7 +256,7 @@ class Narrator:
         """Objects matched to this frame's detections first, then the nearest visible others."""
         pose_xy = np.array([[estimate.x, estimate.y]])
         # Line of sight from the map's precomputed grid (the cell around the pose).
-        visible = self.map.visibility.visible(estimate.x, estimate.y)[0]
+        visible = self.map.visibility.row(estimate.x, estimate.y)
         rel = self.map.object_xy - pose_xy
         dist = np.hypot(rel[:, 0], rel[:, 1])
         fov_deg, centre_deg = fov

@@ -456,7 +456,11 @@ def protection_radius(
     need = 1.0 if alternative_share >= 1.0 - q else q / (1.0 - alternative_share)
     idx = systematic_resample(weights, PROTECTION_SAMPLE, rng)
     d = np.hypot(x[idx] - estimate.x, y[idx] - estimate.y)
-    r_particles = float(np.quantile(d, min(need, 1.0)))
+    # np.quantile's linear interpolation, from a partial sort of the two order statistics.
+    pos = min(need, 1.0) * (d.size - 1)
+    lo, hi = int(np.floor(pos)), int(np.ceil(pos))
+    part = np.partition(d, (lo, hi))
+    r_particles = float(part[lo] + (pos - lo) * (part[hi] - part[lo]))
     sigma = max(estimate.std_x_m, estimate.std_y_m)
     r_gauss = float(np.sqrt(-2.0 * np.log(1.0 - min(need, 0.9999)))) * sigma
     r = PROTECTION_SCALE * max(r_particles, r_gauss) + PROTECTION_FLOOR_M

@@ -85,6 +85,10 @@ class EvidenceSettings:
 
     #: Frames between global searches (1 s at 5 frames/s).
     search_every: int = 5
+    #: With no alternative tracked, each search that finds none doubles the interval, up
+    #: to this many frames (5 s): a converged walk through a building without look-alikes
+    #: pays for a search every 5 s, not every second.
+    max_search_every: int = 25
     #: Frames of history a search scores, chained back by the odometry.
     window: int = 10
     #: No search before this many frames: places fitted to a shorter history are often
@@ -183,6 +187,8 @@ class EvidenceTracker:
             maxlen=self.settings.window
         )
         self._since_search = self.settings.search_every
+        #: Searches in a row of this main mode that found nothing (the interval's doubling).
+        self._quiet = 0
         #: Frames since the last global search (None before the first one).
         self.searched_ago: int | None = None
         self.searches = 0
@@ -209,6 +215,7 @@ class EvidenceTracker:
                 for odo, obs, compass in self._history
             ],
             "since_search": self._since_search,
+            "quiet": self._quiet,
             "searched_ago": self.searched_ago,
             "searches": self.searches,
             "swaps": self.swaps,
@@ -237,6 +244,7 @@ class EvidenceTracker:
                 )
             )
         self._since_search = int(state["since_search"])
+        self._quiet = int(state.get("quiet", 0))
         self.searched_ago = state["searched_ago"]
         self.searches = int(state["searches"])
         self.swaps = int(state["swaps"])
@@ -252,6 +260,15 @@ class EvidenceTracker:
     def _anchor(self, cloud: NDArray[np.float64] | None) -> None:
         self._cloud = cloud
         self._pose: tuple[float, float, float] | None = None
+
+    @property
+    def search_interval(self) -> int:
+        """Frames between searches now: ``search_every`` while alternatives are tracked,
+        doubled by each search in a row that found none, up to ``max_search_every``."""
+        st = self.settings
+        if self.count:
+            return st.search_every
+        return min(st.max_search_every, st.search_every << min(self._quiet, 8))
 
     # ------------------------------------------------------------ read-outs
     @property
@@ -385,6 +402,7 @@ class EvidenceTracker:
         ):
             # A new main mode (or none): its searches, its dead and its walk start again.
             self.mode_searches = 0
+            self._quiet = 0
             self._graves = np.empty((0, 3))
             self._trail.clear()
         if main is not None:
@@ -396,7 +414,7 @@ class EvidenceTracker:
             and search_ok
             and self._anchor is not None
             and not obs.empty
-            and self._since_search >= self.settings.search_every
+            and self._since_search >= self.search_interval
             and len(self._history) >= self.settings.min_history
         ):
             if not self.count:
@@ -404,6 +422,7 @@ class EvidenceTracker:
                 # filter's own cloud of the main mode again, tight and weighed.
                 self._draw_anchor(main, particles)
             self._search(main)
+            self._quiet = 0 if self.count else self._quiet + 1
         return bool(self.count and np.minimum(self.llr, self.seg).max() >= self.settings.switch_llr)
 
     def _track(

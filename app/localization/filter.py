@@ -448,7 +448,7 @@ class ParticleFilter:
         top = raw.hypotheses[0] if raw.hypotheses else None
         if top is None or top.std_xy_m > FIT_MAX_SPREAD_M or obs is None or obs.empty:
             return
-        row = self._vis.visible(raw.x, raw.y)[0] if self._vis is not None else None
+        row = self._vis.row(raw.x, raw.y) if self._vis is not None else None
         if self.unseen is not None:
             self.unseen.update(raw.x, raw.y, raw.theta_rad, obs, row)
         r = normalized_residuals(raw.x, raw.y, raw.theta_rad, obs, self.map, self._fit_config, row)

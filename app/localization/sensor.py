@@ -198,25 +198,30 @@ def match_detections(
         object of the class is a candidate.
     """
     n = x.shape[0]
-    best = np.full((obs.det_cos.size, n), -np.inf)
-    index = np.full((obs.det_cos.size, n), -1, dtype=np.int64)
+    if obs.empty:
+        return np.full((0, n), -np.inf), np.full((0, n), -1, dtype=np.int64)
+    # Every member object of every detected class at once, shape (N, M), then every
+    # detection against the members of its own class, shape (K, N, M).
+    objs = obs.members
+    member_group = np.repeat(np.arange(obs.group_kappa.size), np.diff(obs.member_start))
+    dx = semantic_map.object_xy[objs, 0][None, :] - x[:, None]
+    dy = semantic_map.object_xy[objs, 1][None, :] - y[:, None]
+    dist = np.hypot(dx, dy) + 1e-12
     cos_t = np.cos(theta)[:, None]
     sin_t = np.sin(theta)[:, None]
-    rows = np.arange(n)
-    for g in range(obs.group_kappa.size):
-        objs = obs.members[obs.member_start[g] : obs.member_start[g + 1]]
-        dx = semantic_map.object_xy[objs, 0][None, :] - x[:, None]
-        dy = semantic_map.object_xy[objs, 1][None, :] - y[:, None]
-        dist = np.hypot(dx, dy) + 1e-12
-        # Unit vector towards each object in the particle's body frame.
-        bx = (cos_t * dx + sin_t * dy) / dist
-        by = (-sin_t * dx + cos_t * dy) / dist
-        cand = candidate_mask(x, y, theta, objs, semantic_map, config, visible_rows)
-        for k in np.flatnonzero(obs.det_group == g):
-            cos_err = np.where(cand, obs.det_cos[k] * bx + obs.det_sin[k] * by, -np.inf)
-            j = np.argmax(cos_err, axis=1)
-            best[k] = cos_err[rows, j]
-            index[k] = np.where(np.isfinite(best[k]), objs[j], -1)
+    # Unit vector towards each object in the particle's body frame.
+    bx = (cos_t * dx + sin_t * dy) / dist
+    by = (-sin_t * dx + cos_t * dy) / dist
+    cand = candidate_mask(x, y, theta, objs, semantic_map, config, visible_rows)
+    own = member_group[None, None, :] == obs.det_group[:, None, None]
+    cos_err = np.where(
+        own & cand[None, :, :],
+        obs.det_cos[:, None, None] * bx[None] + obs.det_sin[:, None, None] * by[None],
+        -np.inf,
+    )
+    j = np.argmax(cos_err, axis=2)
+    best = np.take_along_axis(cos_err, j[:, :, None], axis=2)[:, :, 0]
+    index = np.where(np.isfinite(best), objs[j], -1)
     return best, index
 
 

@@ -97,6 +97,35 @@ def point_segment_distance(points: ArrayLike, walls: ArrayLike) -> FloatArray:
     return np.linalg.norm(p - closest, axis=-1)
 
 
+def polygon_edges(polygons: list[NDArray[np.float64]]) -> tuple[FloatArray, NDArray[np.int64]]:
+    """The polygons' edges (x1, y1, x2, y2) joined, shape (E, 4), and where each
+    polygon's edges start, shape (P,). Each polygon: vertices in order, not closed."""
+    edges = [
+        np.column_stack([poly, np.roll(poly, -1, axis=0)])
+        for poly in (np.asarray(p, dtype=np.float64).reshape(-1, 2) for p in polygons)
+    ]
+    starts = np.cumsum([0] + [e.shape[0] for e in edges[:-1]]).astype(np.int64)
+    return (np.concatenate(edges) if edges else np.empty((0, 4))), starts
+
+
+def points_in_polygons(
+    points: ArrayLike, edges: FloatArray, starts: NDArray[np.int64]
+) -> NDArray[np.bool_]:
+    """Even-odd rule: whether each point is inside each polygon, shape (M, P).
+
+    ``edges`` and ``starts`` as :func:`polygon_edges` gives them (every polygon at once).
+    """
+    pts = np.atleast_2d(np.asarray(points, dtype=np.float64))
+    if not starts.size:
+        return np.zeros((pts.shape[0], 0), dtype=bool)
+    x, y = pts[:, 0:1], pts[:, 1:2]
+    x1, y1, x2, y2 = (edges[None, :, i] for i in range(4))
+    straddles = (y1 > y) != (y2 > y)
+    dy = np.where(y2 == y1, 1.0, y2 - y1)
+    crossings = straddles & (x < x1 + (y - y1) * (x2 - x1) / dy)
+    return np.add.reduceat(crossings.astype(np.int64), starts, axis=1) % 2 == 1
+
+
 def points_in_polygon(points: ArrayLike, polygon: ArrayLike) -> NDArray[np.bool_]:
     """Even-odd rule point-in-polygon test.
 
@@ -107,19 +136,7 @@ def points_in_polygon(points: ArrayLike, polygon: ArrayLike) -> NDArray[np.bool_
     Returns:
         Boolean array, shape (M,).
     """
-    pts = np.atleast_2d(np.asarray(points, dtype=np.float64))
-    poly = np.asarray(polygon, dtype=np.float64)
-    x = pts[:, 0:1]
-    y = pts[:, 1:2]
-    x1 = poly[None, :, 0]
-    y1 = poly[None, :, 1]
-    x2 = np.roll(poly[:, 0], -1)[None, :]
-    y2 = np.roll(poly[:, 1], -1)[None, :]
-    straddles = (y1 > y) != (y2 > y)
-    dy = np.where(y2 == y1, 1.0, y2 - y1)
-    x_cross = x1 + (y - y1) * (x2 - x1) / dy
-    crossings = straddles & (x < x_cross)
-    return (np.count_nonzero(crossings, axis=1) % 2) == 1
+    return points_in_polygons(points, *polygon_edges([np.asarray(polygon)]))[:, 0]
 
 
 def grid_cell(x, y, origin_x, origin_y, inv_res, rows, cols):  # fmt: skip

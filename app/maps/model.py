@@ -22,7 +22,8 @@ from app.maps.freespace import WALL_CLEARANCE_M as WALL_CLEARANCE_M  # re-export
 from app.maps.freespace import FreeSpaceGrid as FreeSpaceGrid  # re-exported
 from app.maps.freespace import MapError as MapError  # re-exported
 from app.maps.geometry import (
-    points_in_polygon,
+    points_in_polygons,
+    polygon_edges,
     segments_cross_walls,
 )
 from app.maps.prepare import nearest_walls
@@ -222,13 +223,17 @@ class SemanticMap:
             out[:, k] = ~blocked
         return out
 
+    @cached_property
+    def _region_edges(self) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+        """Every region polygon's edges at once (:func:`polygon_edges`)."""
+        return polygon_edges(self.region_polygons)
+
     def region_index(self, points: ArrayLike) -> NDArray[np.int64]:
         """Index of the first region containing each point, or -1, shape (M,)."""
-        pts = np.atleast_2d(np.asarray(points, dtype=np.float64))
-        out = np.full(pts.shape[0], -1, dtype=np.int64)
-        for i in range(len(self.region_polygons) - 1, -1, -1):
-            out[points_in_polygon(pts, self.region_polygons[i])] = i
-        return out
+        inside = points_in_polygons(points, *self._region_edges)
+        if not inside.shape[1]:
+            return np.full(inside.shape[0], -1, dtype=np.int64)
+        return np.where(inside.any(axis=1), np.argmax(inside, axis=1), -1)
 
     def region_at(self, x: float, y: float) -> str | None:
         """The name of the region containing (x, y), or None."""

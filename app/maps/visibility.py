@@ -16,7 +16,10 @@ from functools import cached_property
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from app.maps.geometry import grid_cells
+from app.maps.geometry import grid_cell, grid_cells
+
+#: Unpacked rows kept per grid by :meth:`VisibilityGrid.row` (a walk stays in few cells).
+ROW_CACHE = 256
 
 
 @dataclass(frozen=True)
@@ -56,6 +59,34 @@ class VisibilityGrid:
     def visible(self, x: ArrayLike, y: ArrayLike) -> NDArray[np.bool_]:
         """Visibility rows for each point, shape (M, N)."""
         return unpack_bits(self.bits[self.cells(x, y)], self.n_objects)
+
+    def row(self, x: float, y: float) -> NDArray[np.bool_]:
+        """The visibility row of one point, shape (N,), read-only.
+
+        Same cell as :meth:`visible`; the unpacked rows of recently used cells are kept,
+        since the estimate, the fit check and the narrator all ask for the same point
+        every frame.
+        """
+        rows, cols = self.shape
+        flat, _ = grid_cell(
+            float(x), float(y), self.origin_x, self.origin_y, 1.0 / self.resolution_m, rows, cols
+        )
+        return self._cell_row(int(flat))
+
+    def _cell_row(self, cell: int) -> NDArray[np.bool_]:
+        cache = self._rows
+        hit = cache.get(cell)
+        if hit is None:
+            hit = unpack_bits(self.bits[cell : cell + 1], self.n_objects)[0]
+            hit.flags.writeable = False
+            if len(cache) >= ROW_CACHE:
+                cache.pop(next(iter(cache)))
+            cache[cell] = hit
+        return hit
+
+    @cached_property
+    def _rows(self) -> dict[int, NDArray[np.bool_]]:
+        return {}
 
 
 def pack_bits(table: NDArray[np.bool_]) -> NDArray[np.uint64]:
