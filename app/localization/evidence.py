@@ -208,7 +208,7 @@ class EvidenceTracker:
             "seg": self.seg,
             "age": self.age,
             "graves": self._graves,
-            "trail": [list(p) for p in self._trail],
+            "trail": np.array(self._trail, dtype=np.float64).reshape(-1, 2),
             "anchor": self._anchor,
             "history": [
                 [to_plain(odo), to_plain(obs), to_plain(compass)]
