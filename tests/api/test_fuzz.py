@@ -106,6 +106,8 @@ def test_schemathesis_finds_nothing_against_a_live_server() -> None:
                 sys.executable,
                 "-c",
                 "from schemathesis.cli import schemathesis; schemathesis()",
+                "--config-file",
+                str(Path(__file__).with_name("schemathesis.toml")),
                 "run",
                 f"http://{host}/openapi.json",
                 "--checks",
