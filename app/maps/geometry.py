@@ -104,7 +104,8 @@ def polygon_edges(polygons: list[NDArray[np.float64]]) -> tuple[FloatArray, NDAr
         np.column_stack([poly, np.roll(poly, -1, axis=0)])
         for poly in (np.asarray(p, dtype=np.float64).reshape(-1, 2) for p in polygons)
     ]
-    starts = np.cumsum([0] + [e.shape[0] for e in edges[:-1]]).astype(np.int64)
+    lengths = np.array([e.shape[0] for e in edges], dtype=np.int64)
+    starts = np.cumsum(lengths) - lengths
     return (np.concatenate(edges) if edges else np.empty((0, 4))), starts
 
 
@@ -123,7 +124,12 @@ def points_in_polygons(
     straddles = (y1 > y) != (y2 > y)
     dy = np.where(y2 == y1, 1.0, y2 - y1)
     crossings = straddles & (x < x1 + (y - y1) * (x2 - x1) / dy)
-    return np.add.reduceat(crossings.astype(np.int64), starts, axis=1) % 2 == 1
+    # Crossings per polygon from running sums (a polygon without edges counts none).
+    running = np.concatenate(
+        [np.zeros((pts.shape[0], 1), dtype=np.int64), np.cumsum(crossings, axis=1)], axis=1
+    )
+    ends = np.append(starts[1:], edges.shape[0])
+    return (running[:, ends] - running[:, starts]) % 2 == 1
 
 
 def points_in_polygon(points: ArrayLike, polygon: ArrayLike) -> NDArray[np.bool_]:

@@ -8,6 +8,8 @@ from hypothesis import strategies as st
 
 from app.maps.geometry import (
     points_in_polygon,
+    points_in_polygons,
+    polygon_edges,
     segments_cross_walls,
     wrap_angle,
     wrap_deg,
@@ -43,3 +45,19 @@ def test_points_in_polygon_square() -> None:
     square = [[0, 0], [2, 0], [2, 2], [0, 2]]
     inside = points_in_polygon([[1, 1], [3, 1], [-0.1, 1], [1.9, 1.9]], square)
     assert inside.tolist() == [True, False, False, True]
+
+
+def test_points_in_several_polygons_at_once() -> None:
+    """Every region at once answers as each polygon alone; no polygon, or one without
+    edges, holds no point."""
+    square = np.array([[0.0, 0.0], [2.0, 0.0], [2.0, 2.0], [0.0, 2.0]])
+    triangle = np.array([[5.0, 5.0], [7.0, 5.0], [6.0, 7.0]])
+    rng = np.random.default_rng(0)
+    pts = rng.uniform(-1.0, 8.0, (500, 2))
+    inside = points_in_polygons(pts, *polygon_edges([square, np.empty((0, 2)), triangle]))
+    assert inside.shape == (500, 3)
+    assert np.array_equal(inside[:, 0], points_in_polygon(pts, square))
+    assert not inside[:, 1].any()
+    assert np.array_equal(inside[:, 2], points_in_polygon(pts, triangle))
+    assert inside[:, 0].any() and inside[:, 2].any()
+    assert points_in_polygons(pts, *polygon_edges([])).shape == (500, 0)
