@@ -11,11 +11,14 @@ at it.
 This module keeps that negative evidence for the gate of ``converged`` only (it never
 moves a particle): per object, a decaying count of frames in which the estimate had it
 *clearly in view* (line of sight on the visibility grid, within ``near_m``, at least
-``margin_rad`` inside the field of view, of a class the detector has reported at
-least once in this session) and of those in which a detection of its class pointed at
-it (within ``cutoff_sigmas`` of its bearing). An object in clear view for
-``min_expected`` frames' worth of count yet seen in at most ``max_seen_share`` of them
-marks the estimate as *contradicted*: converged is not gained, and is given up.
+``margin_rad`` inside the field of view, of a class the detector has reported at least
+once in this session, and no farther than the detector has been seen to report objects
+of that class, or of any class while that one has not been seen yet: a detector that
+only reports small objects up close is not held to more) and of those in which a
+detection of its class pointed at it (within ``cutoff_sigmas`` of its bearing). An
+object in clear view for ``min_expected`` frames' worth of count yet seen in at most
+``max_seen_share`` of them marks the estimate as *contradicted*: converged is not
+gained, and is given up.
 
 Only frames with detections count (a blocked camera reports nothing at all, which says
 nothing about any one object). When the estimate jumps by more than ``jump_m`` the
@@ -70,6 +73,9 @@ class UnseenObjects:
         self.config = config
         self.settings = settings
         self.reported = np.zeros(len(semantic_map.classes), dtype=bool)
+        #: Per class, the farthest an object of it was seen from the estimate (m; 0 while
+        #: none was): how far this detector reports such objects.
+        self.reach_m = np.zeros(len(semantic_map.classes))
         self._class_index = {c: i for i, c in enumerate(semantic_map.classes)}
         self.reset()
 
@@ -114,19 +120,26 @@ class UnseenObjects:
         dy = self.map.object_xy[:, 1] - y
         dist = np.hypot(dx, dy)
         bearing = wrap_angle(np.arctan2(dy, dx) - theta)
-        clear = (dist <= st.near_m) & (dist >= st.min_m) & self.reported[self.map.object_class]
+        cls = self.map.object_class
+        view = (dist <= st.near_m) & (dist >= st.min_m) & self.reported[cls]
         if visible_row is not None and self.config.visibility:
-            clear &= visible_row
+            view &= visible_row
         if self.config.fov_deg < 360.0:
             off_centre = np.abs(wrap_angle(bearing - np.radians(self.config.fov_centre_deg)))
-            clear &= off_centre <= np.radians(self.config.fov_deg) / 2.0 - st.margin_rad
-        objects = np.flatnonzero(clear)
-        # Each object in clear view against every detection of its class at once.
-        same = self.map.object_class[objects][:, None] == group_class[obs.det_group][None, :]
+            view &= off_centre <= np.radians(self.config.fov_deg) / 2.0 - st.margin_rad
+        objects = np.flatnonzero(view)
+        # Each object in view against every detection of its class at once.
+        same = cls[objects][:, None] == group_class[obs.det_group][None, :]
         err = np.abs(wrap_angle(obs.det_bearing[None, :] - bearing[objects][:, None]))
-        reach = st.cutoff_sigmas / np.sqrt(obs.group_kappa[obs.det_group])
+        within = st.cutoff_sigmas / np.sqrt(obs.group_kappa[obs.det_group])
         seen = np.zeros(self.map.object_count, dtype=bool)
-        seen[objects] = (same & (err <= reach[None, :])).any(axis=1)
+        seen[objects] = (same & (err <= within[None, :])).any(axis=1)
+        # How far this detector reports each class, learnt from what it reported; a class
+        # never seen yet is expected as far as any class was.
+        np.maximum.at(self.reach_m, cls[seen], dist[seen])
+        reach = np.where(self.reach_m > 0.0, self.reach_m, self.reach_m.max())
+        clear = view & (dist <= reach[cls])
+        objects = np.flatnonzero(clear)
         self.expected = st.decay * self.expected + clear
         self.seen = st.decay * self.seen + (clear & seen)
         self.frame_expected = int(objects.size)
@@ -143,6 +156,7 @@ class UnseenObjects:
             "expected": self.expected,
             "seen": self.seen,
             "reported": self.reported,
+            "reach": self.reach_m,
             "at": None if self._at is None else list(self._at),
         }
 
@@ -150,5 +164,6 @@ class UnseenObjects:
         self.expected = np.array(state["expected"], dtype=np.float64)
         self.seen = np.array(state["seen"], dtype=np.float64)
         self.reported = np.array(state["reported"], dtype=bool)
+        self.reach_m = np.array(state.get("reach", np.zeros(self.reported.size)), dtype=float)
         at = state["at"]
         self._at = None if at is None else (float(at[0]), float(at[1]))
