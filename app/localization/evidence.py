@@ -57,6 +57,7 @@ prior counted equal to each alternative's), gates ``converged`` (see
 
 from __future__ import annotations
 
+import math
 from collections import deque
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -73,7 +74,7 @@ from app.localization.recovery import sample_from_observation
 from app.localization.resampling import systematic_resample
 from app.localization.sensor import Observation
 from app.localization.types import Hypothesis, Odometry
-from app.maps.geometry import wrap_angle
+from app.maps.geometry import wrap_angle, wrap_deg
 from app.maps.model import SemanticMap
 from app.maps.visibility import VisibilityGrid
 from app.state import from_plain, to_plain
@@ -375,7 +376,7 @@ class EvidenceTracker:
             main is not None
             and main_tight
             and self._last_main is not None
-            and bool(_near(main.x, main.y, main.theta_rad, self._last_main, self.settings))
+            and _same_place(main.x, main.y, main.theta_rad, self._last_main, self.settings)
         )
         if self._anchor is not None:
             # While the main belief does not explain the detections, converged can be
@@ -398,7 +399,7 @@ class EvidenceTracker:
             or main is None
             or last is None
             or odometry is None
-            or not _near(main.x, main.y, main.theta_rad, last, self.settings)
+            or not _same_place(main.x, main.y, main.theta_rad, last, self.settings)
         ):
             # A new main mode (or none): its searches, its dead and its walk start again.
             self.mode_searches = 0
@@ -568,7 +569,7 @@ class EvidenceTracker:
             return
         ax, ay, at = self._anchor_pose()
         anchor = Hypothesis(ax, ay, at, 0.0)
-        if _near(main.x, main.y, main.theta_rad, anchor, st):
+        if _same_place(main.x, main.y, main.theta_rad, anchor, st):
             close = (
                 np.hypot(ax - main.x, ay - main.y) < st.distinct_m / 2
                 and abs(float(wrap_angle(at - main.theta_rad))) < st.distinct_rad / 2
@@ -789,7 +790,7 @@ class EvidenceTracker:
             if gain + prior < st.seed_llr or not np.isfinite(gain):
                 break
             h = Hypothesis(float(fx[i]), float(fy[i]), float(ft[i]), 0.0)
-            if _near(np.array([h.x]), np.array([h.y]), np.array([h.theta_rad]), main_h, st)[0]:
+            if _same_place(h.x, h.y, h.theta_rad, main_h, st):
                 continue
             move = _moves_onto(
                 self._anchor_pose(), np.array([h.x]), np.array([h.y]), np.array([h.theta_rad])
@@ -923,6 +924,13 @@ class EvidenceTracker:
         ny = self._anchor[1, pick] + self.rng.normal(0.0, jitter, n)
         nt = wrap_angle(self._anchor[2, pick] + self.rng.normal(0.0, jitter, n))
         return nx, ny, nt
+
+
+def _same_place(x: float, y: float, t: float, h: Hypothesis, st: EvidenceSettings) -> bool:
+    """:func:`_near` for one pose, in plain float arithmetic (it runs several times a
+    frame, where numpy's overhead on scalars was most of its cost)."""
+    turn = abs(wrap_deg(math.degrees(t - h.theta_rad)))
+    return math.hypot(x - h.x, y - h.y) < st.distinct_m and math.radians(turn) < st.distinct_rad
 
 
 def _near(
