@@ -292,6 +292,11 @@ class EvidenceTracker:
         """
         return np.maximum(self.llr, self.seg)
 
+    @property
+    def _agreed(self) -> NDArray[np.float64]:
+        """The evidence both counts agree on, shape (A,): what a swap takes."""
+        return np.minimum(self.llr, self.seg)
+
     def probabilities(self) -> NDArray[np.float64]:
         """Each alternative's probability under the whole belief, shape (A,)."""
         if not self.count:
@@ -393,14 +398,8 @@ class EvidenceTracker:
             and (self.age < self.settings.young).any()
         ):
             self._refit_young(main)
-        last, self._last_main = self._last_main, main
-        if (
-            not main_tight
-            or main is None
-            or last is None
-            or odometry is None
-            or not _same_place(main.x, main.y, main.theta_rad, last, self.settings)
-        ):
+        self._last_main = main
+        if not steady or odometry is None:
             # A new main mode (or none): its searches, its dead and its walk start again.
             self.mode_searches = 0
             self._quiet = 0
@@ -424,7 +423,7 @@ class EvidenceTracker:
                 self._draw_anchor(main, particles)
             self._search(main)
             self._quiet = 0 if self.count else self._quiet + 1
-        return bool(self.count and np.minimum(self.llr, self.seg).max() >= self.settings.switch_llr)
+        return bool(self.count and self._agreed.max() >= self.settings.switch_llr)
 
     def _track(
         self,
@@ -765,25 +764,26 @@ class EvidenceTracker:
         # One polish: the main mode, the tracked alternatives, the finalists.
         ax, ay, at = self._centres() if self.count else (np.empty(0),) * 3
         a = ax.size
-        # The main mode is polished from the filter's cluster and from the anchor.
-        bx, by, bt = self._anchor_pose()
-        px, py, pt, ps = self._polished(
-            np.concatenate([[bx, main.x], ax, rx[picked]]),
-            np.concatenate([[by, main.y], ay, ry[picked]]),
-            np.concatenate([[bt, main.theta_rad], at, rt[picked]]),
+        main_pose, main_score, (qx, qy, qt, qs) = self._polish_with_main(
+            main,
+            np.concatenate([ax, rx[picked]]),
+            np.concatenate([ay, ry[picked]]),
+            np.concatenate([at, rt[picked]]),
             window,
         )
-        if ps[1] > ps[0]:
-            px[0], py[0], pt[0], ps[0] = px[1], py[1], pt[1], ps[1]
-        px, py, pt, ps = (np.delete(v, 1) for v in (px, py, pt, ps))
+        mx, my, mt = main_pose
         if a:
             # Each place where the recent frames put it: the segment's evidence.
-            on_segment = self.window_score(px[: 1 + a], py[: 1 + a], pt[: 1 + a], segment)
+            on_segment = self.window_score(
+                np.concatenate([[mx], qx[:a]]),
+                np.concatenate([[my], qy[:a]]),
+                np.concatenate([[mt], qt[:a]]),
+                segment,
+            )
             self.seg = self.seg + (on_segment[1:] - on_segment[0])
-        self._recentre((px[0], py[0], pt[0]), (px[1 : 1 + a], py[1 : 1 + a], pt[1 : 1 + a]))
-        main_score = float(ps[0])
-        main_h = Hypothesis(float(px[0]), float(py[0]), float(pt[0]), 0.0)
-        fx, fy, ft, fsc = px[1 + a :], py[1 + a :], pt[1 + a :], ps[1 + a :]
+        self._recentre(main_pose, (qx[:a], qy[:a], qt[:a]))
+        main_h = Hypothesis(mx, my, mt, 0.0)
+        fx, fy, ft, fsc = qx[a:], qy[a:], qt[a:], qs[a:]
         self._replace_places(fx, fy, ft, fsc, window)
         for i in np.argsort(-fsc):
             gain = float(fsc[i] - main_score)
@@ -841,17 +841,42 @@ class EvidenceTracker:
         alongside, so the two stay comparable).
         """
         young = np.flatnonzero(self.age < self.settings.young)
-        ax, ay, at = self._anchor_pose()
         cx, cy, ct = (v.copy() for v in self._centres())
-        px, py, pt, ps = self._polished(
-            np.concatenate([[main.x, ax], cx[young]]),
-            np.concatenate([[main.y, ay], cy[young]]),
-            np.concatenate([[main.theta_rad, at], ct[young]]),
-            self.window(),
+        main_pose, _, (qx, qy, qt, _) = self._polish_with_main(
+            main, cx[young], cy[young], ct[young], self.window()
         )
-        cx[young], cy[young], ct[young] = px[2:], py[2:], pt[2:]
-        b = int(np.argmax(ps[:2]))  # the main mode from the filter's cluster or the anchor
-        self._recentre((px[b], py[b], pt[b]), (cx, cy, ct))
+        cx[young], cy[young], ct[young] = qx, qy, qt
+        self._recentre(main_pose, (cx, cy, ct))
+
+    def _polish_with_main(
+        self,
+        main: Hypothesis,
+        x: NDArray[np.float64],
+        y: NDArray[np.float64],
+        t: NDArray[np.float64],
+        window: sensor_kernel.ObservationWindow,
+    ) -> tuple[
+        tuple[float, float, float],
+        float,
+        tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]],
+    ]:
+        """Polish the main mode and the places (x, y, t) together, in one call.
+
+        The main mode is polished from two starts, the filter's cluster and the anchor,
+        and the better kept (a pattern search from one start can stop in a poorer local
+        optimum). Returns the main mode's pose and window score, and the places' polished
+        poses and scores.
+        """
+        ax, ay, at = self._anchor_pose()
+        px, py, pt, ps = self._polished(
+            np.concatenate([[main.x, ax], x]),
+            np.concatenate([[main.y, ay], y]),
+            np.concatenate([[main.theta_rad, at], t]),
+            window,
+        )
+        b = int(np.argmax(ps[:2]))
+        pose = (float(px[b]), float(py[b]), float(pt[b]))
+        return pose, float(ps[b]), (px[2:], py[2:], pt[2:], ps[2:])
 
     def _walk_fits(self, move: NDArray[np.float64]) -> bool:
         """Whether the main mode's walk so far, carried by ``move``, stays in the free
@@ -914,7 +939,7 @@ class EvidenceTracker:
         The old main belief becomes an alternative with the opposite evidence; the
         others are re-expressed against the new main belief.
         """
-        best = int(np.argmin(-np.minimum(self.llr, self.seg)))
+        best = int(np.argmax(self._agreed))
         self._make_main(best)
         self.swaps += 1
         assert self._anchor is not None

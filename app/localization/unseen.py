@@ -127,22 +127,21 @@ class UnseenObjects:
         if self.config.fov_deg < 360.0:
             off_centre = np.abs(wrap_angle(bearing - np.radians(self.config.fov_centre_deg)))
             view &= off_centre <= np.radians(self.config.fov_deg) / 2.0 - st.margin_rad
-        objects = np.flatnonzero(view)
+        in_view = np.flatnonzero(view)
         # Each object in view against every detection of its class at once.
-        same = cls[objects][:, None] == group_class[obs.det_group][None, :]
-        err = np.abs(wrap_angle(obs.det_bearing[None, :] - bearing[objects][:, None]))
+        same = cls[in_view][:, None] == group_class[obs.det_group][None, :]
+        err = np.abs(wrap_angle(obs.det_bearing[None, :] - bearing[in_view][:, None]))
         within = st.cutoff_sigmas / np.sqrt(obs.group_kappa[obs.det_group])
         seen = np.zeros(self.map.object_count, dtype=bool)
-        seen[objects] = (same & (err <= within[None, :])).any(axis=1)
+        seen[in_view] = (same & (err <= within[None, :])).any(axis=1)
         # How far this detector reports each class, learnt from what it reported; a class
         # never seen yet is expected as far as any class was.
         np.maximum.at(self.reach_m, cls[seen], dist[seen])
         reach = np.where(self.reach_m > 0.0, self.reach_m, self.reach_m.max())
         clear = view & (dist <= reach[cls])
-        objects = np.flatnonzero(clear)
         self.expected = st.decay * self.expected + clear
         self.seen = st.decay * self.seen + (clear & seen)
-        self.frame_expected = int(objects.size)
+        self.frame_expected = int(np.count_nonzero(clear))
         self.frame_missed = int(np.count_nonzero(clear & ~seen))
 
     @property
