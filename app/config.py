@@ -75,15 +75,10 @@ class Settings(BaseSettings):
         2, ge=1, le=16, description="frames a session holds while busy; later ones are merged"
     )
     max_waiting_steps: int = Field(
-        64, ge=1, description="filter steps waiting for a thread before new sessions get 503"
+        64, ge=1, description="filter steps waiting their turn before new sessions get 503"
     )
     fair_steps: bool = Field(
         True, description="filter steps take turns between keys (false: arrival order)"
-    )
-    steps_per_key: int = Field(
-        0,
-        ge=0,
-        description="most step threads one key may use at once (0: all threads but one)",
     )
     demo_walk_max_s: float = Field(
         600.0, gt=0, description="a demo walk started from the view ends after this long"

@@ -1,127 +1,105 @@
-"""Filter steps on a few threads, shared fairly between clients.
+"""Filter steps on the event loop's own thread, shared fairly between clients.
 
-A plain thread pool runs jobs in arrival order, so a client that keeps many heavy
-sessions busy makes everyone else wait behind all of its steps. Here every client
-(API key) has its own queue and the threads take one job from each waiting client in
-turn (round-robin): a light client waits at most for the steps already running, one per
-thread, whatever a heavy client has queued.
+Why not threads: a step is mostly Python around short compiled kernels, so step threads
+hold the GIL most of the time and hand it back and forth with each other and with the
+event loop at every kernel and every large numpy call. On the 2-vCPU VM this project is
+measured on, two step threads made about 26 context switches per frame and cost 2.1 ms
+of CPU per frame against 1.2 ms on one thread, for fewer frames per second; a server
+with its steps on threads spent about 2.7 ms per frame where the same steps run on the
+event loop spend 1.4 ms (benchmarks/README.md, "One worker"). A worker process therefore
+uses one core, and more cores are used by more workers (docs/SCALE.md).
+
+Fairness: every client (API key) has its own queue, and the stepper takes one job from
+each waiting client in turn (round-robin), so a light client waits at most for the step
+that is running and one step of each other waiting client, whatever a heavy client has
+queued. Between two steps the event loop handles whatever I/O is ready.
 """
 
 from __future__ import annotations
 
-import threading
-import time
+import asyncio
 from collections import OrderedDict, deque
 from collections.abc import Callable, Hashable
-from concurrent.futures import Future
 from typing import Any
 
+Job = tuple[asyncio.Future[Any], Callable[[], Any]]
 
-class FairExecutor:
-    """``workers`` threads running submitted callables, round-robin between ``owner`` queues."""
 
-    def __init__(
-        self, workers: int, *, max_per_owner: int | None = None, name: str = "step"
-    ) -> None:
-        self.max_per_owner = max(1, max_per_owner or workers)
-        self._running_of: dict[Hashable, int] = {}
-        self._queues: OrderedDict[Hashable, deque[tuple[Future[Any], Callable[[], Any], float]]]
-        self._queues = OrderedDict()
-        self._cv = threading.Condition()
-        self._stopping = False
+class FairStepper:
+    """Runs submitted callables one at a time on the event loop, round-robin between owners.
+
+    Use from the event loop's thread only. ``fair=False`` runs jobs in arrival order.
+    """
+
+    def __init__(self, *, fair: bool = True) -> None:
+        self.fair = fair
+        self._queues: OrderedDict[Hashable, deque[Job]] = OrderedDict()
         self._waiting = 0
-        self._running = 0
-        #: Seconds the last started job waited for a thread.
-        self.last_wait_s = 0.0
-        self._threads = [
-            threading.Thread(target=self._work, name=f"{name}-{i}", daemon=True)
-            for i in range(max(1, workers))
-        ]
-        for t in self._threads:
-            t.start()
+        self._stopping = False
+        self._wake: asyncio.Event | None = None
+        self._task: asyncio.Task[None] | None = None
 
     @property
     def waiting(self) -> int:
         """Jobs submitted and not yet started."""
         return self._waiting
 
-    @property
-    def running(self) -> int:
-        return self._running
-
-    def submit(self, owner: Hashable, fn: Callable[..., Any], *args: Any) -> Future[Any]:
+    def submit(self, owner: Hashable, fn: Callable[..., Any], *args: Any) -> asyncio.Future[Any]:
         """Queue ``fn(*args)`` behind ``owner``'s earlier jobs; a future of its result."""
-        future: Future[Any] = Future()
-        with self._cv:
-            if self._stopping:
-                raise RuntimeError("the step executor is shut down")
-            queue = self._queues.get(owner)
-            if queue is None:
-                queue = self._queues[owner] = deque()
-            queue.append((future, lambda: fn(*args), time.monotonic()))
-            self._waiting += 1
-            self._cv.notify()
+        if self._stopping:
+            raise RuntimeError("the stepper is shut down")
+        loop = asyncio.get_running_loop()
+        future: asyncio.Future[Any] = loop.create_future()
+        key = owner if self.fair else None
+        queue = self._queues.get(key)
+        if queue is None:
+            queue = self._queues[key] = deque()
+        queue.append((future, lambda: fn(*args)))
+        self._waiting += 1
+        if self._task is None or self._task.done() or self._task.get_loop() is not loop:
+            self._wake = asyncio.Event()
+            self._task = loop.create_task(self._run(), name="filter-steps")
+        assert self._wake is not None
+        self._wake.set()
         return future
 
-    def _next(self) -> tuple[Hashable, tuple[Future[Any], Callable[[], Any], float]] | None:
-        with self._cv:
-            while True:
-                # The owner served longest ago that is not already using its share of
-                # the threads.
-                eligible = [
-                    o for o in self._queues if self._running_of.get(o, 0) < self.max_per_owner
-                ]
-                if eligible:
-                    owner = eligible[0]
-                    break
-                if self._stopping and not self._queues:
-                    return None
-                self._cv.wait()
-            queue = self._queues.pop(owner)
-            job = queue.popleft()
-            if queue:
-                self._queues[owner] = queue  # back of the line
-            self._waiting -= 1
-            self._running += 1
-            self._running_of[owner] = self._running_of.get(owner, 0) + 1
-            return owner, job
+    def _next(self) -> Job | None:
+        if not self._queues:
+            return None
+        owner, queue = next(iter(self._queues.items()))
+        job = queue.popleft()
+        del self._queues[owner]
+        if queue:
+            self._queues[owner] = queue  # back of the line
+        self._waiting -= 1
+        return job
 
-    def _work(self) -> None:
+    async def _run(self) -> None:
+        assert self._wake is not None
         while True:
-            taken = self._next()
-            if taken is None:
-                return
-            owner, (future, call, queued_at) = taken
-            self.last_wait_s = time.monotonic() - queued_at
-            try:
-                if future.set_running_or_notify_cancel():
-                    try:
-                        result = call()
-                    except BaseException as exc:
-                        future.set_exception(exc)
-                    else:
-                        future.set_result(result)
-            finally:
-                with self._cv:
-                    self._running -= 1
-                    left = self._running_of[owner] - 1
-                    if left:
-                        self._running_of[owner] = left
-                    else:
-                        del self._running_of[owner]
-                    self._cv.notify_all()  # an owner at its share may go again
+            job = self._next()
+            if job is None:
+                self._wake.clear()
+                await self._wake.wait()
+                continue
+            future, call = job
+            if not future.cancelled():
+                try:
+                    result = call()
+                except Exception as exc:  # the job's caller gets it; the stepper goes on
+                    future.set_exception(exc)
+                else:
+                    future.set_result(result)
+            # Let the event loop take in frames and send answers between two steps.
+            await asyncio.sleep(0)
 
-    def shutdown(self, *, wait: bool = True, cancel_futures: bool = False) -> None:
-        """Stop taking jobs; run (or cancel) the queued ones; with ``wait``, join the threads."""
-        with self._cv:
-            self._stopping = True
-            if cancel_futures:
-                for queue in self._queues.values():
-                    for future, _, _ in queue:
-                        future.cancel()
-                self._queues.clear()
-                self._waiting = 0
-            self._cv.notify_all()
-        if wait:
-            for t in self._threads:
-                t.join()
+    def shutdown(self) -> None:
+        """Take no more jobs; cancel the ones not started (for a closing service)."""
+        self._stopping = True
+        for queue in self._queues.values():
+            for future, _ in queue:
+                future.cancel()
+        self._queues.clear()
+        self._waiting = 0
+        if self._task is not None and not self._task.get_loop().is_closed():
+            self._task.cancel()

@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import asyncio
 import logging
-import os
 import secrets
 import threading
 import time
@@ -47,7 +46,7 @@ from app.service.errors import (
 )
 from app.service.metrics import Metrics
 from app.service.queueing import FrameQueue, merged_warning
-from app.service.scheduler import FairExecutor
+from app.service.scheduler import FairStepper
 from app.service.sharing import SessionSharing
 from app.service.store import MemoryStore, SessionStore
 from app.service.types import FrameInput, FrameOutcome, SessionSpec
@@ -250,20 +249,13 @@ class SessionManager:
         self._buckets: dict[str, TokenBucket] = {}
         #: Set by :meth:`shutdown`: no new sessions or frames are taken.
         self.closing = False
-        # Filter steps are CPU-bound and release the GIL inside their kernels: one
-        # thread per core runs them, so they never crowd out the event loop's thread
-        # (a larger pool measured higher latency under load, same throughput), taking
-        # turns between clients, and one key uses at most all threads but one, so that
-        # another key's step finds a thread at once (benchmarks/abuse.py).
-        workers = os.cpu_count() or 1
-        per_key = settings.steps_per_key or max(1, workers - 1)
-        self._steps = FairExecutor(
-            workers, max_per_owner=per_key if settings.fair_steps else None, name="step"
-        )
+        # Filter steps run on the event loop's thread, taking turns between keys
+        # (app/service/scheduler.py says why not on threads).
+        self._steps = FairStepper(fair=settings.fair_steps)
 
     def close(self) -> None:
-        """Stop the step threads (at shutdown); steps not started are dropped."""
-        self._steps.shutdown(wait=False, cancel_futures=True)
+        """Stop stepping (at shutdown); steps not started are dropped."""
+        self._steps.shutdown()
         if self.sharing is not None:
             self.sharing.close()
 
@@ -378,7 +370,7 @@ class SessionManager:
         if self._steps.waiting >= self.settings.max_waiting_steps:
             raise CapacityReached(
                 f"the service is at capacity ({self._steps.waiting} filter steps are waiting "
-                "for a thread); try again shortly",
+                "their turn); try again shortly",
                 "busy",
                 1.0,
             )
@@ -533,10 +525,9 @@ class SessionManager:
         await self.find(session_id, owner)  # with a shared store: resumed here if need be
         return await self.submit(session_id, frame, owner)
 
-    def _turn_of(self, session: Session) -> str | None:
+    @staticmethod
+    def _turn_of(session: Session) -> str:
         """Whose turn a step counts for: its key, or (open service) the session itself."""
-        if not self.settings.fair_steps:
-            return None  # one queue: arrival order
         return session.owner if session.owner is not None else session.id
 
     async def _pump(self, session: Session) -> None:
@@ -553,7 +544,7 @@ class SessionManager:
                     self._turn_of(session), self._step_sync, session, item.frame, item.count
                 )
                 try:
-                    result, entry = await asyncio.wrap_future(job)
+                    result, entry = await job
                     # With a shared store the answer leaves once the frame is journalled.
                     if entry is not None and not await self.sharing.journal(session, entry):  # type: ignore[union-attr]
                         raise SessionUnavailable(

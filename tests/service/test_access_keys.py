@@ -1,14 +1,14 @@
-"""The key file, key checks, the token bucket and the fair step executor."""
+"""The key file, key checks, the token bucket and the fair stepper."""
 
 from __future__ import annotations
 
-import threading
+import asyncio
 import time
 
 import pytest
 
 from app.service.access import KeyFileError, TokenBucket, parse_keys
-from app.service.scheduler import FairExecutor
+from app.service.scheduler import FairStepper
 
 DEFAULTS = {"default_sessions": 10, "default_particles": 100_000, "default_frames_per_s": 50.0}
 K1 = "k1-aaaaaaaaaaaaaaaaaaaa"
@@ -63,56 +63,64 @@ def test_token_bucket_allows_a_burst_then_the_rate() -> None:
     assert bucket.take() == 0
 
 
-def test_fair_executor_serves_a_light_owner_between_a_heavy_owners_jobs() -> None:
-    pool = FairExecutor(1)
-    gate = threading.Event()
-    order: list[str] = []
-    blocker = pool.submit("heavy", gate.wait)
-    heavy = [pool.submit("heavy", order.append, f"h{i}") for i in range(5)]
-    light = pool.submit("light", order.append, "l")
-    gate.set()
-    for f in [blocker, *heavy, light]:
-        f.result(timeout=5)
-    # Plain FIFO would run the light job last; round-robin runs it after one heavy job.
-    assert order.index("l") <= 1
+def test_the_stepper_serves_a_light_owner_between_a_heavy_owners_jobs() -> None:
+    async def main() -> list[str]:
+        stepper = FairStepper()
+        order: list[str] = []
+        heavy = [stepper.submit("heavy", order.append, f"h{i}") for i in range(5)]
+        light = stepper.submit("light", order.append, "l")
+        assert stepper.waiting == 6 and order == []  # nothing runs until the loop is free
+        await asyncio.gather(*heavy, light)
+        assert stepper.waiting == 0
+        return order
+
+    order = asyncio.run(main())
+    # Arrival order would run the light job last; turns run it right after one heavy job.
+    assert order.index("l") == 1
     assert [x for x in order if x != "l"] == [f"h{i}" for i in range(5)]  # order kept per owner
-    pool.shutdown()
 
 
-def test_fair_executor_passes_exceptions_and_drains_at_shutdown() -> None:
-    pool = FairExecutor(2)
-    bad = pool.submit("a", lambda: 1 / 0)
-    with pytest.raises(ZeroDivisionError):
-        bad.result(timeout=5)
-    slow = [pool.submit("a", time.sleep, 0.05) for _ in range(4)]
-    pool.shutdown(wait=True)
-    assert all(f.done() and f.exception() is None for f in slow)
-    with pytest.raises(RuntimeError, match="shut down"):
-        pool.submit("a", print)
+def test_without_turns_jobs_run_in_arrival_order() -> None:
+    async def main() -> list[str]:
+        stepper = FairStepper(fair=False)
+        order: list[str] = []
+        jobs = [stepper.submit("heavy", order.append, f"h{i}") for i in range(3)]
+        jobs.append(stepper.submit("light", order.append, "l"))
+        await asyncio.gather(*jobs)
+        return order
+
+    assert asyncio.run(main()) == ["h0", "h1", "h2", "l"]
 
 
-def test_one_owner_uses_at_most_its_share_of_the_threads() -> None:
-    pool = FairExecutor(2, max_per_owner=1)
-    gate = threading.Event()
-    running = threading.Semaphore(0)
+def test_the_stepper_passes_exceptions_on_lets_io_in_and_cancels_at_shutdown() -> None:
+    async def main() -> None:
+        stepper = FairStepper()
+        bad = stepper.submit("a", lambda: 1 / 0)
+        ticks: list[int] = []
 
-    def hold() -> None:
-        running.release()
-        gate.wait()
+        async def ticker() -> None:
+            for i in range(3):
+                ticks.append(i)
+                await asyncio.sleep(0)
 
-    heavy = [pool.submit("heavy", hold) for _ in range(3)]
-    assert running.acquire(timeout=5)
-    light = pool.submit("light", time.sleep, 0)
-    # The second thread stays free for another owner: the light job runs while heavy waits.
-    assert light.result(timeout=5) is None
-    assert not running.acquire(timeout=0.2)  # still only one heavy job running
-    gate.set()
-    for f in heavy:
-        f.result(timeout=5)
-    pool.shutdown()
+        good = [stepper.submit("a", ticks.append, -1) for _ in range(3)]
+        await asyncio.gather(ticker(), *good)
+        with pytest.raises(ZeroDivisionError):
+            await bad
+        # The loop ran other tasks between the steps, not only after all of them.
+        assert ticks.index(2) < len(ticks) - 1
+        pending = [stepper.submit("a", pow, 2, i) for i in range(3)]
+        stepper.shutdown()
+        assert all(f.cancelled() for f in pending) and stepper.waiting == 0
+        with pytest.raises(RuntimeError, match="shut down"):
+            stepper.submit("a", print)
+
+    asyncio.run(main())
 
 
 def test_any_hashable_owner_even_none() -> None:
-    pool = FairExecutor(2)
-    assert [pool.submit(None, pow, 2, i).result(timeout=5) for i in range(3)] == [1, 2, 4]
-    pool.shutdown()
+    async def main() -> list[int]:
+        stepper = FairStepper()
+        return list(await asyncio.gather(*(stepper.submit(None, pow, 2, i) for i in range(3))))
+
+    assert asyncio.run(main()) == [1, 2, 4]

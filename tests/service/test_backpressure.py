@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import asyncio
 import math
-import threading
 
 import numpy as np
 import pytest
@@ -131,21 +130,16 @@ def test_a_burst_is_answered_frame_by_frame_with_merge_warnings() -> None:
 def test_new_sessions_are_refused_while_steps_pile_up() -> None:
     async def main() -> None:
         manager = make_manager(max_waiting_steps=2)
-        gate = threading.Event()
         try:
-            # Every step thread busy, and two more steps waiting for one.
-            held = [manager._steps.submit(f"k{i}", gate.wait) for i in range(8)]
-            await asyncio.sleep(0.1)
-            assert manager._steps.waiting >= 2
+            # Three steps waiting their turn (none runs before the loop is free).
+            held = [manager._steps.submit(f"k{i}", pow, 2, i) for i in range(3)]
+            assert manager._steps.waiting == 3
             with pytest.raises(CapacityReached) as info:
                 await manager.create(SessionSpec(map_name="paper_office", particles=200))
             assert info.value.code == "busy" and info.value.retry_after_s == 1.0
-            gate.set()
-            for f in held:
-                f.result(timeout=5)
+            assert await asyncio.gather(*held) == [1, 2, 4]
             await manager.create(SessionSpec(map_name="paper_office", particles=200))
         finally:
-            gate.set()
             manager.close()
 
     asyncio.run(main())
