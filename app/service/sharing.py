@@ -18,7 +18,11 @@ The rules (docs/API.md, "Overload and restarts"):
   replays the journal: the session goes on exactly where its client left it.
 * At shutdown every session is checkpointed and its lease released.
 
-All store calls run on this module's own threads, never on the event loop.
+Store calls run on this module's own threads, never blocking the event loop, except the
+one made for every frame: the journal entry is written from the event loop itself
+(:meth:`SessionStore.append`), and checkpoints are packed there too, one session at a
+time between filter steps. A hand-off to another thread and back for each frame cost
+more CPU than the work it moved (benchmarks/README.md).
 """
 
 from __future__ import annotations
@@ -93,13 +97,16 @@ class SessionSharing:
         return session.id, checkpoint.pack(state), int(state["frames"]), version
 
     async def save(self, sessions: list[Session]) -> list[Session]:
-        """Checkpoint ``sessions`` (off the loop); return those whose lease was lost."""
+        """Checkpoint ``sessions``; return those whose lease was lost.
+
+        Each is packed on the event loop, with a turn for the other tasks (filter steps,
+        answers) after each one; the writing happens on a store thread."""
         if not sessions:
             return []
-        loop = asyncio.get_running_loop()
-        packed = await asyncio.gather(
-            *(loop.run_in_executor(self._io, self._pack, s) for s in sessions)
-        )
+        packed = []
+        for session in sessions:
+            packed.append(self._pack(session))
+            await asyncio.sleep(0)
         items = [(sid, data, frames) for sid, data, frames, _ in packed]
         ok = await self._run(self.store.save, items, self.owner, self.idle_timeout_s)
         metrics = self.manager.metrics
@@ -213,8 +220,9 @@ class SessionSharing:
     async def journal(self, session: Session, entry: bytes) -> bool:
         """Store one answered frame's entry; False if another worker has the session
         now (then this copy is dropped, and the step with it)."""
-        done = self.store.append(session.id, entry, self.owner, self.idle_timeout_s, self.lease_s)
-        if await asyncio.wrap_future(done):
+        if await self.store.append(
+            session.id, entry, self.owner, self.idle_timeout_s, self.lease_s
+        ):
             return True
         self._drop(session, "lease_lost")
         return False
@@ -350,6 +358,7 @@ class SessionSharing:
             self.manager.forget(session)
         await self.save(sessions)
         await self._run(self.store.release, [s.id for s in sessions], self.owner)
+        await self.store.aclose()
         if sessions:
             log.info("checkpointed %d sessions and released their leases", len(sessions))
 

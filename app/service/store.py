@@ -18,19 +18,21 @@ Every write is conditional on holding the lease (a server-side script compares t
 token first), so a worker that lost its lease can never overwrite a newer state.
 
 The store's methods block: the session manager calls them from its own threads, never
-on the event loop. :meth:`SessionStore.append` returns a future instead: entries from
-all sessions are written together by one thread (group commit), so a frame's answer
-waits for its journal entry to be stored without one round trip per frame.
+on the event loop, except :meth:`SessionStore.append`, the one call made for every frame.
+It is a coroutine run on the event loop: the entries of all sessions that arrive while
+one write is in flight go together in the next (group commit), so a frame's answer
+waits for its journal entry to be stored without one round trip per frame, and without
+a hand-off to another thread (on a busy worker those hand-offs cost more CPU than the
+writes themselves; benchmarks/README.md).
 """
 
 from __future__ import annotations
 
-import queue
+import asyncio
 import threading
 import time
-from collections.abc import Callable, Sequence
-from concurrent.futures import Future
-from typing import Protocol
+from collections.abc import Awaitable, Callable, Sequence
+from typing import Any, Protocol
 from urllib.parse import urlsplit, urlunsplit
 
 #: Most journal entries written in one round trip.
@@ -71,10 +73,10 @@ class SessionStore(Protocol):
         lease, drop the journal entries they cover; False where the lease was lost."""
         ...
 
-    def append(
+    async def append(
         self, session_id: str, entry: bytes, owner: str, ttl_s: float, lease_s: float
-    ) -> Future[bool]:
-        """Add a journal entry; the future says True once it is stored.
+    ) -> bool:
+        """Add a journal entry (on the event loop); True once it is stored.
 
         A lease that ran out (the owner stalled) is taken back first when nobody went on
         with the session meanwhile: the stored frames end right before this entry's.
@@ -85,7 +87,13 @@ class SessionStore(Protocol):
         """Forget the session: checkpoint, journal and lease."""
         ...
 
-    def close(self) -> None: ...
+    async def aclose(self) -> None:
+        """Close what belongs to the event loop (the journal's connection), from it."""
+        ...
+
+    def close(self) -> None:
+        """Close the blocking connections (after :meth:`aclose`)."""
+        ...
 
 
 def _seq(entry: bytes) -> int:
@@ -175,10 +183,9 @@ class MemoryStore:
         last = -1 if stored is None else int(stored)  # type: ignore[call-overload]
         return max([last, *(_seq(e) for e in journal)])  # type: ignore[attr-defined]
 
-    def append(
+    async def append(
         self, session_id: str, entry: bytes, owner: str, ttl_s: float, lease_s: float
-    ) -> Future[bool]:
-        done: Future[bool] = Future()
+    ) -> bool:
         with self._lock:
             holder = self._get(f"{session_id}:lease")
             ok = holder == owner
@@ -190,13 +197,15 @@ class MemoryStore:
                 self._put(f"{session_id}:journal", [*journal, entry], ttl_s)  # type: ignore[misc]
                 self._touch(f"{session_id}:ckpt", ttl_s)
                 self._touch(f"{session_id}:ckpt:frames", ttl_s)
-        done.set_result(ok)
-        return done
+        return ok
 
     def delete(self, session_id: str) -> None:
         with self._lock:
             for part in ("ckpt", "ckpt:frames", "journal", "lease"):
                 self._values.pop(f"{session_id}:{part}", None)
+
+    async def aclose(self) -> None:
+        pass
 
     def close(self) -> None:
         pass
@@ -301,53 +310,44 @@ def redacted(url: str) -> str:
     return urlunsplit(parts._replace(netloc=user + host))
 
 
+Entry = tuple[str, bytes, str, int, int]  # session id, entry, owner, ttl ms, lease ms
+
+
 class _GroupCommit:
-    """One thread writes the journal entries of all sessions, many per round trip."""
+    """Journal entries of all sessions, written many per round trip, on the event loop.
 
-    def __init__(
-        self, write: Callable[[list[tuple[str, bytes, str, int, int]]], list[bool]]
-    ) -> None:
+    Entries submitted while a write is in flight wait for it and go in the next one.
+    One instance serves one event loop (the Redis connection it writes through is bound
+    to that loop).
+    """
+
+    def __init__(self, write: Callable[[list[Entry]], Awaitable[list[bool]]]) -> None:
         self._write = write
-        self._queue: queue.SimpleQueue[tuple[tuple[str, bytes, str, int, int], Future[bool]] | None]
-        self._queue = queue.SimpleQueue()
-        self._thread = threading.Thread(target=self._run, name="store-journal", daemon=True)
-        self._thread.start()
+        self._pending: list[tuple[Entry, asyncio.Future[bool]]] = []
+        self._writer: asyncio.Task[None] | None = None
 
-    def submit(self, item: tuple[str, bytes, str, int, int]) -> Future[bool]:
-        done: Future[bool] = Future()
-        self._queue.put((item, done))
+    def submit(self, item: Entry) -> asyncio.Future[bool]:
+        loop = asyncio.get_running_loop()
+        done: asyncio.Future[bool] = loop.create_future()
+        self._pending.append((item, done))
+        if self._writer is None or self._writer.done():
+            self._writer = loop.create_task(self._drain(), name="store-journal")
         return done
 
-    def close(self) -> None:
-        self._queue.put(None)
-        self._thread.join(timeout=5)
-
-    def _run(self) -> None:
-        while True:
-            first = self._queue.get()
-            if first is None:
-                return
-            batch = [first]
-            stop = False
-            while len(batch) < MAX_BATCH:
-                try:
-                    more = self._queue.get_nowait()
-                except queue.Empty:
-                    break
-                if more is None:
-                    stop = True
-                    break
-                batch.append(more)
+    async def _drain(self) -> None:
+        while self._pending:
+            batch, self._pending = self._pending[:MAX_BATCH], self._pending[MAX_BATCH:]
             try:
-                results = self._write([item for item, _ in batch])
-            except Exception as exc:  # the futures carry it to each waiting frame
+                results = await self._write([item for item, _ in batch])
+            except Exception as exc:  # each waiting frame gets it
+                error = StoreUnavailable(f"journal write failed: {exc}")
                 for _, done in batch:
-                    done.set_exception(StoreUnavailable(f"journal write failed: {exc}"))
+                    if not done.done():
+                        done.set_exception(error)
             else:
                 for (_, done), ok in zip(batch, results, strict=True):
-                    done.set_result(ok)
-            if stop:
-                return
+                    if not done.done():
+                        done.set_result(ok)
 
 
 class RedisStore:
@@ -359,6 +359,7 @@ class RedisStore:
         import redis
 
         self.url = url
+        self.timeout_s = timeout_s
         try:
             self._redis = redis.Redis.from_url(
                 url, socket_timeout=timeout_s, socket_connect_timeout=timeout_s
@@ -372,8 +373,12 @@ class RedisStore:
         self._renew = self._redis.register_script(_RENEW)
         self._release = self._redis.register_script(_RELEASE)
         self._save = self._redis.register_script(_SAVE)
-        self._append = self._redis.register_script(_APPEND)
-        self._journal = _GroupCommit(self._write_entries)
+        # The journal's client and group commit, made on the event loop that first
+        # appends (an asyncio connection belongs to one loop).
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._aredis: Any = None
+        self._append: Any = None
+        self._journal: _GroupCommit | None = None
 
     def acquire(self, session_id: str, owner: str, ttl_s: float) -> bool:
         return bool(self._acquire(keys=[_keys(session_id)[0]], args=[owner, _ms(ttl_s)]))
@@ -407,12 +412,26 @@ class RedisStore:
             out += [bool(v) for v in self._save(keys=keys, args=args)]
         return out
 
-    def append(
-        self, session_id: str, entry: bytes, owner: str, ttl_s: float, lease_s: float
-    ) -> Future[bool]:
-        return self._journal.submit((session_id, entry, owner, _ms(ttl_s), _ms(lease_s)))
+    def _journal_here(self) -> _GroupCommit:
+        loop = asyncio.get_running_loop()
+        if self._journal is None or self._loop is not loop:
+            import redis.asyncio
 
-    def _write_entries(self, batch: list[tuple[str, bytes, str, int, int]]) -> list[bool]:
+            self._aredis = redis.asyncio.Redis.from_url(
+                self.url, socket_timeout=self.timeout_s, socket_connect_timeout=self.timeout_s
+            )
+            self._append = self._aredis.register_script(_APPEND)
+            self._journal = _GroupCommit(self._write_entries)
+            self._loop = loop
+        return self._journal
+
+    async def append(
+        self, session_id: str, entry: bytes, owner: str, ttl_s: float, lease_s: float
+    ) -> bool:
+        item = (session_id, entry, owner, _ms(ttl_s), _ms(lease_s))
+        return await self._journal_here().submit(item)
+
+    async def _write_entries(self, batch: list[Entry]) -> list[bool]:
         # One script call per (owner, ttl, lease): in practice one per batch.
         results: dict[int, bool] = {}
         groups: dict[tuple[str, int, int], list[int]] = {}
@@ -422,7 +441,7 @@ class RedisStore:
             keys = [k for i in rows for k in _keys(batch[i][0])]
             args: list[bytes | str | int | float] = [owner, ttl, lease]
             args += [batch[i][1] for i in rows]
-            for i, v in zip(rows, self._append(keys=keys, args=args), strict=True):
+            for i, v in zip(rows, await self._append(keys=keys, args=args), strict=True):
                 results[i] = bool(v)
         return [results[i] for i in range(len(batch))]
 
@@ -430,8 +449,12 @@ class RedisStore:
         lease, ckpt, journal = _keys(session_id)
         self._redis.delete(lease, ckpt, f"{ckpt}:frames", journal)
 
+    async def aclose(self) -> None:
+        if self._aredis is not None and self._loop is asyncio.get_running_loop():
+            await self._aredis.aclose()
+        self._aredis = self._append = self._journal = self._loop = None
+
     def close(self) -> None:
-        self._journal.close()
         self._redis.close()
 
 
