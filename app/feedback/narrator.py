@@ -21,6 +21,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from app.feedback.phrasing import (
     Style,
@@ -32,8 +33,6 @@ from app.feedback.phrasing import (
     direction_phrase,
     distance_phrase,
 )
-from app.localization.config import FilterConfig
-from app.localization.sensor import match_detections, prepare_observation
 from app.localization.types import Detection, Estimate
 from app.maps.geometry import wrap_angle
 from app.maps.model import SemanticMap
@@ -93,6 +92,7 @@ class Narrator:
         self._status_at: float | None = None
         self._ambiguity: tuple[str, ...] = ()
         self._objects_at: float | None = None
+        self._class_index = {c: i for i, c in enumerate(semantic_map.classes)}
 
     # ------------------------------------------------------------- checkpoints
     def checkpoint(self) -> dict[str, Any]:
@@ -209,21 +209,21 @@ class Narrator:
         certain = max(estimate.std_x_m, estimate.std_y_m) <= CERTAIN_STD_M and (
             estimate.protection_m is None or estimate.protection_m <= CERTAIN_PROTECTION_M
         )
-        ordered = self._ordered_objects(estimate, dets, fov)
-        pose_xy = np.array([estimate.x, estimate.y])
-        items: list[FeedbackItem] = []
-        for n in ordered[: opts.max_items]:
-            d = self.map.object_xy[n] - pose_xy
-            bearing = math.degrees(float(wrap_angle(math.atan2(d[1], d[0]) - estimate.theta_rad)))
-            items.append(
-                FeedbackItem(
-                    self.map.class_of(n),
-                    self.map.object_labels[n],
-                    clock_from_bearing_deg(bearing),
-                    round(bearing, 1),
-                    round(float(np.hypot(*d)), 2),
-                )
+        ordered, rel, dist = self._ordered_objects(estimate, dets, fov)
+        shown = ordered[: opts.max_items]
+        # One wrap_angle call for all items: the same numbers as one call per item.
+        turns = [math.atan2(dy, dx) - estimate.theta_rad for dx, dy in rel[shown].tolist()]
+        bearings = [math.degrees(b) for b in wrap_angle(turns).tolist()]
+        items = [
+            FeedbackItem(
+                self.map.class_of(n),
+                self.map.object_labels[n],
+                clock_from_bearing_deg(bearing),
+                round(bearing, 1),
+                round(far, 2),
             )
+            for n, bearing, far in zip(shown, bearings, dist[shown].tolist(), strict=True)
+        ]
         parts: list[str] = []
         if not self._was_converged:
             parts.append("Location found.")
@@ -252,40 +252,68 @@ class Narrator:
 
     def _ordered_objects(
         self, estimate: Estimate, dets: list[Detection], fov: tuple[float, float]
-    ) -> list[int]:
-        """Objects matched to this frame's detections first, then the nearest visible others."""
-        pose_xy = np.array([[estimate.x, estimate.y]])
+    ) -> tuple[list[int], NDArray[np.float64], NDArray[np.float64]]:
+        """Objects matched to this frame's detections first, then the nearest visible others.
+
+        Also each object's offset from the pose, shape (N, 2), and distance, shape (N,).
+        """
         # Line of sight from the map's precomputed grid (the cell around the pose).
         visible = self.map.visibility.row(estimate.x, estimate.y)
-        rel = self.map.object_xy - pose_xy
+        rel = self.map.object_xy - np.array([estimate.x, estimate.y])
         dist = np.hypot(rel[:, 0], rel[:, 1])
+        matched = self._matched(estimate, dets, fov, visible, rel, dist) if dets else []
+        near = dist.tolist()
+        matched.sort(key=near.__getitem__)  # nearest first: a stable, useful order
+        order = np.argsort(dist)
+        others = [i for i in order[visible[order]].tolist() if i not in matched]
+        return matched + others, rel, dist
+
+    def _matched(
+        self,
+        estimate: Estimate,
+        dets: list[Detection],
+        fov: tuple[float, float],
+        visible: NDArray[np.bool_],
+        rel: NDArray[np.float64],
+        dist: NDArray[np.float64],
+    ) -> list[int]:
+        """Each detection's best visible object of its class, each object once.
+
+        The sensor model's own correspondence (eq. 3, :func:`match_detections
+        <app.localization.sensor.match_detections>`) at the estimated pose only, within
+        the camera's view, with the same arithmetic, so it picks the same objects: the
+        largest cosine of the bearing error, the first object on a tie. Detections are
+        taken in the sensor model's order (by class, then as given). The camera may
+        look off the body's forward by centre_deg: the pose turns by it and the bearings
+        (relative to the body) by the opposite, so each detection still points the same
+        way while the field of view is centred on the camera.
+        """
         fov_deg, centre_deg = fov
+        centre = math.radians(centre_deg)
+        theta = estimate.theta_rad + centre
+        cos_t, sin_t = np.cos(theta), np.sin(theta)
+        dx, dy = rel[:, 0], rel[:, 1]
+        reach = dist + 1e-12
+        # Unit vector towards each object in the camera's frame; its forward part also
+        # says whether the object is inside the field of view.
+        bx = (cos_t * dx + sin_t * dy) / reach
+        by = (-sin_t * dx + cos_t * dy) / reach
+        seen = visible & (bx >= np.cos(np.radians(fov_deg) / 2.0)) if fov_deg < 360.0 else visible
+        by_class = sorted(dets, key=lambda d: d.cls)
+        bearing = np.array([d.bearing_rad - centre for d in by_class], dtype=np.float64)
+        cls = np.array([self._class_index[d.cls] for d in by_class], dtype=np.int64)
+        cos_err = np.where(
+            (cls[:, None] == self.map.object_class) & seen,
+            np.cos(bearing)[:, None] * bx + np.sin(bearing)[:, None] * by,
+            -np.inf,
+        )
+        # The first largest per detection; none when no object of its class is in view.
+        best = cos_err.argmax(axis=1)[np.isfinite(cos_err.max(axis=1))]
         matched: list[int] = []
-        if dets:
-            # Each detection's best visible object of its class: the sensor model's own
-            # correspondence (eq. 3) at the estimated pose, within the camera's view. The
-            # camera may look off the body's forward by centre_deg: the pose turns by it
-            # and the bearings (relative to the body) by the opposite, so each detection
-            # still points the same way while the field of view is centred on the camera.
-            config = FilterConfig(fov_deg=fov_deg, visibility=True, max_range_m=None)
-            centre = math.radians(centre_deg)
-            camera_dets = [Detection(d.cls, d.bearing_rad - centre, d.score) for d in dets]
-            obs = prepare_observation(camera_dets, self.map, config)
-            _, index = match_detections(
-                np.array([estimate.x]),
-                np.array([estimate.y]),
-                np.array([estimate.theta_rad + centre]),
-                obs,
-                self.map,
-                config,
-                visible[None, :],
-            )
-            for best in index[:, 0]:
-                if best >= 0 and int(best) not in matched:
-                    matched.append(int(best))
-        matched.sort(key=lambda i: dist[i])  # nearest first: a stable, useful order
-        others = [int(i) for i in np.argsort(dist) if visible[i] and int(i) not in matched]
-        return matched + others
+        for n in best.tolist():
+            if n not in matched:
+                matched.append(n)
+        return matched
 
     # ------------------------------------------------------------ repetition
     def _gap_passed(self, now: float) -> bool:

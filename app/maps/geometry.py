@@ -1,9 +1,13 @@
 """Plane geometry on numpy arrays: angles, segment crossings, polygons.
 
-Everything here is vectorized and unit-agnostic except angles, which are radians.
+Everything here is vectorized and unit-agnostic except angles, which are radians;
+:class:`PolygonCells` answers one point at a time from a grid built with arrays.
 """
 
 from __future__ import annotations
+
+import math
+from array import array
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -130,6 +134,155 @@ def points_in_polygons(
     )
     ends = np.append(starts[1:], edges.shape[0])
     return (running[:, ends] - running[:, starts]) % 2 == 1
+
+
+def first_polygon(
+    points: ArrayLike, edges: FloatArray, starts: NDArray[np.int64]
+) -> NDArray[np.int64]:
+    """Index of the first polygon containing each point (:func:`points_in_polygons`), or
+    -1, shape (M,)."""
+    inside = points_in_polygons(points, edges, starts)
+    if not inside.shape[1]:
+        return np.full(inside.shape[0], -1, dtype=np.int64)
+    return np.where(inside.any(axis=1), np.argmax(inside, axis=1), -1)
+
+
+#: Cell side of a :class:`PolygonCells` grid (units of the map) ...
+POLYGON_CELL = 0.1
+#: ... unless the polygons span more than this many cells: then larger cells.
+POLYGON_CELLS_MAX = 512
+#: Most (edge, grid row) pairs, and most (point, edge) tests, a grid may cost to build;
+#: polygons that need more are always tested exactly.
+POLYGON_GRID_WORK = 500_000
+#: The cell code of a cell an edge passes near (its points take the exact test).
+_NEAR_EDGE = -2
+
+
+class PolygonCells:
+    """:func:`first_polygon` for one point at a time, mostly from a grid.
+
+    In a cell that no edge comes near, every point lies in the same polygons, so the
+    cell keeps the exact test's answer for its centre; neighbouring such cells share
+    it, so the grid is built with one exact test per patch of them. A point in a cell
+    near an edge takes the exact test, as does every point when the grid would cost
+    too much to build; a finite point off the grid, a cell or more outside all the
+    polygons' bounding box, is in none. "Near" is within the cell's half diagonal of
+    its centre plus a margin orders of magnitude above the exact test's rounding, so
+    the answer is always the exact test's.
+    """
+
+    def __init__(self, edges: FloatArray, starts: NDArray[np.int64]) -> None:
+        self.edges = edges
+        self.starts = starts
+        self.x0 = self.y0 = 0.0
+        self.inv = 1.0
+        self.cols = self.rows = 0
+        self.codes = array("i")
+        #: False when every point takes the exact test.
+        self.gridded = True
+        if edges.shape[0]:
+            self.gridded = self._build()
+
+    def first(self, x: float, y: float) -> int:
+        """:func:`first_polygon` of the point (x, y)."""
+        fx = (x - self.x0) * self.inv
+        fy = (y - self.y0) * self.inv
+        if 0.0 <= fx < self.cols and 0.0 <= fy < self.rows:
+            code = self.codes[int(fy) * self.cols + int(fx)]
+            if code != _NEAR_EDGE:
+                return code
+        elif self.gridded and math.isfinite(fx) and math.isfinite(fy):
+            return -1
+        return int(first_polygon([[x, y]], self.edges, self.starts)[0])
+
+    def _build(self) -> bool:
+        """Lay the grid and fill in its codes; False when that would cost too much."""
+        e = self.edges
+        lo_x, hi_x = float(e[:, 0::2].min()), float(e[:, 0::2].max())
+        lo_y, hi_y = float(e[:, 1::2].min()), float(e[:, 1::2].max())
+        margin = 1e-9 * (1.0 + max(abs(lo_x), abs(hi_x), abs(lo_y), abs(hi_y)))
+        span = max(hi_x - lo_x, hi_y - lo_y)
+        side = max(POLYGON_CELL, span / (POLYGON_CELLS_MAX - 2))
+        if not side > 4.0 * margin:
+            return False  # coordinates so large that rounding is not small against a cell
+        # One cell of padding all round: off the grid is a cell away from every polygon.
+        x0, y0 = lo_x - side, lo_y - side
+        cols = int((hi_x - lo_x) / side) + 3
+        rows = int((hi_y - lo_y) / side) + 3
+        near = _cells_near_edges(e, x0, y0, side, rows, cols, 0.75 * side + 2.0 * margin)
+        if near is None:
+            return False
+        # Runs of cells along a row with no edge near any of them share one answer, and so
+        # does a run whose first cell has such a cell above it (with that cell's run).
+        clear = ~near
+        run_starts = clear.copy()
+        run_starts[:, 1:] &= near[:, :-1]
+        first_cells = np.flatnonzero(run_starts)
+        run_of = np.cumsum(run_starts.ravel()) - 1
+        above = first_cells - cols
+        joined = above >= 0
+        joined[joined] = clear.ravel()[above[joined]]
+        parent = np.arange(first_cells.size)
+        parent[joined] = run_of[above[joined]]
+        while not np.array_equal(parent[parent], parent):  # each run to the top of its chain
+            parent = parent[parent]
+        tops = np.flatnonzero(parent == np.arange(parent.size))
+        if tops.size * e.shape[0] > POLYGON_GRID_WORK:
+            return False
+        r, c = np.divmod(first_cells[tops], cols)
+        centres = np.column_stack([x0 + (c + 0.5) * side, y0 + (r + 0.5) * side])
+        answer = np.zeros(first_cells.size, dtype=np.int64)
+        chunk = max(1, 100_000 // e.shape[0])
+        for i in range(0, tops.size, chunk):
+            answer[tops[i : i + chunk]] = first_polygon(centres[i : i + chunk], e, self.starts)
+        codes = np.full(rows * cols, _NEAR_EDGE, dtype=np.int32)
+        inside = clear.ravel()
+        codes[inside] = answer[parent[run_of[inside]]]
+        self.x0, self.y0, self.inv = x0, y0, 1.0 / side
+        self.cols, self.rows = cols, rows
+        self.codes = array("i", codes.tobytes())
+        return True
+
+
+def _cells_near_edges(
+    edges: FloatArray, x0: float, y0: float, side: float, rows: int, cols: int, reach: float
+) -> NDArray[np.bool_] | None:
+    """Cells whose centre may lie within ``reach`` of an edge, shape (rows, cols).
+
+    Generous: it may name a few cells more, never one fewer. Per edge and grid row, the
+    part of the edge within ``reach`` of the row's centre line, widened by ``reach``.
+    None when there are more than :data:`POLYGON_GRID_WORK` (edge, row) pairs.
+    """
+    x1, y1, x2, y2 = (edges[:, i] for i in range(4))
+    low, high = np.minimum(y1, y2), np.maximum(y1, y2)
+    first = np.clip(np.ceil((low - reach - y0) / side - 0.5), 0, rows - 1).astype(np.int64)
+    last = np.clip(np.floor((high + reach - y0) / side - 0.5), -1, rows - 1).astype(np.int64)
+    count = np.maximum(last - first + 1, 0)
+    total = int(count.sum())
+    if total > POLYGON_GRID_WORK:
+        return None
+    k = np.repeat(np.arange(edges.shape[0]), count)
+    row = first[k] + np.arange(total) - np.repeat(np.cumsum(count) - count, count)
+    centre_y = y0 + (row + 0.5) * side
+    band_lo = np.clip(centre_y - reach, low[k], high[k])
+    band_hi = np.clip(centre_y + reach, low[k], high[k])
+    # Where along the edge (0..1) the band starts and ends (a level edge: all of it).
+    dy = y2[k] - y1[k]
+    level = dy == 0.0
+    along = np.where(level, 1.0, dy)
+    t_lo = np.where(level, 0.0, np.clip((band_lo - y1[k]) / along, 0.0, 1.0))
+    t_hi = np.where(level, 1.0, np.clip((band_hi - y1[k]) / along, 0.0, 1.0))
+    at_lo = x1[k] + (x2[k] - x1[k]) * t_lo
+    at_hi = x1[k] + (x2[k] - x1[k]) * t_hi
+    left, right = np.minimum(at_lo, at_hi), np.maximum(at_lo, at_hi)
+    c_first = np.clip(np.ceil((left - reach - x0) / side - 0.5), 0, cols).astype(np.int64)
+    c_last = np.clip(np.floor((right + reach - x0) / side - 0.5), -1, cols - 1).astype(np.int64)
+    keep = c_first <= c_last
+    # Mark each row's column span: +1 where it starts, -1 after it ends, then sum along.
+    marks = np.zeros((rows, cols + 1), dtype=np.int64)
+    np.add.at(marks, (row[keep], c_first[keep]), 1)
+    np.add.at(marks, (row[keep], c_last[keep] + 1), -1)
+    return np.asarray(np.cumsum(marks, axis=1)[:, :cols] > 0)
 
 
 def points_in_polygon(points: ArrayLike, polygon: ArrayLike) -> NDArray[np.bool_]:

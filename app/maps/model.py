@@ -22,7 +22,8 @@ from app.maps.freespace import WALL_CLEARANCE_M as WALL_CLEARANCE_M  # re-export
 from app.maps.freespace import FreeSpaceGrid as FreeSpaceGrid  # re-exported
 from app.maps.freespace import MapError as MapError  # re-exported
 from app.maps.geometry import (
-    points_in_polygons,
+    PolygonCells,
+    first_polygon,
     polygon_edges,
     segments_cross_walls,
 )
@@ -228,16 +229,19 @@ class SemanticMap:
         """Every region polygon's edges at once (:func:`polygon_edges`)."""
         return polygon_edges(self.region_polygons)
 
+    @cached_property
+    def _region_cells(self) -> PolygonCells:
+        """The regions on a grid, for :meth:`region_at` (built on first use)."""
+        return PolygonCells(*self._region_edges)
+
     def region_index(self, points: ArrayLike) -> NDArray[np.int64]:
         """Index of the first region containing each point, or -1, shape (M,)."""
-        inside = points_in_polygons(points, *self._region_edges)
-        if not inside.shape[1]:
-            return np.full(inside.shape[0], -1, dtype=np.int64)
-        return np.where(inside.any(axis=1), np.argmax(inside, axis=1), -1)
+        return first_polygon(points, *self._region_edges)
 
     def region_at(self, x: float, y: float) -> str | None:
-        """The name of the region containing (x, y), or None."""
-        i = int(self.region_index([[x, y]])[0])
+        """The name of the region containing (x, y), or None; the same answer as
+        :meth:`region_index`, mostly from a grid (called per hypothesis every frame)."""
+        i = self._region_cells.first(x, y)
         return self.region_names[i] if i >= 0 else None
 
     @property
