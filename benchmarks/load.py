@@ -6,7 +6,8 @@ given rate from each, and reports p50/p95/max latency (send to result), frames/s
 errors; for a server it started, also the server's CPU seconds per 1,000 frames (from
 /proc, less sensitive to other load on the machine than latency is).
 
-Each client walks the paper office there and back (about 80 s at 10 Hz), starting at
+Clients send at their own phase of the period, as independent phones would. Each client
+walks the paper office there and back (about 80 s at 10 Hz), starting at
 its own point but never running off the end, so a session is not kidnapped by a jump
 back to the start: after the first second or so every session is a converged walk.
 
@@ -90,6 +91,9 @@ async def one_session(
     room = max(1, len(frames) - int(seconds * rate) - 1)
     first = (seed * 7) % room  # its own stretch of the walk, never past the end
     async with websockets.connect(f"ws://{url}/sessions/{sid}/stream", max_size=2**22) as ws:
+        # Phones are not synchronized: each client starts at its own point of the period
+        # (else every client sends in the same instant and the last waits for all others).
+        await asyncio.sleep(period * np.random.default_rng(seed).random())
         start = time.perf_counter()
         i = 0
         while time.perf_counter() - start < seconds:

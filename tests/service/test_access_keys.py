@@ -94,7 +94,7 @@ def test_without_turns_jobs_run_in_arrival_order() -> None:
 
 def test_the_stepper_passes_exceptions_on_lets_io_in_and_cancels_at_shutdown() -> None:
     async def main() -> None:
-        stepper = FairStepper()
+        stepper = FairStepper(slice_s=0.0)  # a turn of the loop after every step
         bad = stepper.submit("a", lambda: 1 / 0)
         ticks: list[int] = []
 
@@ -109,6 +109,10 @@ def test_the_stepper_passes_exceptions_on_lets_io_in_and_cancels_at_shutdown() -
             await bad
         # The loop ran other tasks between the steps, not only after all of them.
         assert ticks.index(2) < len(ticks) - 1
+        # With a slice, short steps run back to back within one turn of the loop.
+        sliced, ticks[:] = FairStepper(slice_s=1.0), []
+        await asyncio.gather(ticker(), *(sliced.submit("a", ticks.append, -1) for _ in range(3)))
+        assert ticks == [-1, -1, -1, 0, 1, 2]
         pending = [stepper.submit("a", pow, 2, i) for i in range(3)]
         stepper.shutdown()
         assert all(f.cancelled() for f in pending) and stepper.waiting == 0
