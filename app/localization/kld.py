@@ -97,4 +97,4 @@ def kld_sample_size(
         float(BIN_THETA_RAD),
         1.0 / n_max,
     )
-    return int(np.clip(kld_bound(int(k)), n_min, n_max))
+    return min(max(int(kld_bound(int(k))), n_min), n_max)

@@ -31,6 +31,7 @@ log space; only differences between particles matter to the filter.
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -96,6 +97,14 @@ class Observation:
         return self.det_cos.size == 0
 
 
+@functools.lru_cache(maxsize=256)
+def _class_terms(std_rad: float, eps: float) -> tuple[float, float, float]:
+    """A class's concentration kappa, log clutter floor and log(1 - eps) (the same few
+    values every frame, so kept)."""
+    k = 1.0 / std_rad**2
+    return k, (math.log(eps * scaled_bessel_i0(k)) if eps > 0.0 else -math.inf), math.log1p(-eps)
+
+
 def prepare_observation(
     detections: Sequence[Detection], semantic_map: SemanticMap, config: FilterConfig
 ) -> Observation:
@@ -119,11 +128,11 @@ def prepare_observation(
             bearing_l.append(float(d.bearing_rad))
             score_l.append(min(float(d.score), 1.0))
             group_l.append(g)
-        k = 1.0 / config.bearing_std_rad(cls) ** 2
+        k, log_floor, log_keep = _class_terms(config.bearing_std_rad(cls), eps)
         kappa.append(k)
         weight.append(1.0 / len(dets))
-        floor.append(math.log(eps * scaled_bessel_i0(k)) if eps > 0.0 else -math.inf)
-        keep.append(math.log1p(-eps))
+        floor.append(log_floor)
+        keep.append(log_keep)
         members.extend(semantic_map.class_members[cls].tolist())
         starts.append(len(members))
     bearing = np.array(bearing_l, dtype=np.float64)

@@ -10,6 +10,7 @@ not hidden by it (see :meth:`SemanticMap.line_of_sight`).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from functools import cached_property
 
@@ -68,9 +69,15 @@ class VisibilityGrid:
         every frame.
         """
         rows, cols = self.shape
-        flat, _ = grid_cell(
-            float(x), float(y), self.origin_x, self.origin_y, 1.0 / self.resolution_m, rows, cols
-        )
+        x, y, inv = float(x), float(y), 1.0 / self.resolution_m
+        fx, fy = (x - self.origin_x) * inv, (y - self.origin_y) * inv
+        if math.isfinite(fx) and math.isfinite(fy):
+            # grid_cell's arithmetic on Python floats (the same IEEE operations, without
+            # a numpy call per operation): this runs several times per frame.
+            c = min(max(float(math.floor(fx)), 0.0), cols - 1.0)
+            r = min(max(float(math.floor(fy)), 0.0), rows - 1.0)
+            return self._cell_row(int(r * cols + c))
+        flat, _ = grid_cell(x, y, self.origin_x, self.origin_y, inv, rows, cols)
         return self._cell_row(int(flat))
 
     def _cell_row(self, cell: int) -> NDArray[np.bool_]:
