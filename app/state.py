@@ -8,6 +8,10 @@ of those types later is carried without touching this module. Only what the type
 is supported: dataclasses, tuples, lists, dicts with string keys, ``X | None``, numpy
 arrays, and numbers, strings and booleans. Non-finite floats pass through as ``NaN``/``Infinity``
 (Python's JSON reads and writes them).
+
+:func:`plain_step` converts one level only, for an encoder that walks the rest itself
+(:func:`app.service.checkpoint.pack` hands it to the JSON encoder, whose walk is
+compiled). :func:`to_columns` stores many values of one type as a few long arrays.
 """
 
 from __future__ import annotations
@@ -16,7 +20,7 @@ import dataclasses
 import functools
 import types
 import typing
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from typing import Any, TypeVar, Union
 
 import numpy as np
@@ -40,6 +44,63 @@ def to_plain(value: Any) -> Any:
     return value
 
 
+def plain_step(value: Any) -> Any:
+    """``value`` one level nearer plain data: a dataclass as a dict of its fields, any
+    other mapping as a dict, a numpy scalar as a number (TypeError for anything else)."""
+    if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        return {name: getattr(value, name) for name in _names(type(value))}
+    if isinstance(value, Mapping):
+        return {str(k): v for k, v in value.items()}
+    if isinstance(value, np.generic):
+        return value.item()
+    raise TypeError(f"{type(value).__name__} is not plain data")
+
+
+def to_columns(values: Sequence[Any]) -> dict[str, Any]:
+    """Values of one dataclass type as columns: each field holding 1-d arrays as those
+    arrays joined end to end (the arrays of a field share a dtype), with every value's
+    lengths in ``lengths``, shape (values, array fields); any other field as a list."""
+    if not values:
+        return {"arrays": {}, "lengths": np.zeros((0, 0), np.int64), "fields": {}}
+    cls: type = type(values[0])
+    names = _names(cls)
+    arrays = [n for n in names if isinstance(getattr(values[0], n), np.ndarray)]
+    return {
+        "arrays": {n: np.concatenate([getattr(v, n) for v in values]) for n in arrays},
+        "lengths": np.array([[getattr(v, n).size for n in arrays] for v in values], np.int64),
+        "fields": {n: [getattr(v, n) for v in values] for n in names if n not in arrays},
+    }
+
+
+def from_columns(kind: type[T], columns: Mapping[str, Any]) -> list[T]:
+    """The values :func:`to_columns` was given (their arrays slices of one writable copy
+    of each column)."""
+    arrays = {n: np.array(a) for n, a in columns["arrays"].items()}
+    ends = np.cumsum(columns["lengths"], axis=0).tolist()
+    cls: type = kind
+    hints = _hints(cls)
+    init = _init_names(cls)
+    fields = {
+        n: [from_plain(hints[n], v) for v in vs] for n, vs in columns["fields"].items() if n in init
+    }
+    starts = [[0] * len(arrays), *ends]
+    values = []
+    for i, end in enumerate(ends):
+        args = {n: a[s:e] for (n, a), s, e in zip(arrays.items(), starts[i], end, strict=True)}
+        values.append(kind(**args, **{n: vs[i] for n, vs in fields.items()}))
+    return values
+
+
+@functools.cache
+def _names(cls: type) -> tuple[str, ...]:
+    return tuple(f.name for f in dataclasses.fields(cls))
+
+
+@functools.cache
+def _init_names(cls: type) -> frozenset[str]:
+    return frozenset(f.name for f in dataclasses.fields(cls) if f.init)
+
+
 @functools.cache
 def _hints(cls: type) -> dict[str, Any]:
     return typing.get_type_hints(cls)
@@ -49,35 +110,7 @@ def from_plain(kind: Any, data: Any) -> Any:
     """Rebuild a value of type ``kind`` (a dataclass or a typing form) from plain data."""
     if data is None:
         return None
-    origin = typing.get_origin(kind)
-    if origin in (Union, types.UnionType):
-        options = [a for a in typing.get_args(kind) if a is not type(None)]
-        for option in options:
-            try:
-                return from_plain(option, data)
-            except (TypeError, ValueError, KeyError):
-                continue
-        raise ValueError(f"{data!r} fits none of {options}")
-    if kind is np.ndarray or origin is np.ndarray:
-        return np.array(data)  # a writable copy
-    if isinstance(kind, type) and dataclasses.is_dataclass(kind):
-        if not isinstance(data, Mapping):
-            raise TypeError(f"{kind.__name__}: expected an object, got {type(data).__name__}")
-        hints = _hints(kind)
-        known = {f.name for f in dataclasses.fields(kind) if f.init}
-        return kind(**{k: from_plain(hints[k], v) for k, v in data.items() if k in known})
-    if origin is tuple:
-        args = typing.get_args(kind)
-        if len(args) == 2 and args[1] is Ellipsis:
-            return tuple(from_plain(args[0], v) for v in data)
-        return tuple(from_plain(a, v) for a, v in zip(args, data, strict=True))
-    if origin is list:
-        (arg,) = typing.get_args(kind) or (Any,)
-        return [from_plain(arg, v) for v in data]
-    if origin in (dict, Mapping) or kind in (dict, Mapping):
-        args = typing.get_args(kind)
-        value_kind = args[1] if args else Any
-        return {k: from_plain(value_kind, v) for k, v in data.items()}
+    # Numbers, strings and dataclasses first: they are most of the calls.
     if kind is float:
         if isinstance(data, bool) or not isinstance(data, int | float):
             raise TypeError(f"expected a number, got {data!r}")
@@ -94,7 +127,38 @@ def from_plain(kind: Any, data: Any) -> Any:
         if not isinstance(data, bool):
             raise TypeError(f"expected true or false, got {data!r}")
         return data
-    if typing.get_origin(kind) is typing.Literal:
+    if isinstance(kind, type) and dataclasses.is_dataclass(kind):
+        if isinstance(data, kind):  # not packed yet: taken as it is
+            return data
+        if not isinstance(data, Mapping):
+            raise TypeError(f"{kind.__name__}: expected an object, got {type(data).__name__}")
+        hints = _hints(kind)
+        known = _init_names(kind)
+        return kind(**{k: from_plain(hints[k], v) for k, v in data.items() if k in known})
+    origin = typing.get_origin(kind)
+    if origin in (Union, types.UnionType):
+        options = [a for a in typing.get_args(kind) if a is not type(None)]
+        for option in options:
+            try:
+                return from_plain(option, data)
+            except (TypeError, ValueError, KeyError):
+                continue
+        raise ValueError(f"{data!r} fits none of {options}")
+    if kind is np.ndarray or origin is np.ndarray:
+        return np.array(data)  # a writable copy
+    if origin is tuple:
+        args = typing.get_args(kind)
+        if len(args) == 2 and args[1] is Ellipsis:
+            return tuple(from_plain(args[0], v) for v in data)
+        return tuple(from_plain(a, v) for a, v in zip(args, data, strict=True))
+    if origin is list:
+        (arg,) = typing.get_args(kind) or (Any,)
+        return [from_plain(arg, v) for v in data]
+    if origin in (dict, Mapping) or kind in (dict, Mapping):
+        args = typing.get_args(kind)
+        value_kind = args[1] if args else Any
+        return {k: from_plain(value_kind, v) for k, v in data.items()}
+    if origin is typing.Literal:
         if data not in typing.get_args(kind):
             raise ValueError(f"{data!r} is not one of {typing.get_args(kind)}")
         return data

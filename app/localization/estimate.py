@@ -28,7 +28,7 @@ from app.localization.fastmath import FAST, sincos
 from app.localization.resampling import systematic_resample
 from app.localization.types import Estimate, Hypothesis
 from app.maps.geometry import wrap_angle
-from app.state import from_plain, to_plain
+from app.state import from_plain
 
 
 @dataclass(frozen=True)
@@ -339,10 +339,10 @@ class ConvergenceGate:
         self.lost_because: tuple[str, ...] = ()
 
     def checkpoint(self) -> dict[str, Any]:
-        """The gate's memory, as plain data."""
+        """The gate's memory (its last estimate as it is: frozen)."""
         return {
             "streak": self._streak,
-            "last": to_plain(self._last),
+            "last": self._last,
             "held": self._held,
             "light": self._light,
         }

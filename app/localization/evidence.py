@@ -61,6 +61,7 @@ import math
 from collections import deque
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from itertools import chain
 from typing import Any
 
 import numpy as np
@@ -77,7 +78,7 @@ from app.localization.types import Hypothesis, Odometry
 from app.maps.geometry import wrap_angle, wrap_deg
 from app.maps.model import SemanticMap
 from app.maps.visibility import VisibilityGrid
-from app.state import from_plain, to_plain
+from app.state import from_columns, from_plain, to_columns
 
 
 @dataclass(frozen=True)
@@ -201,27 +202,29 @@ class EvidenceTracker:
     # ---------------------------------------------------------- checkpoints
     def checkpoint(self) -> dict[str, Any]:
         """The anchor, the alternatives (motions, evidence, ages), the dropped ones, the
-        main mode's trail and the recent frames (prepared observations), as plain data
-        and arrays; the random generator is the filter's."""
+        main mode's trail and the recent frames (prepared observations as columns, see
+        :func:`~app.state.to_columns`), as plain data, arrays and frozen values; the
+        random generator is the filter's."""
         return {
             "moves": self.moves,
             "llr": self.llr,
             "seg": self.seg,
             "age": self.age,
             "graves": self._graves,
-            "trail": np.array(self._trail, dtype=np.float64).reshape(-1, 2),
+            "trail": np.fromiter(chain.from_iterable(self._trail), np.float64).reshape(-1, 2),
             "anchor": self._anchor,
-            "history": [
-                [to_plain(odo), to_plain(obs), to_plain(compass)]
-                for odo, obs, compass in self._history
-            ],
+            "history": {
+                "odometry": [odo for odo, _, _ in self._history],
+                "observations": to_columns([obs for _, obs, _ in self._history]),
+                "compass": [compass for _, _, compass in self._history],
+            },
             "since_search": self._since_search,
             "quiet": self._quiet,
             "searched_ago": self.searched_ago,
             "searches": self.searches,
             "swaps": self.swaps,
             "mode_searches": self.mode_searches,
-            "last_main": to_plain(self._last_main),
+            "last_main": self._last_main,
         }
 
     def restore(self, state: Mapping[str, Any]) -> None:
@@ -232,18 +235,25 @@ class EvidenceTracker:
         self.age = np.array(state["age"], dtype=np.int64)
         self._graves = np.array(state["graves"], dtype=np.float64).reshape(-1, 3)
         self._trail.clear()
-        self._trail.extend((float(x), float(y)) for x, y in state["trail"])
+        self._trail.extend(map(tuple, np.asarray(state["trail"]).tolist()))
         anchor = state["anchor"]
         self._anchor = None if anchor is None else np.array(anchor, dtype=np.float64)
+        history = state["history"]
+        if isinstance(history, Mapping):
+            odometry, compass = history["odometry"], history["compass"]
+            observations = from_columns(Observation, history["observations"])
+        else:  # checkpoint format 1: one (odometry, observation, compass) record a frame
+            odometry, plain, compass = zip(*history, strict=True) if history else ((), (), ())
+            observations = [from_plain(Observation, obs) for obs in plain]
         self._history.clear()
-        for odo, obs, compass in state["history"]:
-            self._history.append(
-                (
-                    from_plain(Odometry | None, odo),
-                    from_plain(Observation, obs),
-                    from_plain(CompassReading | None, compass),
-                )
+        self._history.extend(
+            zip(
+                [from_plain(Odometry | None, odo) for odo in odometry],
+                observations,
+                [from_plain(CompassReading | None, c) for c in compass],
+                strict=True,
             )
+        )
         self._since_search = int(state["since_search"])
         self._quiet = int(state.get("quiet", 0))
         self.searched_ago = state["searched_ago"]

@@ -42,7 +42,7 @@ from app.localization.types import Detection, Estimate, InitialPose, Odometry
 from app.localization.unseen import UnseenObjects
 from app.maps.geometry import wrap_angle
 from app.maps.model import SemanticMap
-from app.state import from_plain, to_plain
+from app.state import from_plain
 
 #: Share of a global start's particles drawn from the first observation.
 SEED_SHARE = 0.9
@@ -353,7 +353,8 @@ class ParticleFilter:
 
     # ------------------------------------------------------------ checkpoints
     def checkpoint(self, max_particles: int = CHECKPOINT_PARTICLES) -> dict[str, Any]:
-        """Everything the next step depends on, compactly: plain data and float32 arrays.
+        """Everything the next step depends on, compactly: plain data, float32 arrays and
+        frozen values (the estimate, the fit) as they are.
 
         A cloud larger than ``max_particles`` is resampled to that many (systematic,
         equal weights; drawn with its own generator so the filter's is untouched). A
@@ -387,14 +388,14 @@ class ParticleFilter:
             "recovery": [self._recovery.w_slow, self._recovery.w_fast],
             "gate": self._gate.checkpoint(),
             "seed_from_observation": self._seed_from_observation,
-            "quality": to_plain(self.quality),
+            "quality": self.quality,
             "had_odometry": self._had_odometry,
             "evidence": None if self.evidence is None else self.evidence.checkpoint(),
             "unseen": None if self.unseen is None else self.unseen.checkpoint(),
             "frames_without_evidence": self.frames_without_evidence,
             "restarts": self.restarts,
             "steps": self.steps,
-            "estimate": to_plain(self.estimate),
+            "estimate": self.estimate,
         }
 
     def restore(self, state: Mapping[str, Any]) -> None:

@@ -13,14 +13,20 @@ kept in a journal (one short entry per frame) and replayed on resume, so a sessi
 resumed on another worker has seen exactly the frames its client was answered for.
 
 Bytes: ``BRGC1``, a 4-byte little-endian header length, a JSON header, then the raw
-arrays the header points to (dtype, shape, offset). A checkpoint of a converged session
-(2,000 particles, the evidence tracker's window of 10 observations) is about 46 KB.
+arrays the header points to (dtype, shape, offset). Anything numerous is an array (the
+particles, the main mode's trail, the window's observations as columns), so the header
+stays a few KB: a checkpoint of a converged session (2,000 particles, the evidence
+tracker's window of 10 observations) is 40 to 57 KB, 45 KB for the paper office's walk.
+Format 2 keeps the window's observations as columns; format 1 (one plain record per
+frame, written by the previous version) is still read, so sessions checkpointed before
+an upgrade resume on upgraded workers.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import json
+import math
 import struct
 from collections.abc import Mapping
 from datetime import datetime
@@ -33,13 +39,15 @@ from app.guidance.planner import Plan
 from app.guidance.targets import Target
 from app.localization.types import Detection, Pose
 from app.service.types import FrameInput, FrameOutcome, SessionSpec
-from app.state import from_plain, to_plain
+from app.state import from_plain, plain_step, to_plain
 
 if TYPE_CHECKING:
     from app.service.sessions import Session
 
 MAGIC = b"BRGC1"
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
+#: Formats this version reads (the layout differs only in the evidence window).
+READABLE_FORMATS = (1, 2)
 _ARRAY = "__array__"
 
 
@@ -48,62 +56,59 @@ class BadCheckpoint(ValueError):
 
 
 def pack(state: Mapping[str, Any]) -> bytes:
-    """Nested plain data with numpy arrays anywhere in it, as bytes."""
-    blobs: list[bytes] = []
+    """Nested data with numpy arrays anywhere in it, as bytes. Dataclasses, mappings and
+    numpy scalars are converted on the way (:func:`~app.state.plain_step`): the JSON
+    encoder's compiled walk meets them, so nothing walks the whole state in Python."""
+    blobs: list[memoryview] = []  # the arrays' own memory, copied once: by the join
     offset = 0
 
-    def walk(value: Any) -> Any:
+    def convert(value: Any) -> Any:
         nonlocal offset
         if isinstance(value, np.ndarray):
-            data = np.ascontiguousarray(value).tobytes()
+            data = np.ascontiguousarray(value)
             ref = {_ARRAY: [value.dtype.str, list(value.shape), offset]}
-            blobs.append(data)
-            offset += len(data)
+            blobs.append(data.data)
+            offset += data.nbytes
             return ref
-        if isinstance(value, Mapping):
-            return {str(k): walk(v) for k, v in value.items()}
-        if isinstance(value, list | tuple):
-            return [walk(v) for v in value]
-        return value
+        return plain_step(value)
 
-    header = json.dumps(walk(state), separators=(",", ":")).encode()
+    encoder = json.JSONEncoder(separators=(",", ":"), default=convert, check_circular=False)
+    header = encoder.encode(state).encode()
     return b"".join([MAGIC, struct.pack("<I", len(header)), header, *blobs])
 
 
 def unpack(data: bytes) -> dict[str, Any]:
-    """The state :func:`pack` was given (arrays read-only, backed by ``data``)."""
+    """The state :func:`pack` was given, as plain data (arrays read-only, backed by
+    ``data``; dataclasses as dicts of their fields)."""
     if not data.startswith(MAGIC) or len(data) < len(MAGIC) + 4:
         raise BadCheckpoint("not a Bearings checkpoint (wrong magic bytes)")
     (size,) = struct.unpack_from("<I", data, len(MAGIC))
     start = len(MAGIC) + 4
     body = memoryview(data)[start + size :]
+
+    def array(value: dict[str, Any]) -> Any:
+        if _ARRAY not in value:
+            return value
+        dtype, shape, offset = value[_ARRAY]
+        count = math.prod(shape)
+        return np.frombuffer(body, dtype=dtype, count=count, offset=offset).reshape(shape)
+
     try:
-        header = json.loads(data[start : start + size])
+        state: dict[str, Any] = json.loads(data[start : start + size], object_hook=array)
     except ValueError as exc:
-        raise BadCheckpoint(f"checkpoint header is not JSON: {exc}") from None
-
-    def walk(value: Any) -> Any:
-        if isinstance(value, dict):
-            if _ARRAY in value:
-                dtype, shape, offset = value[_ARRAY]
-                dt = np.dtype(dtype)
-                count = int(np.prod(shape, dtype=np.int64))
-                return np.frombuffer(body, dtype=dt, count=count, offset=offset).reshape(shape)
-            return {k: walk(v) for k, v in value.items()}
-        if isinstance(value, list):
-            return [walk(v) for v in value]
-        return value
-
-    state = walk(header)
-    if state.get("format") != FORMAT_VERSION:
+        raise BadCheckpoint(f"checkpoint header unreadable: {exc}") from None
+    if state.get("format") not in READABLE_FORMATS:
         raise BadCheckpoint(
-            f"checkpoint format {state.get('format')!r}; this version reads {FORMAT_VERSION}"
+            f"checkpoint format {state.get('format')!r}; this version reads "
+            f"{', '.join(map(str, READABLE_FORMATS))}"
         )
     return state
 
 
 def capture(session: Session) -> dict[str, Any]:
-    """A session's state (call under its ``state_lock``, or when no step can run).
+    """A session's state (call under its ``state_lock``, or when no step can run), to
+    :func:`pack` before the session steps again: frozen values (spec, outcome,
+    estimates) and some of the filter's arrays are the session's own, not copies.
 
     Before its first frame a session is exactly what its spec (with the seed drawn at
     creation) builds, so its filter and narrator are left out.
@@ -113,18 +118,18 @@ def capture(session: Session) -> dict[str, Any]:
     return {
         "format": FORMAT_VERSION,
         "id": session.id,
-        "spec": to_plain(session.spec),
+        "spec": session.spec,
         "created_at": session.created_at.isoformat(),
         "particles": session.particles,
         "frames": session.frames,
         "owner": session.owner,
         "shared": session.shared,
         "speaker": to_plain(session.speaker),
-        "destination": None if plan is None else to_plain(plan.target),
+        "destination": None if plan is None else plan.target,
         "last_timestamp": session.last_timestamp,
-        "last_outcome": to_plain(session.last_outcome),
-        "last_detections": to_plain(session.last_detections),
-        "truth": to_plain(session.truth),
+        "last_outcome": session.last_outcome,
+        "last_detections": list(session.last_detections),
+        "truth": session.truth,
         "filter": None if fresh else session.filter.checkpoint(),
         "narrator": None if fresh else session.narrator.checkpoint(),
     }

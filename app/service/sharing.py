@@ -91,10 +91,11 @@ class SessionSharing:
 
     # ---------------------------------------------------------------- checkpoints
     def _pack(self, session: Session) -> tuple[str, bytes, int, int]:
+        # Packed under the lock too: the captured state refers to the session's own
+        # (frozen or not yet replaced) values rather than copies.
         with session.state_lock:
             state = checkpoint.capture(session)
-            version = session.version
-        return session.id, checkpoint.pack(state), int(state["frames"]), version
+            return session.id, checkpoint.pack(state), int(state["frames"]), session.version
 
     async def save(self, sessions: list[Session]) -> list[Session]:
         """Checkpoint ``sessions``; return those whose lease was lost.
