@@ -128,19 +128,23 @@ def cluster(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Cluster]:
             "BEARINGS_WORKER1": f"127.0.0.1:{workers[0].port}",
             "BEARINGS_WORKER2": f"127.0.0.1:{workers[1].port}",
         }
-        proxy = subprocess.Popen(
-            [haproxy, "-db", "-f", str(ROOT / "deploy" / "haproxy.cfg")],
-            env=env,
-            stdout=subprocess.DEVNULL,
-        )
+        # Workers first: HAProxy then starts with both up, rather than marking them
+        # down while they start and needing two passing checks (1 s) to take them back.
+        proxy = None
         try:
             for w in workers:
                 w.start()
+            proxy = subprocess.Popen(
+                [haproxy, "-db", "-f", str(ROOT / "deploy" / "haproxy.cfg")],
+                env=env,
+                stdout=subprocess.DEVNULL,
+            )
             wait_for_port(proxy_port)
             yield Cluster(f"127.0.0.1:{proxy_port}", workers)
         finally:
-            proxy.terminate()
-            proxy.wait(timeout=10)
+            if proxy is not None:
+                proxy.terminate()
+                proxy.wait(timeout=10)
             for w in workers:
                 if w.proc is not None and w.proc.poll() is None:
                     w.proc.kill()
