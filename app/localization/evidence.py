@@ -405,6 +405,7 @@ class EvidenceTracker:
             and search_ok
             and self._anchor is not None
             and not obs.empty
+            and self.count
             and (self.age < self.settings.young).any()
         ):
             self._refit_young(main)
@@ -448,33 +449,39 @@ class EvidenceTracker:
         ``weigh``)."""
         assert self._anchor is not None
         x0, y0, t0 = self._anchor
-        nx, ny, nt = sample_motion(x0, y0, t0, odometry, self.config, self.rng)
         a, p = self.count, x0.size
-        if not a or not weigh:
+        rows = a + 1 if a and weigh else 1
+        # Row 0 the moved anchor, rows 1.. its copies: x, y, theta, each (rows, P).
+        poses = np.empty((3, rows, p))
+        nx, ny, nt = sample_motion(x0, y0, t0, odometry, self.config, self.rng, out=poses[:, 0])
+        if rows == 1:
             # Nothing to weigh (no alternative, or no evidence worth counting): the
             # anchor only has to follow the main mode (it is redrawn from the filter's
             # cluster when it drifts, and re-centred by every search), so the odometry
             # alone moves it, and the copies with it.
-            self._anchor = np.vstack([nx, ny, nt])
+            self._anchor = poses[:, 0]
             return
         # The copies move with the same body-frame motion: a rigid motion of the map
-        # commutes with it, so the carried cloud is the moved cloud carried.
-        sx, sy, _ = _carry(self.moves, x0, y0, t0)
-        ex, ey, et = _carry(self.moves, nx, ny, nt)
-        fx = np.concatenate([nx, ex.reshape(-1)])
-        fy = np.concatenate([ny, ey.reshape(-1)])
-        ft = np.concatenate([nt, et.reshape(-1)])
-        log_w = motion_log_penalty(
-            np.concatenate([x0, sx.reshape(-1)]), np.concatenate([y0, sy.reshape(-1)]),
-            fx, fy, self.map,
-        )  # fmt: skip
+        # commutes with it, so the carried cloud is the moved cloud carried. The starts
+        # (x, y only: the penalty's) are carried the same way, by :func:`_carry`'s
+        # arithmetic written into the stacked rows.
+        starts = np.empty((2, rows, p))
+        starts[0, 0], starts[1, 0] = x0, y0
+        turn, shift_x, shift_y = self.moves[:, 0:1], self.moves[:, 1:2], self.moves[:, 2:3]
+        c, s = np.cos(turn), np.sin(turn)
+        for x, y, (cx, cy) in ((x0, y0, starts), (nx, ny, poses[:2])):
+            np.subtract(c * x, s * y, out=cx[1:])
+            cx[1:] += shift_x
+            np.add(s * x, c * y, out=cy[1:])
+            cy[1:] += shift_y
+        poses[2, 1:] = wrap_angle(nt + turn)
+        fx, fy, ft = (v.reshape(-1) for v in poses)
+        log_w = motion_log_penalty(starts[0].reshape(-1), starts[1].reshape(-1), fx, fy, self.map)
         if not obs.empty:
-            log_w = log_w + sensor_kernel.log_likelihood(
-                fx, fy, ft, obs, self.map, self.config, self.grid
-            )
+            log_w += sensor_kernel.log_likelihood(fx, fy, ft, obs, self.map, self.config, self.grid)
         if heading is not None:
-            log_w = log_w + compass_log_likelihood(ft, heading)
-        log_w = log_w.reshape(a + 1, p)
+            log_w += compass_log_likelihood(ft, heading)
+        log_w = log_w.reshape(rows, p)
         ev = _log_mean_exp_rows(log_w)
         if not np.isfinite(ev[0]):
             self._anchor = None  # the anchor walked through a wall: draw it again
@@ -482,14 +489,15 @@ class EvidenceTracker:
         if count:
             self.llr = self.llr + (ev[1:] - ev[0])
         self.age = self.age + 1
-        self._refit(log_w, np.vstack([nx, ex]), np.vstack([ny, ey]), np.vstack([nt, et]))
+        self._refit(log_w, *poses)
         keep = np.isfinite(ev[1:]) & (self.evidence >= self.settings.drop_llr)
-        graves = np.vstack([self._graves, self.moves[~keep]])
-        self._graves = graves[-self.settings.max_graves :]
-        self._keep(keep)
+        if not keep.all():
+            graves = np.vstack([self._graves, self.moves[~keep]])
+            self._graves = graves[-self.settings.max_graves :]
+            self._keep(keep)
         w = np.exp(log_w[0] - log_w[0].max())
         idx = systematic_resample(w / w.sum(), p, self.rng)
-        self._anchor = np.vstack([nx[idx], ny[idx], nt[idx]])
+        self._anchor = poses[:, 0].take(idx, axis=1)
 
     def _refit(
         self,
@@ -511,14 +519,18 @@ class EvidenceTracker:
         ok = np.isfinite(top[:, 0])
         if not ok[0]:
             return
-        rows = np.flatnonzero(ok)
-        w = np.exp(log_w[rows] - top[rows])
+        fit: slice | NDArray[np.intp] = slice(None)  # the re-fitted copies' rows of moves
+        if not ok.all():  # leave the copies with no weight out (else nothing is copied)
+            rows = np.flatnonzero(ok)
+            log_w, top, x, y, t = log_w[rows], top[rows], x[rows], y[rows], t[rows]
+            fit = rows[1:] - 1
+        w = np.exp(log_w - top)
         total = w.sum(axis=1)
-        mx = (w * x[rows]).sum(axis=1) / total
-        my = (w * y[rows]).sum(axis=1) / total
-        mt = np.arctan2((w * np.sin(t[rows])).sum(axis=1), (w * np.cos(t[rows])).sum(axis=1))
+        mx = (w * x).sum(axis=1) / total
+        my = (w * y).sum(axis=1) / total
+        mt = np.arctan2((w * np.sin(t)).sum(axis=1), (w * np.cos(t)).sum(axis=1))
         fitted = _moves_onto((float(mx[0]), float(my[0]), float(mt[0])), mx[1:], my[1:], mt[1:])
-        self.moves[rows[1:] - 1] = fitted
+        self.moves[fit] = fitted
 
     def _keep(self, keep: NDArray[np.bool_]) -> None:
         self.moves, self.llr, self.age = self.moves[keep], self.llr[keep], self.age[keep]
@@ -527,11 +539,14 @@ class EvidenceTracker:
     def _anchor_pose(self) -> tuple[float, float, float]:
         if self._pose is None:
             assert self._anchor is not None
+            # The means as ndarray.mean computes them (the same sums, divided by the
+            # count), without its per-call overhead.
             x, y, t = self._anchor
+            n, add = x.shape[0], np.add.reduce
             self._pose = (
-                float(x.mean()),
-                float(y.mean()),
-                float(np.arctan2(np.sin(t).mean(), np.cos(t).mean())),
+                float(add(x)) / n,
+                float(add(y)) / n,
+                float(np.arctan2(float(add(np.sin(t))) / n, float(add(np.cos(t))) / n)),
             )
         return self._pose
 
@@ -581,7 +596,7 @@ class EvidenceTracker:
         if _same_place(main.x, main.y, main.theta_rad, anchor, st):
             close = (
                 np.hypot(ax - main.x, ay - main.y) < st.distinct_m / 2
-                and abs(float(wrap_angle(at - main.theta_rad))) < st.distinct_rad / 2
+                and abs(_wrap(at - main.theta_rad)) < st.distinct_rad / 2
             )
             if not close:
                 self._draw_anchor(main, particles)
@@ -966,6 +981,14 @@ def _same_place(x: float, y: float, t: float, h: Hypothesis, st: EvidenceSetting
     frame, where numpy's overhead on scalars was most of its cost)."""
     turn = abs(wrap_deg(math.degrees(t - h.theta_rad)))
     return math.hypot(x - h.x, y - h.y) < st.distinct_m and math.radians(turn) < st.distinct_rad
+
+
+def _wrap(angle: float) -> float:
+    """:func:`~app.maps.geometry.wrap_angle` of one angle in plain float arithmetic (the
+    same operations: Python's float ``%`` rounds as numpy's ``mod`` does, both C's
+    ``fmod`` corrected to the divisor's sign), without numpy's overhead on a scalar."""
+    wrapped = (angle + math.pi) % (2.0 * math.pi) - math.pi
+    return math.pi if wrapped <= -math.pi else wrapped
 
 
 def _near(

@@ -54,12 +54,15 @@ def sample_motion(
     odometry: Odometry | None,
     config: FilterConfig,
     rng: np.random.Generator,
+    out: NDArray[np.float64] | None = None,
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
     """New particle poses after one noisy odometry step (the inputs are not modified).
 
     Args:
         x, y, theta: particle poses, shape (N,), metres and radians.
         odometry: motion in the previous body frame, or None (unknown motion).
+        out: optional array of shape (3, N), each row C-contiguous and none an input, to
+            write the new poses into (its rows are returned): saves stacking them.
 
     Returns:
         New (x, y, theta), each shape (N,); theta wrapped to (-pi, pi].
@@ -76,7 +79,7 @@ def sample_motion(
         fwd, left, turn = odometry.forward_m, odometry.left_m, odometry.turn_rad
     n = x.shape[0]
     noise = fill_normal(rng, 3 * n)
-    new_x, new_y, new_theta = np.empty(n), np.empty(n), np.empty(n)
+    new_x, new_y, new_theta = (np.empty(n), np.empty(n), np.empty(n)) if out is None else out
     _move(
         np.ascontiguousarray(x, dtype=np.float64),
         np.ascontiguousarray(y, dtype=np.float64),
