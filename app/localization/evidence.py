@@ -319,7 +319,7 @@ class EvidenceTracker:
     @property
     def alternative_share(self) -> float:
         """Probability that the person is at one of the alternatives, not the main mode."""
-        return float(self.probabilities().sum())
+        return float(self.probabilities().sum()) if self.count else 0.0
 
     @property
     def confirmed_share(self) -> float:
@@ -329,6 +329,8 @@ class EvidenceTracker:
         look-alike would, by selection alone; one that then keeps its evidence for a
         second of tracking is a real competitor.
         """
+        if not self.count:
+            return 0.0  # (what the empty sum gives, without numpy's calls each frame)
         p = self.probabilities()
         return float(p[self.age >= self.settings.probation].sum())
 
@@ -568,9 +570,10 @@ class EvidenceTracker:
         """Draw the anchor from the filter's particles of the main mode; False if none."""
         x, y, t, w = particles
         w = np.where(_near(x, y, t, main, self.settings), w, 0.0)
-        if w.sum() <= 0.0:
+        total = w.sum()
+        if total <= 0.0:
             return False
-        idx = systematic_resample(w / w.sum(), self.settings.particles, self.rng)
+        idx = systematic_resample(w / total, self.settings.particles, self.rng)
         self._set_anchor(np.vstack([x[idx], y[idx], t[idx]]))
         return True
 
