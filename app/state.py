@@ -28,32 +28,42 @@ import numpy as np
 T = TypeVar("T")
 
 
-def to_plain(value: Any) -> Any:
-    """``value`` as nested dicts, lists, numbers and strings (numpy arrays stay arrays:
-    :func:`app.service.checkpoint.pack` stores them as raw bytes)."""
-    if isinstance(value, np.ndarray):
-        return value
-    if dataclasses.is_dataclass(value) and not isinstance(value, type):
-        return {f.name: to_plain(getattr(value, f.name)) for f in dataclasses.fields(value)}
-    if isinstance(value, tuple | list):
-        return [to_plain(v) for v in value]
-    if isinstance(value, Mapping):
-        return {str(k): to_plain(v) for k, v in value.items()}
-    if hasattr(value, "item") and callable(value.item):  # numpy scalar
-        return value.item()
-    return value
+#: What :func:`_one_level` returns for a value it leaves as it is.
+_AS_IS = object()
 
 
-def plain_step(value: Any) -> Any:
-    """``value`` one level nearer plain data: a dataclass as a dict of its fields, any
-    other mapping as a dict, a numpy scalar as a number (TypeError for anything else)."""
+def _one_level(value: Any) -> Any:
+    """A dataclass as a dict of its fields, any other mapping as a dict (string keys), a
+    numpy scalar as a number; anything else :data:`_AS_IS`."""
     if dataclasses.is_dataclass(value) and not isinstance(value, type):
         return {name: getattr(value, name) for name in _names(type(value))}
     if isinstance(value, Mapping):
         return {str(k): v for k, v in value.items()}
     if isinstance(value, np.generic):
         return value.item()
-    raise TypeError(f"{type(value).__name__} is not plain data")
+    return _AS_IS
+
+
+def to_plain(value: Any) -> Any:
+    """``value`` as nested dicts, lists, numbers and strings (numpy arrays stay arrays:
+    :func:`app.service.checkpoint.pack` stores them as raw bytes)."""
+    if isinstance(value, np.ndarray):
+        return value
+    if isinstance(value, tuple | list):
+        return [to_plain(v) for v in value]
+    step = _one_level(value)
+    if step is _AS_IS:
+        return value
+    return {k: to_plain(v) for k, v in step.items()} if isinstance(step, dict) else step
+
+
+def plain_step(value: Any) -> Any:
+    """``value`` one level nearer plain data (:func:`_one_level`; TypeError for anything
+    it leaves as it is, as a JSON encoder's ``default`` must)."""
+    step = _one_level(value)
+    if step is _AS_IS:
+        raise TypeError(f"{type(value).__name__} is not plain data")
+    return step
 
 
 def to_columns(values: Sequence[Any]) -> dict[str, Any]:

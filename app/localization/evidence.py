@@ -402,6 +402,8 @@ class EvidenceTracker:
         if main is not None:
             self._follow_main(main, particles, search_ok)
             self._forget_covered(main)
+        # The window is packed at most once a frame (the polish and the search share it).
+        window = None
         if (
             main is not None
             and search_ok
@@ -410,7 +412,8 @@ class EvidenceTracker:
             and self.count
             and (self.age < self.settings.young).any()
         ):
-            self._refit_young(main)
+            window = self.window()
+            self._refit_young(main, window)
         self._last_main = main
         if not steady or odometry is None:
             # A new main mode (or none): its searches, its dead and its walk start again.
@@ -434,7 +437,7 @@ class EvidenceTracker:
                 # Moved by the odometry alone meanwhile (see _track): take the
                 # filter's own cloud of the main mode again, tight and weighed.
                 self._draw_anchor(main, particles)
-            self._search(main)
+            self._search(main, self.window() if window is None else window)
             self._quiet = 0 if self.count else self._quiet + 1
         return bool(self.count and self._agreed.max() >= self.settings.switch_llr)
 
@@ -749,12 +752,10 @@ class EvidenceTracker:
             step_m, step_rad = step_m / 2.0, step_rad / 2.0
         return x, y, t, score
 
-    def _search(self, main: Hypothesis) -> None:
-        """One global consistency search (module docstring); may add alternatives.
-
-        The history window is packed once; the main mode, every tracked alternative and
-        the finalists are polished together.
-        """
+    def _search(self, main: Hypothesis, window: sensor_kernel.ObservationWindow) -> None:
+        """One global consistency search (module docstring) over ``window`` (this frame's
+        :meth:`window`); may add alternatives. The main mode, every tracked alternative
+        and the finalists are polished together."""
         st = self.settings
         # The frames since the last search of this mode (all of the history at its first).
         segment = self.window(
@@ -765,7 +766,6 @@ class EvidenceTracker:
         self.searches += 1
         prior = st.seed_llr if self.mode_searches else 0.0
         self.mode_searches += 1
-        window = self.window()
         obs = self._history[-1][1]
         fs = self.map.free_space
         area = fs.free_cells.size * fs.resolution_m**2
@@ -858,7 +858,7 @@ class EvidenceTracker:
         if moved:
             self.moves = _moves_onto(self._anchor_pose(), cx, cy, ct)
 
-    def _refit_young(self, main: Hypothesis) -> None:
+    def _refit_young(self, main: Hypothesis, window: sensor_kernel.ObservationWindow) -> None:
         """Polish every young alternative's place over the window, each frame.
 
         A place found by a search, or left behind by the main cluster, is often some
@@ -866,12 +866,12 @@ class EvidenceTracker:
         re-fit of :meth:`_refit` (which moves it within the anchor's spread) can bring
         it back. For its first ``young`` frames it is polished like the searches do,
         against the same recent frames as the main mode (whose place is polished
-        alongside, so the two stay comparable).
+        alongside, so the two stay comparable): ``window``, this frame's :meth:`window`.
         """
         young = np.flatnonzero(self.age < self.settings.young)
         cx, cy, ct = (v.copy() for v in self._centres())
         main_pose, _, (qx, qy, qt, _) = self._polish_with_main(
-            main, cx[young], cy[young], ct[young], self.window()
+            main, cx[young], cy[young], ct[young], window
         )
         cx[young], cy[young], ct[young] = qx, qy, qt
         self._recentre(main_pose, (cx, cy, ct))

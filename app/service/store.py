@@ -32,7 +32,7 @@ import asyncio
 import threading
 import time
 from collections.abc import Awaitable, Callable, Sequence
-from typing import Any, Protocol
+from typing import Protocol
 from urllib.parse import urlsplit, urlunsplit
 
 #: Most journal entries written in one round trip.
@@ -350,6 +350,35 @@ class _GroupCommit:
                         done.set_result(ok)
 
 
+class _Journal:
+    """The journal's writer on one event loop: an asyncio connection of its own (which
+    belongs to that loop) and the group commit that writes through it."""
+
+    def __init__(self, url: str, timeout_s: float, loop: asyncio.AbstractEventLoop) -> None:
+        import redis.asyncio
+
+        self.loop = loop
+        self.client = redis.asyncio.Redis.from_url(
+            url, socket_timeout=timeout_s, socket_connect_timeout=timeout_s
+        )
+        self._append = self.client.register_script(_APPEND)
+        self.commit = _GroupCommit(self._write)
+
+    async def _write(self, batch: list[Entry]) -> list[bool]:
+        # One script call per (owner, ttl, lease): in practice one per batch.
+        results: dict[int, bool] = {}
+        groups: dict[tuple[str, int, int], list[int]] = {}
+        for i, (_, _, owner, ttl, lease) in enumerate(batch):
+            groups.setdefault((owner, ttl, lease), []).append(i)
+        for (owner, ttl, lease), rows in groups.items():
+            keys = [k for i in rows for k in _keys(batch[i][0])]
+            args: list[bytes | str | int | float] = [owner, ttl, lease]
+            args += [batch[i][1] for i in rows]
+            for i, v in zip(rows, await self._append(keys=keys, args=args), strict=True):
+                results[i] = bool(v)
+        return [results[i] for i in range(len(batch))]
+
+
 class RedisStore:
     """Sessions in Redis, shared by every worker given the same URL."""
 
@@ -373,12 +402,9 @@ class RedisStore:
         self._renew = self._redis.register_script(_RENEW)
         self._release = self._redis.register_script(_RELEASE)
         self._save = self._redis.register_script(_SAVE)
-        # The journal's client and group commit, made on the event loop that first
-        # appends (an asyncio connection belongs to one loop).
-        self._loop: asyncio.AbstractEventLoop | None = None
-        self._aredis: Any = None
-        self._append: Any = None
-        self._journal: _GroupCommit | None = None
+        # Made on the event loop that first appends (an asyncio connection belongs to
+        # one loop).
+        self._journal: _Journal | None = None
 
     def acquire(self, session_id: str, owner: str, ttl_s: float) -> bool:
         return bool(self._acquire(keys=[_keys(session_id)[0]], args=[owner, _ms(ttl_s)]))
@@ -412,47 +438,26 @@ class RedisStore:
             out += [bool(v) for v in self._save(keys=keys, args=args)]
         return out
 
-    def _journal_here(self) -> _GroupCommit:
+    def _journal_here(self) -> _Journal:
         loop = asyncio.get_running_loop()
-        if self._journal is None or self._loop is not loop:
-            import redis.asyncio
-
-            self._aredis = redis.asyncio.Redis.from_url(
-                self.url, socket_timeout=self.timeout_s, socket_connect_timeout=self.timeout_s
-            )
-            self._append = self._aredis.register_script(_APPEND)
-            self._journal = _GroupCommit(self._write_entries)
-            self._loop = loop
+        if self._journal is None or self._journal.loop is not loop:
+            self._journal = _Journal(self.url, self.timeout_s, loop)
         return self._journal
 
     async def append(
         self, session_id: str, entry: bytes, owner: str, ttl_s: float, lease_s: float
     ) -> bool:
         item = (session_id, entry, owner, _ms(ttl_s), _ms(lease_s))
-        return await self._journal_here().submit(item)
-
-    async def _write_entries(self, batch: list[Entry]) -> list[bool]:
-        # One script call per (owner, ttl, lease): in practice one per batch.
-        results: dict[int, bool] = {}
-        groups: dict[tuple[str, int, int], list[int]] = {}
-        for i, (_, _, owner, ttl, lease) in enumerate(batch):
-            groups.setdefault((owner, ttl, lease), []).append(i)
-        for (owner, ttl, lease), rows in groups.items():
-            keys = [k for i in rows for k in _keys(batch[i][0])]
-            args: list[bytes | str | int | float] = [owner, ttl, lease]
-            args += [batch[i][1] for i in rows]
-            for i, v in zip(rows, await self._append(keys=keys, args=args), strict=True):
-                results[i] = bool(v)
-        return [results[i] for i in range(len(batch))]
+        return await self._journal_here().commit.submit(item)
 
     def delete(self, session_id: str) -> None:
         lease, ckpt, journal = _keys(session_id)
         self._redis.delete(lease, ckpt, f"{ckpt}:frames", journal)
 
     async def aclose(self) -> None:
-        if self._aredis is not None and self._loop is asyncio.get_running_loop():
-            await self._aredis.aclose()
-        self._aredis = self._append = self._journal = self._loop = None
+        journal, self._journal = self._journal, None
+        if journal is not None and journal.loop is asyncio.get_running_loop():
+            await journal.client.aclose()
 
     def close(self) -> None:
         self._redis.close()

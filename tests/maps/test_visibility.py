@@ -58,3 +58,20 @@ def test_packed_bits_hold_the_table() -> None:
     unpacked = (bits[:, objects // 64] >> (objects % 64).astype(np.uint64)) & np.uint64(1)
     assert np.array_equal(unpacked.astype(bool), table)
     assert np.array_equal(SPLIT.visibility.bits, pack_bits(SPLIT.visibility.table))
+
+
+def test_one_point_rows_are_the_grid_cells_rows() -> None:
+    """``row`` computes the cell in Python floats; it must be grid_cell's cell everywhere:
+    on cell edges, off the grid and far off (overflowing the cell arithmetic)."""
+    grid = SPLIT.visibility
+    res = grid.resolution_m
+    edges = [
+        (grid.origin_x + i * res, grid.origin_y + j * res)
+        for i in range(-2, 80, 3)
+        for j in range(-2, 50, 3)
+    ]
+    odd = [(-1e308, 2.0), (1e308, -1e308), (3.0, 1e300), (float("inf"), 0.0)]
+    rng = np.random.default_rng(1)
+    for x, y in [*rng.uniform(-3, 9, (500, 2)).tolist(), *edges, *odd]:
+        with np.errstate(over="ignore"):
+            assert np.array_equal(grid.row(x, y), grid.visible([x], [y])[0]), (x, y)
