@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import asyncio
 import dataclasses
+import json
 import math
 from typing import Any
 
@@ -21,7 +22,7 @@ from app.localization.compass import CompassReading
 from app.localization.config import FilterConfig
 from app.localization.filter import CHECKPOINT_PARTICLES, ParticleFilter
 from app.localization.sensor import Observation, prepare_observation
-from app.localization.types import Detection, InitialPose
+from app.localization.types import Detection, InitialPose, Pose
 from app.maps.check import load_map
 from app.resources import bundled_maps_dir
 from app.service import checkpoint
@@ -69,9 +70,16 @@ def test_plain_data_round_trip_of_a_full_spec_and_an_outcome() -> None:
     outcome = FrameOutcome(3, estimate, feedback, ("a warning",), ("Kitchen", None, None))
     assert from_plain(FrameOutcome, to_plain(outcome)) == outcome
     assert from_plain(FrameInput, to_plain(frame(3))) == frame(3)
-    # The journal's written-out encoding says the same as the generic one.
-    for f in (frame(3), FrameInput(), FrameInput(heading=CompassReading(1.0, 0.2))):
-        assert checkpoint._frame_plain(f) == to_plain(f)
+    # The journal's encoding (orjson's walk) writes what the generic conversion does.
+    frames = (
+        frame(3),
+        FrameInput(),
+        FrameInput(heading=CompassReading(1.0, 0.2), truth=Pose(1.0, 2.0, -0.5)),
+        FrameInput(timestamp=np.float64(0.1) + 0.2, detections=(Detection("door", 0.1, 0.9),)),
+    )
+    for f in frames:
+        plain = json.dumps({"frame": to_plain(f), "merged": 2}, separators=(",", ":"))
+        assert checkpoint.encode_frame(7, f, 2) == b"7|" + plain.encode()
         assert checkpoint.decode_frame(checkpoint.encode_frame(7, f, 2)) == (7, f, 2)
 
 
