@@ -19,10 +19,11 @@ The rules (docs/API.md, "Overload and restarts"):
 * At shutdown every session is checkpointed and its lease released.
 
 Store calls run on this module's own threads, never blocking the event loop, except the
-one made for every frame: the journal entry is written from the event loop itself
-(:meth:`SessionStore.append`), and checkpoints are packed there too, one session at a
-time between filter steps. A hand-off to another thread and back for each frame cost
-more CPU than the work it moved (benchmarks/README.md).
+writes made while sessions are served: each frame's journal entry
+(:meth:`SessionStore.append`) and the checkpoints (:meth:`SessionStore.save`, packed
+one session at a time between filter steps) are written from the event loop itself. A
+hand-off to another thread and back for each frame cost more CPU than the work it moved
+(benchmarks/README.md).
 """
 
 from __future__ import annotations
@@ -101,7 +102,7 @@ class SessionSharing:
         """Checkpoint ``sessions``; return those whose lease was lost.
 
         Each is packed on the event loop, with a turn for the other tasks (filter steps,
-        answers) after each one; the writing happens on a store thread."""
+        answers) after each one, then written from the event loop too."""
         if not sessions:
             return []
         packed = []
@@ -109,7 +110,7 @@ class SessionSharing:
             packed.append(self._pack(session))
             await asyncio.sleep(0)
         items = [(sid, data, frames) for sid, data, frames, _ in packed]
-        ok = await self._run(self.store.save, items, self.owner, self.idle_timeout_s)
+        ok = await self.store.save(items, self.owner, self.idle_timeout_s)
         metrics = self.manager.metrics
         lost = []
         for session, (sid, data, _, version), held in zip(sessions, packed, ok, strict=True):

@@ -17,13 +17,14 @@ Keys of one session share a Redis Cluster hash tag, ``bearings:{ID}:...``:
 Every write is conditional on holding the lease (a server-side script compares the
 token first), so a worker that lost its lease can never overwrite a newer state.
 
-The store's methods block: the session manager calls them from its own threads, never
-on the event loop, except :meth:`SessionStore.append`, the one call made for every frame.
-It is a coroutine run on the event loop: the entries of all sessions that arrive while
-one write is in flight go together in the next (group commit), so a frame's answer
-waits for its journal entry to be stored without one round trip per frame, and without
-a hand-off to another thread (on a busy worker those hand-offs cost more CPU than the
-writes themselves; benchmarks/README.md).
+Most of the store's methods block: the session manager calls them from its own threads,
+never on the event loop. The two writes made while sessions are served are coroutines
+run on the event loop instead: :meth:`SessionStore.append`, made for every frame, and
+:meth:`SessionStore.save`, a checkpoint of every session about once a second. The
+journal entries of all sessions that arrive while one write is in flight go together in
+the next (group commit), so a frame's answer waits for its journal entry to be stored
+without one round trip per frame, and without a hand-off to another thread (on a busy
+worker those hand-offs cost more CPU than the writes themselves; benchmarks/README.md).
 """
 
 from __future__ import annotations
@@ -68,9 +69,12 @@ class SessionStore(Protocol):
         """The checkpoint (None if there is none) and the journal entries after it."""
         ...
 
-    def save(self, items: Sequence[tuple[str, bytes, int]], owner: str, ttl_s: float) -> list[bool]:
+    async def save(
+        self, items: Sequence[tuple[str, bytes, int]], owner: str, ttl_s: float
+    ) -> list[bool]:
         """Write checkpoints (session id, bytes, frames covered) where ``owner`` holds the
-        lease, drop the journal entries they cover; False where the lease was lost."""
+        lease, drop the journal entries they cover; False where the lease was lost. On
+        the event loop, like :meth:`append`."""
         ...
 
     async def append(
@@ -88,7 +92,7 @@ class SessionStore(Protocol):
         ...
 
     async def aclose(self) -> None:
-        """Close what belongs to the event loop (the journal's connection), from it."""
+        """Close what belongs to the event loop (the connection it writes through), from it."""
         ...
 
     def close(self) -> None:
@@ -159,7 +163,9 @@ class MemoryStore:
             journal = self._get(f"{session_id}:journal")
             return data, list(journal or [])  # type: ignore[return-value, call-overload]
 
-    def save(self, items: Sequence[tuple[str, bytes, int]], owner: str, ttl_s: float) -> list[bool]:
+    async def save(
+        self, items: Sequence[tuple[str, bytes, int]], owner: str, ttl_s: float
+    ) -> list[bool]:
         out = []
         with self._lock:
             for sid, data, frames in items:
@@ -350,9 +356,12 @@ class _GroupCommit:
                         done.set_result(ok)
 
 
-class _Journal:
-    """The journal's writer on one event loop: an asyncio connection of its own (which
-    belongs to that loop) and the group commit that writes through it."""
+class _OnLoop:
+    """The store's writes from one event loop (journal entries and checkpoints): an
+    asyncio connection of its own, which belongs to that loop, and the group commit of
+    journal entries that writes through it. Writing from the loop, rather than from a
+    thread, spares the two threads handing the GIL back and forth while a checkpoint's
+    bytes are sent."""
 
     def __init__(self, url: str, timeout_s: float, loop: asyncio.AbstractEventLoop) -> None:
         import redis.asyncio
@@ -362,6 +371,7 @@ class _Journal:
             url, socket_timeout=timeout_s, socket_connect_timeout=timeout_s
         )
         self._append = self.client.register_script(_APPEND)
+        self.save = self.client.register_script(_SAVE)
         self.commit = _GroupCommit(self._write)
 
     async def _write(self, batch: list[Entry]) -> list[bool]:
@@ -401,10 +411,9 @@ class RedisStore:
         self._acquire = self._redis.register_script(_ACQUIRE)
         self._renew = self._redis.register_script(_RENEW)
         self._release = self._redis.register_script(_RELEASE)
-        self._save = self._redis.register_script(_SAVE)
-        # Made on the event loop that first appends (an asyncio connection belongs to
+        # Made on the event loop that first writes (an asyncio connection belongs to
         # one loop).
-        self._journal: _Journal | None = None
+        self._writer: _OnLoop | None = None
 
     def acquire(self, session_id: str, owner: str, ttl_s: float) -> bool:
         return bool(self._acquire(keys=[_keys(session_id)[0]], args=[owner, _ms(ttl_s)]))
@@ -427,7 +436,10 @@ class RedisStore:
         data, entries = pipe.execute()
         return data, list(entries)
 
-    def save(self, items: Sequence[tuple[str, bytes, int]], owner: str, ttl_s: float) -> list[bool]:
+    async def save(
+        self, items: Sequence[tuple[str, bytes, int]], owner: str, ttl_s: float
+    ) -> list[bool]:
+        client = self._on_loop()
         out: list[bool] = []
         for start in range(0, len(items), 64):  # a few MB per call at most
             chunk = items[start : start + 64]
@@ -435,29 +447,29 @@ class RedisStore:
             args: list[bytes | str | int | float] = [owner, _ms(ttl_s)]
             for _, data, frames in chunk:
                 args += [data, frames]
-            out += [bool(v) for v in self._save(keys=keys, args=args)]
+            out += [bool(v) for v in await client.save(keys=keys, args=args)]
         return out
 
-    def _journal_here(self) -> _Journal:
+    def _on_loop(self) -> _OnLoop:
         loop = asyncio.get_running_loop()
-        if self._journal is None or self._journal.loop is not loop:
-            self._journal = _Journal(self.url, self.timeout_s, loop)
-        return self._journal
+        if self._writer is None or self._writer.loop is not loop:
+            self._writer = _OnLoop(self.url, self.timeout_s, loop)
+        return self._writer
 
     async def append(
         self, session_id: str, entry: bytes, owner: str, ttl_s: float, lease_s: float
     ) -> bool:
         item = (session_id, entry, owner, _ms(ttl_s), _ms(lease_s))
-        return await self._journal_here().commit.submit(item)
+        return await self._on_loop().commit.submit(item)
 
     def delete(self, session_id: str) -> None:
         lease, ckpt, journal = _keys(session_id)
         self._redis.delete(lease, ckpt, f"{ckpt}:frames", journal)
 
     async def aclose(self) -> None:
-        journal, self._journal = self._journal, None
-        if journal is not None and journal.loop is asyncio.get_running_loop():
-            await journal.client.aclose()
+        writer, self._writer = self._writer, None
+        if writer is not None and writer.loop is asyncio.get_running_loop():
+            await writer.client.aclose()
 
     def close(self) -> None:
         self._redis.close()

@@ -55,6 +55,12 @@ def append(store: SessionStore, runner: asyncio.Runner) -> Callable[..., bool]:
     return lambda *args: runner.run(store.append(*args))
 
 
+@pytest.fixture
+def save(store: SessionStore, runner: asyncio.Runner) -> Callable[..., list[bool]]:
+    """``store.save`` run to completion on the test's event loop."""
+    return lambda *args: runner.run(store.save(*args))
+
+
 def test_one_lease_at_a_time_and_it_runs_out(store: SessionStore) -> None:
     assert store.acquire("s1", "w1", 0.3)
     assert store.acquire("s1", "w1", 0.3)  # the holder keeps it
@@ -69,32 +75,34 @@ def test_one_lease_at_a_time_and_it_runs_out(store: SessionStore) -> None:
     assert store.acquire("s1", "w1", 0.3)
 
 
-def test_writes_need_the_lease(store: SessionStore, append: Callable[..., bool]) -> None:
-    assert store.save([("s1", b"ckpt", 0)], "w1", 60) == [False]
+def test_writes_need_the_lease(
+    store: SessionStore, append: Callable[..., bool], save: Callable[..., list[bool]]
+) -> None:
+    assert save([("s1", b"ckpt", 0)], "w1", 60) == [False]
     assert not append("s1", b"1|{}", "w1", 60, 5)
     assert store.load("s1") == (None, [])
     assert store.acquire("s1", "w1", 5)
-    assert store.save([("s1", b"ckpt-0", 0)], "w1", 60) == [True]
+    assert save([("s1", b"ckpt-0", 0)], "w1", 60) == [True]
     stored = [append("s1", b"%d|{}" % i, "w1", 60, 5) for i in (1, 2, 3)]
     assert stored == [True] * 3
     assert store.load("s1") == (b"ckpt-0", [b"1|{}", b"2|{}", b"3|{}"])
     # A checkpoint covering frame 2 drops the entries it covers, keeps the rest.
-    assert store.save([("s1", b"ckpt-2", 2)], "w1", 60) == [True]
+    assert save([("s1", b"ckpt-2", 2)], "w1", 60) == [True]
     assert store.load("s1") == (b"ckpt-2", [b"3|{}"])
-    assert store.save([("s1", b"other", 9)], "w2", 60) == [False]
+    assert save([("s1", b"other", 9)], "w2", 60) == [False]
     assert store.load("s1")[0] == b"ckpt-2"
     # Two writes overtaking each other: the older checkpoint does not replace the newer.
     assert append("s1", b"4|{}", "w1", 60, 5)
-    assert store.save([("s1", b"ckpt-4", 4)], "w1", 60) == [True]
-    assert store.save([("s1", b"ckpt-3", 3)], "w1", 60) == [True]
+    assert save([("s1", b"ckpt-4", 4)], "w1", 60) == [True]
+    assert save([("s1", b"ckpt-3", 3)], "w1", 60) == [True]
     assert store.load("s1") == (b"ckpt-4", [])
 
 
 def test_a_lapsed_lease_is_taken_back_only_if_nobody_went_on(
-    store: SessionStore, append: Callable[..., bool]
+    store: SessionStore, append: Callable[..., bool], save: Callable[..., list[bool]]
 ) -> None:
     assert store.acquire("s1", "w1", 0.2)
-    assert store.save([("s1", b"ckpt-2", 2)], "w1", 60) == [True]
+    assert save([("s1", b"ckpt-2", 2)], "w1", 60) == [True]
     assert append("s1", b"3|{}", "w1", 60, 0.2)
     time.sleep(0.3)  # w1 stalled: its lease ran out, nobody took the session
     assert append("s1", b"4|{}", "w1", 60, 5)  # frames end at 3: ok
@@ -125,18 +133,18 @@ def test_journal_entries_from_many_sessions_in_one_round_trip(
 
 
 def test_checkpoints_expire_after_the_idle_timeout(
-    store: SessionStore, append: Callable[..., bool]
+    store: SessionStore, append: Callable[..., bool], save: Callable[..., list[bool]]
 ) -> None:
     assert store.acquire("s1", "w1", 5)
-    assert store.save([("s1", b"ckpt", 0)], "w1", 0.3) == [True]
+    assert save([("s1", b"ckpt", 0)], "w1", 0.3) == [True]
     assert append("s1", b"1|{}", "w1", 0.3, 5)
     time.sleep(0.45)
     assert store.load("s1") == (None, [])
 
 
-def test_delete_forgets_everything(store: SessionStore) -> None:
+def test_delete_forgets_everything(store: SessionStore, save: Callable[..., list[bool]]) -> None:
     assert store.acquire("s1", "w1", 5)
-    store.save([("s1", b"ckpt", 0)], "w1", 60)
+    save([("s1", b"ckpt", 0)], "w1", 60)
     store.delete("s1")
     assert store.load("s1") == (None, [])
     assert store.acquire("s1", "w2", 5)
