@@ -384,7 +384,7 @@ class ParticleFilter:
             "y": y,
             "theta": theta,
             "log_w": log_w,
-            "rng": self.rng.bit_generator.state,
+            "rng": _rng_state_out(self.rng.bit_generator.state),
             "recovery": [self._recovery.w_slow, self._recovery.w_fast],
             "gate": self._gate.checkpoint(),
             "seed_from_observation": self._seed_from_observation,
@@ -407,7 +407,7 @@ class ParticleFilter:
         self.log_w = (
             np.zeros(self.x.shape[0]) if log_w is None else np.asarray(log_w, dtype=np.float64)
         )
-        self.rng.bit_generator.state = state["rng"]
+        self.rng.bit_generator.state = _rng_state_in(state["rng"])
         self._recovery.w_slow, self._recovery.w_fast = (float(v) for v in state["recovery"])
         self._gate.restore(state["gate"])
         self._seed_from_observation = bool(state["seed_from_observation"])
@@ -484,6 +484,21 @@ class ParticleFilter:
             unexplained = q.unexplained + a_share * (unexplained - q.unexplained)
         contradicted = self.unseen is not None and self.unseen.contradicted
         self.quality = FitQuality(fit, unexplained, bad, contradicted)
+
+
+def _rng_state_out(state: Mapping[str, Any]) -> dict[str, Any]:
+    """A generator's state with its integers wider than 63 bits as decimal text (PCG64
+    keeps 128-bit ones): a checkpoint's serializer holds at most 64 bits, as do most
+    JSON readers."""
+    inner = {k: str(v) if isinstance(v, int) and v.bit_length() > 63 else v
+             for k, v in state["state"].items()}  # fmt: skip
+    return {**state, "state": inner}
+
+
+def _rng_state_in(state: Mapping[str, Any]) -> dict[str, Any]:
+    """:func:`_rng_state_out` undone (checkpoints of format 2 and older hold integers)."""
+    inner = {k: int(v) if isinstance(v, str) else v for k, v in state["state"].items()}
+    return {**state, "state": inner}
 
 
 def warm_up() -> None:

@@ -10,6 +10,7 @@ import asyncio
 import dataclasses
 import json
 import math
+import struct
 from typing import Any
 
 import numpy as np
@@ -33,7 +34,7 @@ from app.service.store import MemoryStore
 from app.service.types import FrameInput, FrameOutcome, SensorSpec, SessionSpec
 from app.simulation.scenarios import paper_config
 from app.simulation.simulator import simulate
-from app.state import from_columns, from_plain, to_columns, to_plain
+from app.state import from_columns, from_plain, plain_step, to_columns, to_plain
 from tests.helpers import make_settings
 
 OFFICE = load_map(bundled_maps_dir() / "paper_office.json")
@@ -136,6 +137,56 @@ def test_a_format_1_checkpoint_of_the_previous_version_is_still_read() -> None:
         eb = b.step(WALK[i].odometry, WALK[i].detections)
         ec = c.step(WALK[i].odometry, WALK[i].detections)
         assert eb == ec  # the same state, whichever format it came in
+
+
+def _pack_with_a_json_header(state: dict[str, Any]) -> bytes:
+    """What the version that wrote formats 1 and 2 wrote: a JSON header (arrays as raw
+    bytes after it), the generator's state with its 128-bit integers as numbers."""
+    blobs: list[bytes] = []
+
+    def convert(value: Any) -> Any:
+        if isinstance(value, np.ndarray):
+            offset = sum(map(len, blobs))
+            blobs.append(np.ascontiguousarray(value).tobytes())
+            return {"__array__": [value.dtype.str, list(value.shape), offset]}
+        return plain_step(value)
+
+    rng = state["filter"]["rng"]
+    rng = {**rng, "state": {k: int(v) for k, v in rng["state"].items()}}
+    state = {**state, "filter": {**state["filter"], "rng": rng}}
+    header = json.dumps(state, default=convert, separators=(",", ":")).encode()
+    assert header.startswith(b"{") and b"Infinity" not in header
+    return b"".join([checkpoint.MAGIC, struct.pack("<I", len(header)), header, *blobs])
+
+
+def test_a_format_2_checkpoint_with_a_json_header_is_still_read() -> None:
+    config = FilterConfig(particles=4000)
+    a = ParticleFilter(OFFICE, config, rng=np.random.default_rng(3))
+    for i in range(40):
+        a.step(WALK[i].odometry, WALK[i].detections)
+    state = a.checkpoint()
+    assert any(isinstance(v, str) for v in state["rng"]["state"].values())  # 128-bit
+    old = _pack_with_a_json_header({"format": 2, "filter": state})
+    new = checkpoint.pack({"format": checkpoint.FORMAT_VERSION, "filter": state})
+    assert not new[len(checkpoint.MAGIC) + 4 :].startswith(b"{")
+    b = ParticleFilter(OFFICE, config, rng=np.random.default_rng(98))
+    b.restore(checkpoint.unpack(old)["filter"])
+    c = ParticleFilter(OFFICE, config, rng=np.random.default_rng(99))
+    c.restore(checkpoint.unpack(new)["filter"])
+    for i in range(40, 60):
+        eb = b.step(WALK[i].odometry, WALK[i].detections)
+        ec = c.step(WALK[i].odometry, WALK[i].detections)
+        assert eb == ec  # the same state, whichever header it came in
+
+
+def test_numbers_come_back_exactly_from_a_header() -> None:
+    values = [0.1, -0.0, 1e-310, math.pi, math.inf, -math.inf, 2**63 - 1, -(2**63), True]
+    back = checkpoint.unpack(checkpoint.pack({"format": checkpoint.FORMAT_VERSION, "v": values}))
+    assert back["v"] == values and math.copysign(1, back["v"][1]) == -1
+    nan = checkpoint.unpack(checkpoint.pack({"format": 3, "v": math.nan}))["v"]
+    assert math.isnan(nan)
+    with pytest.raises(checkpoint.BadCheckpoint, match="unreadable"):
+        checkpoint.unpack(checkpoint.MAGIC + struct.pack("<I", 3) + b"\xc1\xc1\xc1")
 
 
 def test_a_lost_filter_is_checkpointed_on_a_subsample() -> None:
