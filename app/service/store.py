@@ -357,19 +357,30 @@ class _GroupCommit:
 
 
 class _OnLoop:
-    """The store's writes from one event loop (journal entries and checkpoints): an
-    asyncio connection of its own, which belongs to that loop, and the group commit of
-    journal entries that writes through it. Writing from the loop, rather than from a
-    thread, spares the two threads handing the GIL back and forth while a checkpoint's
-    bytes are sent."""
+    """The store's writes from one event loop (journal entries and checkpoints): asyncio
+    connections of its own, which belong to that loop, and the group commit of journal
+    entries that writes through them. Writing from the loop, rather than from a thread,
+    spares the two threads handing the GIL back and forth while a checkpoint's bytes are
+    sent.
+
+    At most ``CONNECTIONS`` writes are in flight; more wait for a connection (up to the
+    timeout) rather than fail: a burst of new sessions writes a checkpoint each at once.
+    """
+
+    CONNECTIONS = 8
 
     def __init__(self, url: str, timeout_s: float, loop: asyncio.AbstractEventLoop) -> None:
         import redis.asyncio
 
         self.loop = loop
-        self.client = redis.asyncio.Redis.from_url(
-            url, socket_timeout=timeout_s, socket_connect_timeout=timeout_s
+        self.pool = redis.asyncio.BlockingConnectionPool.from_url(
+            url,
+            max_connections=self.CONNECTIONS,
+            timeout=timeout_s,
+            socket_timeout=timeout_s,
+            socket_connect_timeout=timeout_s,
         )
+        self.client = redis.asyncio.Redis(connection_pool=self.pool)
         self._append = self.client.register_script(_APPEND)
         self.save = self.client.register_script(_SAVE)
         self.commit = _GroupCommit(self._write)
@@ -470,6 +481,7 @@ class RedisStore:
         writer, self._writer = self._writer, None
         if writer is not None and writer.loop is asyncio.get_running_loop():
             await writer.client.aclose()
+            await writer.pool.disconnect()
 
     def close(self) -> None:
         self._redis.close()

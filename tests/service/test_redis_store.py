@@ -132,6 +132,22 @@ def test_journal_entries_from_many_sessions_in_one_round_trip(
     assert all(len(store.load(sid)[1]) == 3 for sid in ids)
 
 
+def test_a_burst_of_checkpoints_waits_for_connections_rather_than_failing(
+    store: SessionStore, runner: asyncio.Runner
+) -> None:
+    """Many sessions created at once each write a checkpoint at once (more than the
+    client's pool of connections holds)."""
+    ids = [f"s{i}" for i in range(150)]
+    for sid in ids:
+        assert store.acquire(sid, "w1", 60)
+
+    async def burst() -> list[list[bool]]:
+        return await asyncio.gather(*(store.save([(sid, b"ckpt", 0)], "w1", 60) for sid in ids))
+
+    assert runner.run(burst()) == [[True]] * len(ids)
+    assert all(store.load(sid) == (b"ckpt", []) for sid in ids)
+
+
 def test_checkpoints_expire_after_the_idle_timeout(
     store: SessionStore, append: Callable[..., bool], save: Callable[..., list[bool]]
 ) -> None:
