@@ -31,9 +31,9 @@ Job = tuple[asyncio.Future[Any], Callable[[], Any]]
 #: Longest run of steps between two turns of the event loop (seconds). The answers of a
 #: slice's steps go to a shared store in one write, so longer slices mean fewer writes:
 #: at 120 sessions x 10 Hz, 8 ms served 804-837 frames/s with Redis against 734-747 for
-#: 4 ms (memory store 887-922 against 838-875), while a light key's p95 under a heavy
-#: key's flood stayed 25-26 ms (benchmarks/abuse.py) and 40 sessions' p95 13 ms with
-#: Redis. 16 ms gained little more and let that light key wait up to 54 ms.
+#: 4 ms (memory store 887-926 against 838-875), while a light key's p95 under a heavy
+#: key's flood stayed 25-30 ms (benchmarks/abuse.py, three runs; 25.5 ms with 4 ms).
+#: 16 ms gained little more and let that light key wait up to 54 ms.
 SLICE_S = 0.008
 #: Turns of the event loop between two slices. A frame that arrived during a slice
 #: needs three to reach the stepper (the socket is read, the stream's reader takes the
