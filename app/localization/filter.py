@@ -490,8 +490,10 @@ def _rng_state_out(state: Mapping[str, Any]) -> dict[str, Any]:
     """A generator's state with its integers wider than 63 bits as decimal text (PCG64
     keeps 128-bit ones): a checkpoint's serializer holds at most 64 bits, as do most
     JSON readers."""
-    inner = {k: str(v) if isinstance(v, int) and v.bit_length() > 63 else v
-             for k, v in state["state"].items()}  # fmt: skip
+    inner = {
+        k: str(v) if isinstance(v, int) and v.bit_length() > 63 else v
+        for k, v in state["state"].items()
+    }
     return {**state, "state": inner}
 
 

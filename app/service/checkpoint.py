@@ -16,7 +16,7 @@ Bytes: ``BRGC1``, a 4-byte little-endian header length, the header, then the raw
 the header points to (dtype, shape, offset). Anything numerous is an array (the
 particles, the main mode's trail, the window's observations as columns), so the header
 stays a few KB: a checkpoint of a converged session (2,000 particles, the evidence
-tracker's window of 10 observations) is 40 to 57 KB, 44 KB for the paper office's walk.
+tracker's window of 10 observations) is 40 to 57 KB, 43 KB for the paper office's walk.
 
 Formats: 3 writes the header in MessagePack, whose numbers are binary (JSON spent most
 of a checkpoint's packing writing a hundred-odd floats out in decimal). 2 and 1 wrote
