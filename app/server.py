@@ -33,8 +33,8 @@ WS_FRAME_SLACK = 2
 #: How long a thread may keep the GIL while another waits for it (Python's default is
 #: 5 ms). Chosen when filter steps ran on threads (a 10 Hz client's p95 under a flood:
 #: 40-75 ms with 1 ms against 80-120 ms with 5 ms, benchmarks/README.md). Steps now run
-#: on the event loop; the other threads (the shared store's lease renewals and writes,
-#: the live view) get in within 1 ms. With Redis at 120 sessions, 1 ms and 5 ms served
+#: on the event loop; the other threads (the shared store's lease renewals, loads and
+#: releases, the live view) get in within 1 ms. With Redis at 120 sessions, 1 ms and 5 ms served
 #: 607/664 and 640/672 frames/s in alternating runs: no difference this VM can show.
 GIL_SWITCH_INTERVAL_S = 0.001
 

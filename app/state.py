@@ -10,8 +10,9 @@ arrays, and numbers, strings and booleans. Non-finite floats pass through as ``N
 (Python's JSON reads and writes them).
 
 :func:`plain_step` converts one level only, for an encoder that walks the rest itself
-(:func:`app.service.checkpoint.pack` hands it to the JSON encoder, whose walk is
-compiled). :func:`to_columns` stores many values of one type as a few long arrays.
+(:func:`app.service.checkpoint.pack` hands it to MessagePack's encoder, and the journal
+to orjson's, whose walks are compiled). :func:`to_columns` stores many values of one
+type as a few long arrays.
 """
 
 from __future__ import annotations
@@ -59,7 +60,7 @@ def to_plain(value: Any) -> Any:
 
 def plain_step(value: Any) -> Any:
     """``value`` one level nearer plain data (:func:`_one_level`; TypeError for anything
-    it leaves as it is, as a JSON encoder's ``default`` must)."""
+    it leaves as it is, as an encoder's ``default`` must)."""
     step = _one_level(value)
     if step is _AS_IS:
         raise TypeError(f"{type(value).__name__} is not plain data")

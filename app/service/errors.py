@@ -57,7 +57,7 @@ class LimitReached(RuntimeError):
 
 
 class CapacityReached(LimitReached):
-    """The whole service is full now (sessions, step threads, or it is restarting)."""
+    """The whole service is full now (sessions, waiting filter steps, or it is restarting)."""
 
 
 class QuotaReached(LimitReached):

@@ -531,7 +531,7 @@ class SessionManager:
         return session.owner if session.owner is not None else session.id
 
     async def _pump(self, session: Session) -> None:
-        """Feed the session's waiting frames to the step threads, one step at a time."""
+        """Feed the session's waiting frames to the stepper, one step at a time."""
         try:
             while (item := session.queue.pop()) is not None:
                 live = [w for w in item.waiters if not w.done()]
@@ -569,7 +569,7 @@ class SessionManager:
     def _step_sync(
         self, session: Session, frame: FrameInput, merged: int
     ) -> tuple[FrameOutcome, bytes | None]:
-        """One step (step thread); with a shared store, also its journal entry."""
+        """One step (run by the stepper); with a shared store, also its journal entry."""
         result = session.process_sync(frame, merged)
         entry = None if self.sharing is None else self.sharing.entry(result.seq, frame, merged)
         return result, entry

@@ -382,7 +382,7 @@ class _OnLoop:
         )
         self.client = redis.asyncio.Redis(connection_pool=self.pool)
         self._append = self.client.register_script(_APPEND)
-        self.save = self.client.register_script(_SAVE)
+        self.save_checkpoints = self.client.register_script(_SAVE)
         self.commit = _GroupCommit(self._write)
 
     async def _write(self, batch: list[Entry]) -> list[bool]:
@@ -450,7 +450,7 @@ class RedisStore:
     async def save(
         self, items: Sequence[tuple[str, bytes, int]], owner: str, ttl_s: float
     ) -> list[bool]:
-        client = self._on_loop()
+        writer = self._on_loop()
         out: list[bool] = []
         for start in range(0, len(items), 64):  # a few MB per call at most
             chunk = items[start : start + 64]
@@ -458,7 +458,7 @@ class RedisStore:
             args: list[bytes | str | int | float] = [owner, _ms(ttl_s)]
             for _, data, frames in chunk:
                 args += [data, frames]
-            out += [bool(v) for v in await client.save(keys=keys, args=args)]
+            out += [bool(v) for v in await writer.save_checkpoints(keys=keys, args=args)]
         return out
 
     def _on_loop(self) -> _OnLoop:
