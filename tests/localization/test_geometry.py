@@ -24,6 +24,40 @@ def test_wrap_angle_lands_in_half_open_interval_and_keeps_direction(a: float) ->
     assert np.isclose(np.sin(w), np.sin(a), atol=1e-6)
 
 
+def _numpy_wrap(a: np.ndarray) -> np.ndarray:
+    """The wrap as numpy's ufuncs compute it (what the compiled one must match)."""
+    with np.errstate(invalid="ignore"):
+        w = np.mod(a + np.pi, 2.0 * np.pi) - np.pi
+    return np.where(w <= -np.pi, np.pi, w)
+
+
+def test_wrap_angle_matches_numpy_mod_to_the_bit_in_any_shape() -> None:
+    rng = np.random.default_rng(3)
+    edges = np.array(
+        [0.0, -0.0, np.pi, -np.pi, 2 * np.pi, -2 * np.pi, 3 * np.pi, 1e300, -1e300, 5e-324,
+         np.nextafter(np.pi, 0), np.nextafter(-np.pi, 0), np.nextafter(np.pi, 4),
+         np.nextafter(-np.pi, -4), np.nan, np.inf, -np.inf]
+    )  # fmt: skip
+    cases = [
+        edges,
+        rng.uniform(-10.0, 10.0, 5000),
+        rng.normal(0.0, 1e6, 5000),
+        rng.uniform(-7.0, 7.0, (30, 40))[:, ::3],  # not contiguous
+        np.zeros((0, 3)),
+    ]
+    for a in cases:
+        got, want = wrap_angle(a), _numpy_wrap(a)
+        assert got.shape == want.shape
+        bits = np.ascontiguousarray(got).view(np.int64)
+        assert np.array_equal(bits, np.ascontiguousarray(want).view(np.int64))
+    for v in edges.tolist():  # a scalar gives a scalar, the same bits
+        got_one = wrap_angle(v)
+        assert np.ndim(got_one) == 0
+        assert np.float64(got_one).view(np.int64) == np.float64(_numpy_wrap(np.array(v))).view(
+            np.int64
+        )
+
+
 def test_wrap_deg_edges() -> None:
     assert wrap_deg(180.0) == 180.0
     assert wrap_deg(-180.0) == 180.0
