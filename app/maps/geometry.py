@@ -29,7 +29,7 @@ def wrap_angle(angle_rad: ArrayLike) -> FloatArray:
     """
     a = np.asarray(angle_rad, dtype=np.float64)
     wrapped: FloatArray = _wrap_array(a.reshape(-1))
-    return wrapped[0] if a.ndim == 0 else wrapped.reshape(a.shape)  # type: ignore[no-any-return]
+    return wrapped[0] if a.ndim == 0 else wrapped.reshape(a.shape)
 
 
 @njit(cache=True)
