@@ -25,6 +25,7 @@ from app.service.errors import (
     SessionUnavailable,
     UnknownMap,
 )
+from app.validation import problem_text
 
 #: The HTTP status of each service limit: the service says what was hit, the API
 #: decides how HTTP says it. A client's own quota is 429, the whole service full (or
@@ -117,13 +118,15 @@ def describe_validation(errors: Sequence[Mapping[str, Any]]) -> str:
     for e in errors:
         loc = [str(p) for p in e.get("loc", ()) if p not in ("body",)]
         where = ".".join(loc) or "body"
-        parts.append(f"{where}: {e.get('msg', 'invalid')}")
+        parts.append(f"{where}: {problem_text(e)}")
     return "; ".join(parts)
 
 
 def _plain(errors: list[dict]) -> list[dict]:
     # Drop the 'ctx'/'input' parts that may hold non-JSON values (e.g. NaN, exceptions).
-    return [{k: v for k, v in e.items() if k in ("type", "loc", "msg")} for e in errors]
+    return [
+        {"type": e.get("type"), "loc": e.get("loc", ()), "msg": problem_text(e)} for e in errors
+    ]
 
 
 async def _validation(_: Request, exc: Exception) -> JSONResponse:

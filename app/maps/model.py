@@ -29,7 +29,7 @@ from app.maps.geometry import (
 )
 from app.maps.prepare import nearest_walls
 from app.resources import bundled_maps_dir as bundled_maps_dir  # re-exported for old imports
-from app.validation import Finite, StrictInput
+from app.validation import Finite, StrictInput, problem_text
 
 if TYPE_CHECKING:
     from app.maps.prepare import PreparedMap
@@ -107,7 +107,7 @@ def _validation_error(source: str, error: ValidationError) -> MapError:
     fields = []
     for item in error.errors():
         where = ".".join(str(p) for p in item["loc"]) or "(file)"
-        fields.append((where, str(item["msg"])))
+        fields.append((where, problem_text(item)))
     return MapError(f"{source}: " + "; ".join(f"{f}: {m}" for f, m in fields), fields)
 
 
