@@ -32,21 +32,26 @@ def wrap_angle(angle_rad: ArrayLike) -> FloatArray:
     return wrapped[0] if a.ndim == 0 else wrapped.reshape(a.shape)
 
 
+@njit(cache=True, inline="always")
+def wrap_scalar(angle: float) -> float:  # pragma: no cover - compiled
+    """:func:`wrap_angle` of one angle, for compiled kernels."""
+    # np.mod's float remainder: fmod, moved into [0, 2 pi) when negative, +0.0 when zero.
+    two_pi = 2.0 * np.pi
+    m = np.fmod(angle + np.pi, two_pi)
+    if m < 0.0:
+        m += two_pi
+    elif m == 0.0:
+        m = 0.0
+    w = m - np.pi
+    # np.mod maps +pi to -pi; the contract's interval is closed at +pi.
+    return np.pi if w <= -np.pi else w
+
+
 @njit(cache=True)
 def _wrap_array(flat: FloatArray) -> FloatArray:  # pragma: no cover - compiled
     out = np.empty(flat.size)
-    two_pi = 2.0 * np.pi
     for i in range(flat.size):
-        # np.mod's float remainder: fmod, moved into [0, 2 pi) when negative, +0.0
-        # when zero.
-        m = np.fmod(flat[i] + np.pi, two_pi)
-        if m < 0.0:
-            m += two_pi
-        elif m == 0.0:
-            m = 0.0
-        w = m - np.pi
-        # np.mod maps +pi to -pi; the contract's interval is closed at +pi.
-        out[i] = np.pi if w <= -np.pi else w
+        out[i] = wrap_scalar(flat[i])
     return out
 
 
