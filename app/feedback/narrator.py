@@ -21,6 +21,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+from numba import njit
 from numpy.typing import NDArray
 
 from app.feedback.phrasing import (
@@ -291,24 +292,17 @@ class Narrator:
         fov_deg, centre_deg = fov
         centre = math.radians(centre_deg)
         theta = estimate.theta_rad + centre
-        cos_t, sin_t = np.cos(theta), np.sin(theta)
-        dx, dy = rel[:, 0], rel[:, 1]
-        reach = dist + 1e-12
-        # Unit vector towards each object in the camera's frame; its forward part also
-        # says whether the object is inside the field of view.
-        bx = (cos_t * dx + sin_t * dy) / reach
-        by = (-sin_t * dx + cos_t * dy) / reach
-        seen = visible & (bx >= np.cos(np.radians(fov_deg) / 2.0)) if fov_deg < 360.0 else visible
         by_class = sorted(dets, key=lambda d: d.cls)
         bearing = np.array([d.bearing_rad - centre for d in by_class], dtype=np.float64)
         cls = np.array([self._class_index[d.cls] for d in by_class], dtype=np.int64)
-        cos_err = np.where(
-            (cls[:, None] == self.map.object_class) & seen,
-            np.cos(bearing)[:, None] * bx + np.sin(bearing)[:, None] * by,
-            -np.inf,
-        )
-        # The first largest per detection; none when no object of its class is in view.
-        best = cos_err.argmax(axis=1)[np.isfinite(cos_err.max(axis=1))]
+        # The cosines and sines by numpy (its own SIMD versions: the compiled code's C
+        # library may differ in the last bit), the rest compiled.
+        best = _best_objects(
+            float(np.cos(theta)), float(np.sin(theta)), rel[:, 0].copy(), rel[:, 1].copy(),
+            dist, np.ascontiguousarray(visible, dtype=np.bool_), fov_deg < 360.0,
+            float(np.cos(np.radians(fov_deg) / 2.0)), np.cos(bearing), np.sin(bearing), cls,
+            self.map.object_class,
+        )  # fmt: skip
         matched: list[int] = []
         for n in best.tolist():
             if n not in matched:
@@ -345,3 +339,36 @@ def _join(words: list[str]) -> str:
     if len(words) <= 1:
         return "".join(words)
     return ", ".join(words[:-1]) + " and " + words[-1]
+
+
+@njit(cache=True)
+def _best_objects(cos_t, sin_t, dx, dy, dist, visible, fov_check, cos_half_fov, cos_b, sin_b, cls, object_class):  # fmt: skip  # noqa: E501  # pragma: no cover - compiled
+    """Each detection's best object (see :meth:`Narrator._matched`), in detection order,
+    leaving out those with none of their class in view: the unit vector towards each
+    object in the camera's frame (its forward part also says whether the object is in
+    the field of view), then the largest cosine of the bearing error, the first on a
+    tie. numpy's element-wise arithmetic of the vectorized form, in its order."""
+    n = dist.shape[0]
+    bx = np.empty(n)
+    by = np.empty(n)
+    seen = np.empty(n, dtype=np.bool_)
+    for i in range(n):
+        reach = dist[i] + 1e-12
+        bx[i] = (cos_t * dx[i] + sin_t * dy[i]) / reach
+        by[i] = (-sin_t * dx[i] + cos_t * dy[i]) / reach
+        seen[i] = visible[i] and (bx[i] >= cos_half_fov or not fov_check)
+    out = np.empty(cls.shape[0], dtype=np.int64)
+    found = 0
+    for k in range(cls.shape[0]):
+        top = -np.inf
+        pick = -1
+        for i in range(n):
+            if object_class[i] != cls[k] or not seen[i]:
+                continue
+            c = cos_b[k] * bx[i] + sin_b[k] * by[i]
+            if pick < 0 or c > top:
+                top, pick = c, i
+        if pick >= 0 and np.isfinite(top):
+            out[found] = pick
+            found += 1
+    return out[:found]
