@@ -6,6 +6,13 @@ given rate from each, and reports p50/p95/max latency (send to result), frames/s
 errors; for a server it started, also the server's CPU seconds per 1,000 frames (from
 /proc, less sensitive to other load on the machine than latency is).
 
+Two throughputs: ``frames_per_s`` over the whole run (creating the sessions, their first
+seconds of global localization at the full particle count, closing them), and
+``steady_frames_per_s``, the frames sent after ``--warmup`` seconds of each session
+divided by the time left: what the server sustains for converged walks. The generator's
+own CPU share is reported too (``client_cpu_share``): near 1.0, the latencies are partly
+the generator's.
+
 Clients send at their own phase of the period, as independent phones would. Each client
 walks the paper office there and back (about 80 s at 10 Hz), starting at
 its own point but never running off the end, so a session is not kidnapped by a jump
@@ -116,7 +123,7 @@ async def run(args: argparse.Namespace, url: str) -> dict[str, object]:
     there_and_back = PAPER_PATH + PAPER_PATH[-2::-1] + PAPER_PATH[1:]
     config = replace(paper_config("nominal", 360), path=there_and_back)
     frames = [f.to_contract() for f in simulate(office, config, np.random.default_rng(0))]
-    t0 = time.perf_counter()
+    t0, cpu0 = time.perf_counter(), time.process_time()
     results = await asyncio.gather(
         *(
             one_session(url, frames, args.rate, args.seconds, args.particles, s)
@@ -124,7 +131,7 @@ async def run(args: argparse.Namespace, url: str) -> dict[str, object]:
         ),
         return_exceptions=True,
     )
-    wall = time.perf_counter() - t0
+    wall, client_cpu = time.perf_counter() - t0, time.process_time() - cpu0
     pairs = [x for r in results if not isinstance(r, BaseException) for x in r[0]]
     lat = [latency for _, latency in pairs]
     steady = sorted(1e3 * latency for t, latency in pairs if t >= args.warmup)
@@ -139,6 +146,8 @@ async def run(args: argparse.Namespace, url: str) -> dict[str, object]:
         "particles": args.particles,
         "frames": len(lat_ms),
         "frames_per_s": round(len(lat_ms) / wall, 1),
+        "steady_frames_per_s": round(len(steady) / max(args.seconds - args.warmup, 1e-9), 1),
+        "client_cpu_share": round(client_cpu / wall, 2),
         "target_frames_per_s": args.sessions * args.rate,
         "p50_ms": round(q[49], 1),
         "p95_ms": round(q[94], 1),
@@ -192,8 +201,9 @@ def main() -> None:
         f"{r['sessions']} sessions x {r['rate_hz']} Hz x {r['particles']} particles, "
         f"{r['seconds']} s: {r['frames_per_s']} frames/s (target {r['target_frames_per_s']}), "
         f"p50 {r['p50_ms']} ms, p95 {r['p95_ms']} ms (after {r['steady_after_s']} s: "
-        f"p50 {r['steady_p50_ms']} ms, p95 {r['steady_p95_ms']} ms), errors {r['errors']}, "
-        f"failed sessions {r['failed_sessions']}"
+        f"{r['steady_frames_per_s']} frames/s, p50 {r['steady_p50_ms']} ms, "
+        f"p95 {r['steady_p95_ms']} ms), errors {r['errors']}, "
+        f"failed sessions {r['failed_sessions']}, generator CPU {r['client_cpu_share']}"
         + (
             f"; server CPU {r['server_cpu_s_per_1000_frames']} s per 1,000 frames"
             if "server_cpu_s_per_1000_frames" in r
