@@ -46,16 +46,31 @@ def effective_sample_size(weights: NDArray[np.floating]) -> float:
 
 @njit(cache=True, nogil=True)
 def _systematic(weights: NDArray[np.float64], n: int, u0: float) -> NDArray[np.int64]:
-    out = np.empty(n, dtype=np.int64)
+    # Index k goes to the first particle i whose running sum c_i reaches the pointer
+    # (u0 + k) / n, the last particle when none does. Rather than merging pointers and
+    # sums (two interleaved loops whose every branch depends on the data: a filter's
+    # weights mispredict most of them, 16-25 us for 2,000 particles, against 3 us when
+    # a benchmark repeats one input), each sum counts the pointers it reaches
+    # (cnt_i, from c_i * n, made exact by the very comparison a merge makes) and k
+    # goes to the number of sums with cnt_i <= k: a histogram of the counts and its
+    # running total, the same indexes with branches that rarely change.
     m = weights.shape[0]
-    i = 0
-    c = weights[0]
+    reached = np.zeros(n + 1, dtype=np.int64)
+    c = 0.0
+    for i in range(m - 1):  # the last particle takes whatever no sum reaches
+        c = weights[0] if i == 0 else c + weights[i]
+        guess = c * n - u0
+        cnt = n if guess >= n else (int(guess) + 1 if guess >= 0.0 else 0)
+        while cnt < n and (u0 + cnt) / n <= c:
+            cnt += 1
+        while cnt > 0 and (u0 + (cnt - 1)) / n > c:
+            cnt -= 1
+        reached[cnt] += 1
+    out = np.empty(n, dtype=np.int64)
+    before = 0
     for k in range(n):
-        u = (u0 + k) / n
-        while u > c and i < m - 1:  # one merge pass over weights and pointers
-            i += 1
-            c += weights[i]
-        out[k] = i
+        before += reached[k]
+        out[k] = before
     return out
 
 
@@ -64,10 +79,10 @@ def systematic_resample(
 ) -> NDArray[np.int64]:
     """Indexes of ``n`` particles drawn by systematic resampling.
 
-    One uniform offset ``u0``, pointers ``(u0 + k) / n``, and a single merge pass of
-    the pointers against the running sum of the weights (O(N + n)). The last pointer
-    can never run past the end, even when round-off leaves the weights summing to a
-    little under one.
+    One uniform offset ``u0``, pointers ``(u0 + k) / n``, each taking the first
+    particle whose running sum of the weights reaches it (O(N + n), see
+    :func:`_systematic`). The last pointer can never run past the end, even when
+    round-off leaves the weights summing to a little under one.
 
     Args:
         weights: normalized weights, shape (M,).

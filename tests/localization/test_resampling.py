@@ -7,6 +7,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from app.localization.resampling import (
+    _systematic,
     effective_sample_size,
     log_sum_exp,
     normalized_weights,
@@ -41,6 +42,34 @@ def test_matches_the_naive_loop(w: list[float], n: int, seed: int) -> None:
     assert np.array_equal(fast, naive_systematic(weights, n, u0))
     assert fast.min() >= 0 and fast.max() < len(w)
     assert (weights[fast] > 0).all()
+
+
+def test_matches_the_naive_loop_on_filter_like_weights() -> None:
+    """Peaked, sparse, one-hot and equal weights of up to 2,000 particles, pointers at
+    the ends of [0, 1): equal weights put running sums right on the pointers, where the
+    compiled count's guesses from c * n are off by one both ways."""
+    rng = np.random.default_rng(11)
+    for m in (3, 7, 10, 49, 100, 999, 2000):
+        for n in (m, 2 * m, max(m // 3, 1), 7):
+            weights = np.full(m, 1.0 / m)
+            for u0 in (0.0, 0.5, float(np.nextafter(1.0, 0.0))):
+                got = _systematic(weights, n, u0)
+                assert np.array_equal(got, naive_systematic(weights, n, u0)), (m, n, u0)
+    for trial in range(300):
+        m = int(rng.choice([1, 2, 3, 40, 2000]))
+        n = int(rng.choice([1, 3, 150, 1000, m]))
+        w = [
+            rng.random(m),
+            rng.random(m) ** 30,
+            np.exp(-rng.exponential(300.0, m)),
+            np.eye(1, m, int(rng.integers(m)))[0],
+            rng.random(m) * (rng.random(m) < 0.1),
+        ][trial % 5]
+        w[0] += 1e-300  # never all zero
+        weights = w / w.sum()
+        u0 = [float(rng.random()), 0.0, float(np.nextafter(1.0, 0.0))][trial % 3]
+        got = _systematic(weights, n, u0)
+        assert np.array_equal(got, naive_systematic(weights, n, u0)), (trial, m, n, u0)
 
 
 def test_low_variance_counts() -> None:
