@@ -65,6 +65,11 @@ def uvicorn_config(app: FastAPI, settings: Settings, **overrides: object) -> uvi
     return uvicorn.Config(app, **options)  # type: ignore[arg-type]
 
 
+#: Garbage-collector thresholds while serving (see :class:`BearingsServer`): young,
+#: middle and old generations, Python's defaults being (700, 10, 10).
+SERVING_GC_THRESHOLDS = (100_000, 50, 100)
+
+
 class BearingsServer(uvicorn.Server):
     """uvicorn's server, draining the service first when asked to stop.
 
@@ -74,6 +79,11 @@ class BearingsServer(uvicorn.Server):
     resumes: the first collections then do not walk the few hundred thousand start-up
     objects (about 0.1 s each, on the first requests), nor does any full collection later.
     What start-up left in unreachable cycles stays (measured: under 1 MB, no arrays).
+    Serving, the youngest generation is collected every ``SERVING_GC_THRESHOLDS[0]``
+    allocations instead of 700: a frame allocates a few hundred objects (messages,
+    models, small arrays), nearly all freed by reference counting at once, so the
+    default collected several times a frame for next to nothing (120 sessions at
+    saturation: 1-5 % more frames in three alternating pairs).
     """
 
     def __init__(
@@ -89,6 +99,7 @@ class BearingsServer(uvicorn.Server):
         finally:
             if self.freeze_start_up:
                 gc.freeze()
+                gc.set_threshold(*SERVING_GC_THRESHOLDS)
                 gc.enable()
 
     async def shutdown(self, sockets: list[socket.socket] | None = None) -> None:

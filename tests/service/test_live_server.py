@@ -14,6 +14,7 @@ import pytest
 import websockets
 
 from app.main import create_app
+from app.server import SERVING_GC_THRESHOLDS
 from app.simulation.scenarios import paper_config
 from app.simulation.simulator import simulate
 from tests.helpers import free_port, make_settings, paper_office, serving
@@ -109,16 +110,20 @@ def test_unknown_session_close_reason_over_the_wire(server_url: str) -> None:
 
 def test_start_up_is_frozen_then_collection_resumes() -> None:
     """`bearings serve` starts with the garbage collector off (app/cli.py); once the
-    service has started, what start-up made is frozen and collection is back on."""
+    service has started, what start-up made is frozen and collection is back on, with
+    the serving thresholds."""
     port = free_port()
     app = create_app(make_settings(port=port))
+    thresholds = gc.get_threshold()
     gc.disable()
     try:
         with serving(app, port, freeze_start_up=True) as url:
             assert gc.isenabled()
             assert gc.get_freeze_count() > 0
+            assert gc.get_threshold() == SERVING_GC_THRESHOLDS
             r = httpx.post(f"http://{url}/sessions", json={"map": "paper_office"})
             assert r.status_code == 201
     finally:
         gc.unfreeze()
+        gc.set_threshold(*thresholds)
         gc.enable()
