@@ -13,7 +13,12 @@ divided by the time left: what the server sustains for converged walks. The gene
 own CPU share is reported too (``client_cpu_share``): near 1.0, the latencies are partly
 the generator's.
 
-Clients send at their own phase of the period, as independent phones would. Each client
+Clients send at their own phase of the period, as independent phones would; with
+``--stagger S`` they also start their sessions at their own moments within S seconds.
+Started together, every session's filter converges on the same frame, and its global
+consistency searches (every 25 frames once nothing is found) then fall on the same
+frames in every session: with 100 sessions started at once, the frames answered in over
+50 ms came in bursts every 2-3 s, 400-600 frames each. Each client
 walks the paper office there and back (about 80 s at 10 Hz), starting at
 its own point but never running off the end, so a session is not kidnapped by a jump
 back to the start: after the first second or so every session is a converged walk.
@@ -84,12 +89,24 @@ def start_server(max_particles: int, store: str) -> tuple[str, subprocess.Popen[
 
 
 async def one_session(
-    url: str, frames: list[dict], rate: float, seconds: float, particles: int, seed: int
+    url: str,
+    frames: list[dict],
+    rate: float,
+    seconds: float,
+    particles: int,
+    seed: int,
+    stagger: float = 0.0,
 ) -> tuple[list[tuple[float, float]], int]:
+    # Phones start their sessions at their own moments, within ``stagger`` seconds.
+    await asyncio.sleep(stagger * np.random.default_rng(seed + 1_000_003).random())
     async with httpx.AsyncClient(base_url=f"http://{url}", timeout=30) as http:
-        r = await http.post(
-            "/sessions", json={"map": "paper_office", "particles": particles, "seed": seed}
-        )
+        body = {"map": "paper_office", "particles": particles, "seed": seed}
+        r = await http.post("/sessions", json=body)
+        for _ in range(10):  # a busy worker says 503 and when to come back, as an app would
+            if r.status_code != 503:
+                break
+            await asyncio.sleep(float(r.headers.get("retry-after", 1.0)))
+            r = await http.post("/sessions", json=body)
         r.raise_for_status()
         sid = r.json()["id"]
     latencies: list[tuple[float, float]] = []  # (seconds since start, latency)
@@ -126,7 +143,7 @@ async def run(args: argparse.Namespace, url: str) -> dict[str, object]:
     t0, cpu0 = time.perf_counter(), time.process_time()
     results = await asyncio.gather(
         *(
-            one_session(url, frames, args.rate, args.seconds, args.particles, s)
+            one_session(url, frames, args.rate, args.seconds, args.particles, s, args.stagger)
             for s in range(args.sessions)
         ),
         return_exceptions=True,
@@ -153,6 +170,7 @@ async def run(args: argparse.Namespace, url: str) -> dict[str, object]:
         "p95_ms": round(q[94], 1),
         "max_ms": round(lat_ms[-1], 1) if lat_ms else None,
         "steady_after_s": args.warmup,
+        "stagger_s": args.stagger,
         "steady_p50_ms": round(statistics.median(steady), 1) if steady else None,
         "steady_p95_ms": round(statistics.quantiles(steady, n=100)[94], 1)
         if len(steady) > 1
@@ -174,6 +192,11 @@ def main() -> None:
     parser.add_argument(
         "--store", default="memory", help="--store of the server started (default memory)"
     )
+    parser.add_argument(
+        "--stagger", type=float, default=0.0,
+        help="sessions start at random moments within this many seconds (default 0: all "
+        "at once, so their filters' periodic searches fall on the same frames)",
+    )  # fmt: skip
     parser.add_argument(
         "--warmup", type=float, default=10.0,
         help="seconds after which latencies also count as steady state (all sessions start lost)",
