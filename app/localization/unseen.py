@@ -192,6 +192,8 @@ def _count_frame(dx, dy, direction, theta, object_class, reported, visible_row, 
             if abs(_wrap(det_bearing[k] - bearing)) <= within:
                 hit[i] = True
                 break
+    # How far this detector reports each class, learnt from what it reported; a class
+    # never seen yet is expected as far as any class was.
     for i in range(n):
         if hit[i]:
             reach[object_class[i]] = max(reach[object_class[i]], dist[i])
