@@ -265,7 +265,7 @@ class Narrator:
         matched = self._matched(estimate, dets, fov, visible, rel, dist) if dets else []
         near = dist.tolist()
         matched.sort(key=near.__getitem__)  # nearest first: a stable, useful order
-        order = np.argsort(dist)
+        order = dist.argsort()
         others = [i for i in order[visible[order]].tolist() if i not in matched]
         return matched + others, rel, dist
 

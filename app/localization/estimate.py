@@ -227,7 +227,8 @@ def estimate_pose(
     if rng is not None and sub:
         idx = systematic_resample(weights, max_points, rng)
         cx, cy, ct = x[idx], y[idx], theta[idx]
-        cw = np.full(max_points, 1.0 / max_points)
+        cw = np.empty(max_points)  # np.full's values, without its Python wrapper
+        cw.fill(1.0 / max_points)
     else:
         cx, cy, ct, cw = x, y, theta, weights
     rows = np.empty((settings.max_hypotheses, 7))
@@ -459,7 +460,8 @@ def protection_radius(
     # np.quantile's linear interpolation, from a partial sort of the two order statistics.
     pos = min(need, 1.0) * (d.size - 1)
     lo, hi = int(np.floor(pos)), int(np.ceil(pos))
-    part = np.partition(d, (lo, hi))
+    d.partition((lo, hi))  # in place: d is this call's own
+    part = d
     r_particles = float(part[lo] + (pos - lo) * (part[hi] - part[lo]))
     sigma = max(estimate.std_x_m, estimate.std_y_m)
     r_gauss = float(np.sqrt(-2.0 * np.log(1.0 - min(need, 0.9999)))) * sigma

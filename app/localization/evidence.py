@@ -144,10 +144,10 @@ DEFAULT_EVIDENCE = EvidenceSettings()
 
 def _log_mean_exp_rows(a: NDArray[np.float64]) -> NDArray[np.float64]:
     """log of the mean of exp over each row, shape (A,); -inf for an all -inf row."""
-    m = np.max(a, axis=1)
+    m = a.max(axis=1)
     safe = np.where(np.isfinite(m), m, 0.0)
     with np.errstate(divide="ignore"):
-        return safe + np.log(np.mean(np.exp(a - safe[:, None]), axis=1))
+        return safe + np.log(np.exp(a - safe[:, None]).mean(axis=1))
 
 
 class EvidenceTracker:
@@ -355,7 +355,7 @@ class EvidenceTracker:
         if not self.count or self._anchor is None:
             return 0.0
         ax, ay, _ = self.clouds()
-        return float(np.max(np.hypot(ax - x, ay - y)))
+        return float(np.hypot(ax - x, ay - y).max())
 
     # ------------------------------------------------------------ one frame
     def update(

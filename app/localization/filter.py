@@ -162,7 +162,7 @@ class ParticleFilter:
             self.x, self.y, self.theta, odometry, self.config, self.rng
         )
         self.log_w = self.log_w + motion_log_penalty(x0, y0, self.x, self.y, self.map)
-        if not np.isfinite(self.log_w).any():
+        if not np.logical_or.reduce(np.isfinite(self.log_w)):
             # Every hypothesis walked through a wall or off the map: the belief is
             # wrong everywhere. Start again from no knowledge rather than keep ghosts.
             self._restart_global()
@@ -460,11 +460,12 @@ class ParticleFilter:
             cutoff = np.full(r.shape, PAPER_RESIDUAL_CUTOFF)
         explained = r <= cutoff
         score = obs.det_score
-        total = float(score.sum())
-        good = float(score[explained].sum())
-        fit = float(np.sum(score[explained] * r[explained] ** 2) / good) if good > 0 else 9.0
+        add = np.add.reduce  # .sum() without its Python wrapper
+        total = float(add(score))
+        good = float(add(score[explained]))
+        fit = float(add(score[explained] * r[explained] ** 2) / good) if good > 0 else 9.0
         unexplained = 1.0 - good / total
-        clipped = float(np.sum(score * np.minimum(r, cutoff) ** 2) / total)
+        clipped = float(add(score * np.minimum(r, cutoff) ** 2) / total)
         # A burst of false detections where the camera still reports what the pose
         # has in clear view is clutter, not a contradiction.
         missing = self.unseen is None or self.unseen.frame_contradicts

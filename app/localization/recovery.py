@@ -52,7 +52,7 @@ class AugmentedMCL:
         if self.w_slow <= 0.0:
             return 0.0
         ratio = self.w_fast / (self.threshold * self.w_slow)
-        return float(np.clip(1.0 - ratio, 0.0, MAX_INJECTION))
+        return float(min(max(1.0 - ratio, 0.0), MAX_INJECTION))
 
     def reset(self) -> None:
         self.w_slow = self.w_fast = 0.0

@@ -20,11 +20,13 @@ def normalized_weights(log_weights: NDArray[np.floating]) -> NDArray[np.float64]
     possible), the weights fall back to uniform so the caller can recover.
     """
     lw = np.asarray(log_weights, dtype=np.float64)
-    top = np.max(lw) if lw.size else -np.inf
+    # The ufuncs' own reductions: the same as .max() and .sum(), without their Python
+    # wrappers (called several times a frame).
+    top = np.maximum.reduce(lw) if lw.size else -np.inf
     if not np.isfinite(top):
         return np.full(lw.shape, 1.0 / max(lw.size, 1))
     w = np.exp(lw - top)
-    return w / w.sum()
+    return w / np.add.reduce(w)
 
 
 def log_sum_exp(values: NDArray[np.floating]) -> float:
@@ -32,16 +34,16 @@ def log_sum_exp(values: NDArray[np.floating]) -> float:
     v = np.asarray(values, dtype=np.float64)
     if v.size == 0:
         return float("-inf")
-    top = np.max(v)
+    top = np.maximum.reduce(v)
     if not np.isfinite(top):
         return float(top)
-    return float(top + np.log(np.sum(np.exp(v - top))))
+    return float(top + np.log(np.add.reduce(np.exp(v - top))))
 
 
 def effective_sample_size(weights: NDArray[np.floating]) -> float:
     """Kish's effective sample size 1 / sum(w^2) of normalized weights."""
     w = np.asarray(weights, dtype=np.float64)
-    return float(1.0 / np.sum(w * w))
+    return float(1.0 / np.add.reduce(w * w))
 
 
 @njit(cache=True, nogil=True)

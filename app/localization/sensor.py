@@ -302,7 +302,8 @@ def normalized_residuals(
     estimate actually explains what the camera sees. ``visible_row`` (shape (N,)) is
     the pose's row of the visibility grid; computed exactly when not given.
     """
-    out = np.full(obs.det_cos.size, np.inf)
+    out = np.empty(obs.det_cos.size)  # np.full's values, without its Python wrapper
+    out.fill(np.inf)
     if obs.empty:
         return out
     n_obj = semantic_map.object_count

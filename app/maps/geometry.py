@@ -354,9 +354,13 @@ def grid_cells(
 
     Both outputs have the broadcast shape of ``x`` and ``y`` (shape (1,) for scalars).
     """
-    shape_out = np.broadcast_shapes(np.shape(x), np.shape(y)) or (1,)
-    xs = np.broadcast_to(np.asarray(x, dtype=np.float64), shape_out)
-    ys = np.broadcast_to(np.asarray(y, dtype=np.float64), shape_out)
+    if isinstance(x, np.ndarray) and isinstance(y, np.ndarray) and x.shape == y.shape and x.ndim:
+        # The common case (particles' coordinates), without broadcasting's Python calls.
+        xs, ys = x.astype(np.float64, copy=False), y.astype(np.float64, copy=False)
+    else:
+        shape_out = np.broadcast_shapes(np.shape(x), np.shape(y)) or (1,)
+        xs = np.broadcast_to(np.asarray(x, dtype=np.float64), shape_out)
+        ys = np.broadcast_to(np.asarray(y, dtype=np.float64), shape_out)
     rows, cols = shape
     flat, inside = grid_cell(xs, ys, origin_x, origin_y, 1.0 / resolution_m, rows, cols)
     return flat.astype(np.int64), inside
