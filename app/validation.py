@@ -19,24 +19,33 @@ from typing import Annotated, Any
 from pydantic import BaseModel, BeforeValidator, ConfigDict, Field
 
 
-def _number_only(value: object) -> object:
-    """Refuse the values pydantic would otherwise turn into numbers: booleans, text."""
+def _refusal(value: object) -> str | None:
+    """Why ``value`` is no number, for a boolean or text (None for anything else)."""
     if isinstance(value, bool):
-        raise ValueError(f"expected a number, got the boolean {str(value).lower()}")
+        return f"expected a number, got the boolean {str(value).lower()}"
     if isinstance(value, str | bytes | bytearray):
-        raise ValueError(f"expected a number, got the string {value!r}")
+        return f"expected a number, got the string {value!r}"
+    return None
+
+
+def _number_only(value: object) -> object:
+    """Refuse the values pydantic would otherwise turn into integers: booleans, text."""
+    refusal = _refusal(value)
+    if refusal is not None:
+        raise ValueError(refusal)
     return value
 
 
-#: The booleans-and-text refusal, for an integer type or a number type that needs its
-#: own bounds in the annotation (a dict's values): ``Annotated[float, Field(gt=0),
-#: NUMBER_ONLY]``. The validator comes after the Field: the other way round, pydantic
+#: The booleans-and-text refusal for an integer type, also one with its own bounds:
+#: ``Annotated[int, Field(ge=100), NUMBER_ONLY]`` (pydantic's strict int would refuse
+#: ``3.0`` too). The validator comes after the Field: the other way round, pydantic
 #: drops the bounds from the JSON schema.
 NUMBER_ONLY = BeforeValidator(_number_only)
 #: pydantic's strict float: an integer or a float, never a boolean or text, checked in
 #: its compiled core (every number of every frame passes here; a Python validator per
-#: number was a tenth of a stream's reading). :func:`problem_text` words its refusals
-#: as :data:`NUMBER_ONLY` does.
+#: number was a tenth of a stream's reading). A number type with its own bounds adds
+#: them to the same Field: ``Annotated[float, Field(gt=0, allow_inf_nan=False,
+#: strict=True)]``. :func:`problem_text` words its refusals as :data:`NUMBER_ONLY` does.
 Finite = Annotated[float, Field(allow_inf_nan=False, strict=True)]
 Integer = Annotated[int, NUMBER_ONLY]
 
@@ -45,11 +54,9 @@ def problem_text(error: Mapping[str, Any]) -> str:
     """The message of one of pydantic's validation errors; a boolean or text refused
     where a number belongs says which it was."""
     if error.get("type") == "float_type":
-        value = error.get("input")
-        if isinstance(value, bool):
-            return f"expected a number, got the boolean {str(value).lower()}"
-        if isinstance(value, str):
-            return f"expected a number, got the string {value!r}"
+        refusal = _refusal(error.get("input"))
+        if refusal is not None:
+            return refusal
     return str(error.get("msg", "invalid"))
 
 

@@ -137,7 +137,7 @@ class SensorSettings(StrictInput):
     )
     fov_deg: Finite = Field(360.0, gt=0.0, le=360.0, description="camera field of view, degrees")
     class_bearing_std_deg: dict[
-        str, Annotated[float, Field(gt=0, le=90, allow_inf_nan=False), NUMBER_ONLY]
+        str, Annotated[float, Field(gt=0, le=90, allow_inf_nan=False, strict=True)]
     ] = Field(default_factory=dict, description="addition: per-class bearing std, degrees")
 
 

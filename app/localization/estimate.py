@@ -461,8 +461,7 @@ def protection_radius(
     pos = min(need, 1.0) * (d.size - 1)
     lo, hi = int(np.floor(pos)), int(np.ceil(pos))
     d.partition((lo, hi))  # in place: d is this call's own
-    part = d
-    r_particles = float(part[lo] + (pos - lo) * (part[hi] - part[lo]))
+    r_particles = float(d[lo] + (pos - lo) * (d[hi] - d[lo]))
     sigma = max(estimate.std_x_m, estimate.std_y_m)
     r_gauss = float(np.sqrt(-2.0 * np.log(1.0 - min(need, 0.9999)))) * sigma
     r = PROTECTION_SCALE * max(r_particles, r_gauss) + PROTECTION_FLOOR_M

@@ -87,6 +87,7 @@ def test_numbers_must_be_numbers(client: TestClient) -> None:
         ("/sessions", {"map": "paper_office", "sensor": {"class_bearing_std_deg": {"door": True}}}),
         ("/simulations", {"seed": False}),
         ("/simulations", {"fov_deg": "180"}),
+        ("/simulations", {"compass_std_deg": True}),
         ("/simulations", {"occlusion": 1}),
     ]
     for path, body in bad_bodies:

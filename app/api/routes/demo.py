@@ -17,7 +17,7 @@ from app.api.schemas import CameraIn
 from app.service.errors import UnknownMap
 from app.simulation.simulator import simulate
 from app.simulation.walks import demo_config
-from app.validation import NUMBER_ONLY, Finite, Integer, StrictInput
+from app.validation import Finite, Integer, StrictInput
 
 router = APIRouter(tags=["demo"])
 
@@ -34,7 +34,7 @@ class SimulationRequest(StrictInput):
         None, description="give detections as this camera's pixel boxes (its field of view)"
     )
     compass_std_deg: (
-        Annotated[float, Field(gt=0, le=90, allow_inf_nan=False), NUMBER_ONLY] | None
+        Annotated[float, Field(gt=0, le=90, allow_inf_nan=False, strict=True)] | None
     ) = Field(None, description="give each frame a compass heading with this noise")
 
 
