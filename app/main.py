@@ -71,11 +71,13 @@ def create_app(settings: Settings | None = None, *, demo: bool = False) -> FastA
 
     @contextlib.asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
+        from app.feedback.narrator import warm_up as warm_up_narrator
         from app.guidance.planner import warm_up as warm_up_guidance
         from app.localization.filter import warm_up
 
         def warm_up_all() -> None:
             warm_up()
+            warm_up_narrator()
             warm_up_guidance()
 
         # Kernels compile (or load from numba's cache) while the maps are checked and

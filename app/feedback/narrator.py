@@ -341,6 +341,15 @@ def _join(words: list[str]) -> str:
     return ", ".join(words[:-1]) + " and " + words[-1]
 
 
+def warm_up() -> None:
+    """Compile the matching kernel now (or load it from the disk cache): compiled on a
+    session's first located frame instead, it held the event loop for about 0.7 s on a
+    machine without numba's cache."""
+    ones, none = np.ones(2), np.zeros(1, dtype=np.int64)
+    seen = np.ones(2, dtype=np.bool_)
+    _best_objects(1.0, 0.0, ones, ones, ones, seen, True, 0.5, ones[:1], ones[:1], none, none)
+
+
 @njit(cache=True)
 def _best_objects(cos_t, sin_t, dx, dy, dist, visible, fov_check, cos_half_fov, cos_b, sin_b, cls, object_class):  # fmt: skip  # noqa: E501  # pragma: no cover - compiled
     """Each detection's best object (see :meth:`Narrator._matched`), in detection order,

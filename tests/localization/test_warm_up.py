@@ -7,19 +7,23 @@ import sys
 import textwrap
 
 
-def test_warm_up_compiles_every_kernel_of_the_engine() -> None:
+def test_warm_up_compiles_every_kernel_a_step_calls() -> None:
     # A fresh interpreter: in this one other tests may have compiled the kernels already.
     probe = textwrap.dedent(
         """
         import importlib, pkgutil
         import app.localization as pkg
         from numba.core.registry import CPUDispatcher
+        from app.feedback.narrator import warm_up as warm_up_narrator
         from app.localization.filter import warm_up
 
         warm_up()
+        warm_up_narrator()
         kernels, cold = 0, []
-        for info in pkgutil.iter_modules(pkg.__path__):
-            module = importlib.import_module(f"app.localization.{info.name}")
+        names = [f"app.localization.{info.name}" for info in pkgutil.iter_modules(pkg.__path__)]
+        # The step's kernels outside the engine: the angle wrap and the narrator's match.
+        for module_name in names + ["app.maps.geometry", "app.feedback.narrator"]:
+            module = importlib.import_module(module_name)
             for name, obj in vars(module).items():
                 if not isinstance(obj, CPUDispatcher) or obj.__module__ != module.__name__:
                     continue
