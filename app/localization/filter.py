@@ -537,5 +537,6 @@ def warm_up() -> None:
         compass = CompassReading(0.0, 0.1)
         window = sensor_kernel.pack_window([((0.0, 0.0, 0.0), obs, compass)])
         sensor_kernel.window_log_likelihood(pf.x, pf.y, pf.theta, window, tiny, cfg, pf._vis)
-        estimate_pose(pf.x, pf.y, pf.theta, pf.weights, rng=pf.rng, max_points=10)
+        est = estimate_pose(pf.x, pf.y, pf.theta, pf.weights, rng=pf.rng, max_points=10)
+        protection_radius(pf.x, pf.y, pf.weights, est, pf.rng)
         kld_sample_size(pf.x, pf.y, pf.theta, pf.weights, 10, 50)

@@ -47,7 +47,9 @@ def effective_sample_size(weights: NDArray[np.floating]) -> float:
 
 
 @njit(cache=True, nogil=True)
-def _systematic(weights: NDArray[np.float64], n: int, u0: float) -> NDArray[np.int64]:
+def systematic_indexes(weights: NDArray[np.float64], n: int, u0: float) -> NDArray[np.int64]:
+    """:func:`systematic_resample` with its offset ``u0`` given, compiled (callable
+    from other kernels); ``weights`` C-contiguous float64."""
     # Index k goes to the first particle i whose running sum c_i reaches the pointer
     # (u0 + k) / n, the last particle when none does. Rather than merging pointers and
     # sums (two interleaved loops whose every branch depends on the data: a filter's
@@ -83,7 +85,7 @@ def systematic_resample(
 
     One uniform offset ``u0``, pointers ``(u0 + k) / n``, each taking the first
     particle whose running sum of the weights reaches it (O(N + n), see
-    :func:`_systematic`). The last pointer can never run past the end, even when
+    :func:`systematic_indexes`). The last pointer can never run past the end, even when
     round-off leaves the weights summing to a little under one.
 
     Args:
@@ -94,4 +96,4 @@ def systematic_resample(
     Returns:
         Indexes into ``weights``, sorted ascending, shape (n,).
     """
-    return _systematic(np.ascontiguousarray(weights, dtype=np.float64), int(n), rng.random())
+    return systematic_indexes(np.ascontiguousarray(weights, dtype=np.float64), int(n), rng.random())

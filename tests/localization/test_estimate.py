@@ -4,7 +4,16 @@ from __future__ import annotations
 
 import numpy as np
 
-from app.localization.estimate import DEFAULT_CLUSTERING, estimate_pose
+from app.localization.estimate import (
+    DEFAULT_CLUSTERING,
+    PROTECTION_FLOOR_M,
+    PROTECTION_PROBABILITY,
+    PROTECTION_SAMPLE,
+    PROTECTION_SCALE,
+    estimate_pose,
+    protection_radius,
+)
+from app.localization.types import Estimate
 from app.maps.geometry import wrap_angle
 
 
@@ -109,3 +118,51 @@ def test_estimate_summarizes_each_mode_by_its_weighted_moments() -> None:
     assert abs(e.std_x_m - 0.05) < 0.005 and abs(e.std_y_m - 0.08) < 0.005
     assert abs(e.std_theta_rad - 0.05) < 0.005
     assert not e.converged  # half the mass is elsewhere
+
+
+def reference_protection_quantile(
+    x: np.ndarray, y: np.ndarray, w: np.ndarray, ex: float, ey: float, need: float, u0: float
+) -> float:
+    """The particles' part of the protection radius in plain numpy: the distances of a
+    systematic resample, sorted, and np.quantile's linear interpolation at ``need``
+    (written out: np.quantile rounds its interpolation differently)."""
+    n = PROTECTION_SAMPLE
+    cum = np.cumsum(w)
+    idx = np.minimum(np.searchsorted(cum, (u0 + np.arange(n)) / n), w.size - 1)
+    d = np.sort(np.hypot(x[idx] - ex, y[idx] - ey))
+    pos = min(need, 1.0) * (n - 1)
+    lo, hi = int(np.floor(pos)), int(np.ceil(pos))
+    return float(d[lo] + (pos - lo) * (d[hi] - d[lo]))
+
+
+def test_protection_radius_takes_the_quantile_of_a_systematic_resample() -> None:
+    """The compiled draw, distances and selection give the sorted distances' number
+    exactly, whatever the quantile (order statistics at, between or next to the last
+    ones), also where distances tie or differ in their last bits only (points on a
+    circle, or mirrored about the estimate), where ranking squared distances alone
+    could pick a neighbour of the right one."""
+    rng = np.random.default_rng(7)
+    for trial in range(300):
+        m = int(rng.integers(1, 3000))
+        ex, ey = rng.normal(0.0, 0.5, 2)
+        kind = trial % 3
+        if kind == 0:  # a cloud
+            x, y = rng.normal(0.0, rng.uniform(0.01, 3.0), (2, m))
+        elif kind == 1:  # a circle: distances equal but for rounding
+            a = rng.uniform(-np.pi, np.pi, m)
+            radius = rng.uniform(1e-3, 5.0)
+            x, y = ex + radius * np.cos(a), ey + radius * np.sin(a)
+        else:  # mirrored pairs: exact ties
+            h = (m + 1) // 2
+            dx, dy = rng.normal(0.0, 0.3, (2, h))
+            x = np.concatenate([ex + dx, ex - dx])[:m]
+            y = np.concatenate([ey + dy, ey - dy])[:m]
+        w = rng.random(m) ** 4
+        w /= w.sum()
+        share = [0.0, 0.005, 0.0099, 0.02, float(rng.uniform(0.0, 0.01))][trial % 5]
+        est = Estimate(float(ex), float(ey), 0.0, 1e-6, 1e-6, 0.1, True, (), m, 1.0)
+        u0 = float(np.random.default_rng(trial).random())
+        got = protection_radius(x, y, w, est, np.random.default_rng(trial), share)
+        need = 1.0 if share >= 1.0 - PROTECTION_PROBABILITY else 0.99 / (1.0 - share)
+        want = PROTECTION_SCALE * reference_protection_quantile(x, y, w, ex, ey, need, u0)
+        assert got == want + PROTECTION_FLOOR_M, (trial, m, share)

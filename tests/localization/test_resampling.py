@@ -7,10 +7,10 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from app.localization.resampling import (
-    _systematic,
     effective_sample_size,
     log_sum_exp,
     normalized_weights,
+    systematic_indexes,
     systematic_resample,
 )
 
@@ -53,7 +53,7 @@ def test_matches_the_naive_loop_on_filter_like_weights() -> None:
         for n in (m, 2 * m, max(m // 3, 1), 7):
             weights = np.full(m, 1.0 / m)
             for u0 in (0.0, 0.5, float(np.nextafter(1.0, 0.0))):
-                got = _systematic(weights, n, u0)
+                got = systematic_indexes(weights, n, u0)
                 assert np.array_equal(got, naive_systematic(weights, n, u0)), (m, n, u0)
     for trial in range(300):
         m = int(rng.choice([1, 2, 3, 40, 2000]))
@@ -68,7 +68,7 @@ def test_matches_the_naive_loop_on_filter_like_weights() -> None:
         w[0] += 1e-300  # never all zero
         weights = w / w.sum()
         u0 = [float(rng.random()), 0.0, float(np.nextafter(1.0, 0.0))][trial % 3]
-        got = _systematic(weights, n, u0)
+        got = systematic_indexes(weights, n, u0)
         assert np.array_equal(got, naive_systematic(weights, n, u0)), (trial, m, n, u0)
 
 
