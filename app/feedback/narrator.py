@@ -254,33 +254,12 @@ class Narrator:
     def _ordered_objects(
         self, estimate: Estimate, dets: list[Detection], fov: tuple[float, float]
     ) -> tuple[list[int], NDArray[np.float64], NDArray[np.float64]]:
-        """Objects matched to this frame's detections first, then the nearest visible others.
+        """Objects matched to this frame's detections first (nearest first), then the
+        nearest visible others (the first object on a tie in distance).
 
         Also each object's offset from the pose, shape (N, 2), and distance, shape (N,).
-        """
-        # Line of sight from the map's precomputed grid (the cell around the pose).
-        visible = self.map.visibility.row(estimate.x, estimate.y)
-        rel = self.map.object_xy - np.array([estimate.x, estimate.y])
-        dist = np.hypot(rel[:, 0], rel[:, 1])
-        matched = self._matched(estimate, dets, fov, visible, rel, dist) if dets else []
-        near = dist.tolist()
-        matched.sort(key=near.__getitem__)  # nearest first: a stable, useful order
-        order = dist.argsort()
-        others = [i for i in order[visible[order]].tolist() if i not in matched]
-        return matched + others, rel, dist
 
-    def _matched(
-        self,
-        estimate: Estimate,
-        dets: list[Detection],
-        fov: tuple[float, float],
-        visible: NDArray[np.bool_],
-        rel: NDArray[np.float64],
-        dist: NDArray[np.float64],
-    ) -> list[int]:
-        """Each detection's best visible object of its class, each object once.
-
-        The sensor model's own correspondence (eq. 3, :func:`match_detections
+        The matching is the sensor model's own correspondence (eq. 3, :func:`match_detections
         <app.localization.sensor.match_detections>`) at the estimated pose only, within
         the camera's view, with the same arithmetic, so it picks the same objects: the
         largest cosine of the bearing error, the first object on a tie. Detections are
@@ -295,19 +274,17 @@ class Narrator:
         by_class = sorted(dets, key=lambda d: d.cls)
         bearing = np.array([d.bearing_rad - centre for d in by_class], dtype=np.float64)
         cls = np.array([self._class_index[d.cls] for d in by_class], dtype=np.int64)
+        # Line of sight from the map's precomputed grid (the cell around the pose).
+        visible = self.map.visibility.row(estimate.x, estimate.y)
         # The cosines and sines by numpy (its own SIMD versions: the compiled code's C
         # library may differ in the last bit), the rest compiled.
-        best = _best_objects(
-            float(np.cos(theta)), float(np.sin(theta)), rel[:, 0].copy(), rel[:, 1].copy(),
-            dist, np.ascontiguousarray(visible, dtype=np.bool_), fov_deg < 360.0,
+        order, rel, dist = _order_objects(
+            float(estimate.x), float(estimate.y), float(np.cos(theta)), float(np.sin(theta)),
+            self.map.object_xy, visible, fov_deg < 360.0,
             float(np.cos(np.radians(fov_deg) / 2.0)), np.cos(bearing), np.sin(bearing), cls,
             self.map.object_class,
         )  # fmt: skip
-        matched: list[int] = []
-        for n in best.tolist():
-            if n not in matched:
-                matched.append(n)
-        return matched
+        return order.tolist(), rel, dist
 
     # ------------------------------------------------------------ repetition
     def _gap_passed(self, now: float) -> bool:
@@ -342,31 +319,46 @@ def _join(words: list[str]) -> str:
 
 
 def warm_up() -> None:
-    """Compile the matching kernel now (or load it from the disk cache): compiled on a
+    """Compile the ordering kernel now (or load it from the disk cache): compiled on a
     session's first located frame instead, it held the event loop for about 0.7 s on a
     machine without numba's cache."""
     ones, none = np.ones(2), np.zeros(1, dtype=np.int64)
     seen = np.ones(2, dtype=np.bool_)
-    _best_objects(1.0, 0.0, ones, ones, ones, seen, True, 0.5, ones[:1], ones[:1], none, none)
+    seen.flags.writeable = False  # as the visibility rows are (another compiled variant)
+    _order_objects(0.0, 0.0, 1.0, 0.0, np.ones((2, 2)), seen, True, 0.5, ones[:1], ones[:1], none, none)  # fmt: skip  # noqa: E501
 
 
-@njit(cache=True)
-def _best_objects(cos_t, sin_t, dx, dy, dist, visible, fov_check, cos_half_fov, cos_b, sin_b, cls, object_class):  # fmt: skip  # noqa: E501  # pragma: no cover - compiled
-    """Each detection's best object (see :meth:`Narrator._matched`), in detection order,
-    leaving out those with none of their class in view: the unit vector towards each
-    object in the camera's frame (its forward part also says whether the object is in
-    the field of view), then the largest cosine of the bearing error, the first on a
-    tie. numpy's element-wise arithmetic of the vectorized form, in its order."""
-    n = dist.shape[0]
+@njit(cache=True, nogil=True)
+def _order_objects(ex, ey, cos_t, sin_t, obj_xy, visible, fov_check, cos_half_fov, cos_b, sin_b, cls, object_class):  # fmt: skip  # noqa: E501  # pragma: no cover - compiled
+    """:meth:`Narrator._ordered_objects` past the detections' arrays: (the objects'
+    order, their offsets from (ex, ey), shape (N, 2), their distances).
+
+    For each detection (in the given order) its best object: the unit vector towards
+    each object in the camera's frame (its forward part also says whether the object
+    is in the field of view), then the largest cosine of the bearing error, the first
+    on a tie; detections with none of their class in view match nothing. The matched
+    objects, each once, sorted by distance (stable), then the other visible objects by
+    distance (stable). numpy's element-wise arithmetic of the vectorized form, in its
+    order; its ``hypot`` is the C library's, as here.
+    """
+    n = obj_xy.shape[0]
+    rel = np.empty((n, 2))
+    dist = np.empty(n)
     bx = np.empty(n)
     by = np.empty(n)
     seen = np.empty(n, dtype=np.bool_)
     for i in range(n):
+        dx = obj_xy[i, 0] - ex
+        dy = obj_xy[i, 1] - ey
+        rel[i, 0] = dx
+        rel[i, 1] = dy
+        dist[i] = np.hypot(dx, dy)
         reach = dist[i] + 1e-12
-        bx[i] = (cos_t * dx[i] + sin_t * dy[i]) / reach
-        by[i] = (-sin_t * dx[i] + cos_t * dy[i]) / reach
+        bx[i] = (cos_t * dx + sin_t * dy) / reach
+        by[i] = (-sin_t * dx + cos_t * dy) / reach
         seen[i] = visible[i] and (bx[i] >= cos_half_fov or not fov_check)
-    out = np.empty(cls.shape[0], dtype=np.int64)
+    taken = np.zeros(n, dtype=np.bool_)
+    order = np.empty(n, dtype=np.int64)
     found = 0
     for k in range(cls.shape[0]):
         top = -np.inf
@@ -377,7 +369,17 @@ def _best_objects(cos_t, sin_t, dx, dy, dist, visible, fov_check, cos_half_fov, 
             c = cos_b[k] * bx[i] + sin_b[k] * by[i]
             if pick < 0 or c > top:
                 top, pick = c, i
-        if pick >= 0 and np.isfinite(top):
-            out[found] = pick
+        if pick >= 0 and np.isfinite(top) and not taken[pick]:
+            taken[pick] = True
+            # Insertion by distance, after any equally far: a stable sort.
+            j = found
+            while j > 0 and dist[order[j - 1]] > dist[pick]:
+                order[j] = order[j - 1]
+                j -= 1
+            order[j] = pick
             found += 1
-    return out[:found]
+    for i in np.argsort(dist, kind="mergesort"):
+        if visible[i] and not taken[i]:
+            order[found] = i
+            found += 1
+    return order[:found], rel, dist

@@ -264,16 +264,21 @@ class SemanticMap:
 
         Built when the map is prepared; a map never prepared builds it on first use.
         """
-        from app.maps.prepare import prepared_of
-
-        return prepared_of(self).free_space
+        prepared = self._prepared
+        return (prepared if prepared is not None else self._prepare()).free_space
 
     @property
     def visibility(self) -> VisibilityGrid:
         """Which objects each cell sees (:func:`app.maps.prepare.build_visibility`)."""
+        prepared = self._prepared
+        return (prepared if prepared is not None else self._prepare()).visibility
+
+    def _prepare(self) -> PreparedMap:
+        """Build the grids now (a map never prepared). The two properties above run
+        several times a frame: they read the grids directly once they exist."""
         from app.maps.prepare import prepared_of
 
-        return prepared_of(self).visibility
+        return prepared_of(self)
 
     def to_json(self) -> dict[str, object]:
         """The map file's JSON (with ``class`` spelled as in the file)."""

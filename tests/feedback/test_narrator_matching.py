@@ -43,7 +43,8 @@ def sensor_model_order(
         )
         matched = list(dict.fromkeys(int(i) for i in index[:, 0] if i >= 0))
     matched.sort(key=lambda i: dist[i])
-    return matched + [int(i) for i in np.argsort(dist) if visible[i] and i not in matched]
+    others = np.argsort(dist, kind="stable")  # the first object on a tie
+    return matched + [int(i) for i in others if visible[i] and i not in matched]
 
 
 def pose(x: float, y: float, theta: float) -> Estimate:
