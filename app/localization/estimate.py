@@ -26,7 +26,7 @@ from numba import njit
 from numpy.typing import NDArray
 
 from app.localization.fastmath import FAST, sincos
-from app.localization.resampling import systematic_indexes, systematic_resample
+from app.localization.resampling import systematic_indexes
 from app.localization.types import Estimate, Hypothesis
 from app.maps.geometry import wrap_angle
 from app.state import from_plain
@@ -49,7 +49,7 @@ class ClusterSettings:
 DEFAULT_CLUSTERING = ClusterSettings()
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
 def _cluster(
     x, y, theta, w, cell_m, heading_bins, radius_m, heading_window_rad, out
 ):  # fmt: skip  # pragma: no cover - compiled
@@ -108,7 +108,7 @@ def _cluster(
     return found
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
 def _refine(x, y, theta, w, rows, found, radius_m, heading_window_rad):  # pragma: no cover
     """Re-summarize hypotheses found on a subsample over every weighted particle.
 
@@ -196,6 +196,25 @@ def _centre(w, x, y, cos_t, sin_t, members):  # fmt: skip  # pragma: no cover - 
     return mx, my, c / norm, s / norm
 
 
+@njit(cache=True, nogil=True, error_model="numpy")
+def _clusters(x, y, theta, w, points, u0, cell_m, heading_bins, radius_m, heading_window_rad, out):  # fmt: skip  # noqa: E501  # pragma: no cover - compiled
+    """:func:`estimate_pose`'s compiled part in one call: mode seeking on the particles
+    themselves (``points`` 0), or on a systematic resample of ``points`` of them (offset
+    ``u0``, equal weights) whose hypotheses are then re-summarized over every weighted
+    particle (:func:`_refine`). Fills ``out`` like :func:`_cluster`; returns how many."""
+    if points == 0:
+        return _cluster(x, y, theta, w, cell_m, heading_bins, radius_m, heading_window_rad, out)
+    idx = systematic_indexes(w, points, u0)
+    cw = np.empty(points)
+    cw[:] = 1.0 / points
+    found = _cluster(
+        x[idx], y[idx], theta[idx], cw, cell_m, heading_bins, radius_m, heading_window_rad, out
+    )
+    if found:
+        _refine(x, y, theta, w, out, found, radius_m, heading_window_rad)
+    return found
+
+
 def estimate_pose(
     x: NDArray[np.float64],
     y: NDArray[np.float64],
@@ -221,24 +240,16 @@ def estimate_pose(
         The :class:`Estimate` (pose of the heaviest cluster, up to three hypotheses).
     """
     n = x.shape[0]
-    x, y, theta, weights = (
-        np.ascontiguousarray(v, dtype=np.float64) for v in (x, y, theta, weights)
-    )
     sub = rng is not None and n > max_points
-    if rng is not None and sub:
-        idx = systematic_resample(weights, max_points, rng)
-        cx, cy, ct = x[idx], y[idx], theta[idx]
-        cw = np.empty(max_points)  # np.full's values, without its Python wrapper
-        cw.fill(1.0 / max_points)
-    else:
-        cx, cy, ct, cw = x, y, theta, weights
     rows = np.empty((settings.max_hypotheses, 7))
     found = (
-        _cluster(
-            cx,
-            cy,
-            ct,
-            cw,
+        _clusters(
+            np.ascontiguousarray(x, dtype=np.float64),
+            np.ascontiguousarray(y, dtype=np.float64),
+            np.ascontiguousarray(theta, dtype=np.float64),
+            np.ascontiguousarray(weights, dtype=np.float64),
+            max_points if sub else 0,
+            rng.random() if rng is not None and sub else 0.0,
             float(settings.cell_m),
             int(settings.heading_bins),
             float(settings.radius_m),
@@ -250,9 +261,6 @@ def estimate_pose(
     )
     if not found:  # no weight anywhere: say so honestly
         return Estimate(0.0, 0.0, 0.0, np.inf, np.inf, np.pi, False, (), n, ess)
-    if sub:
-        r, window = float(settings.radius_m), float(settings.heading_window_rad)
-        _refine(x, y, theta, weights, rows, found, r, window)
     hyps = sorted(rows[:found].tolist(), key=lambda h: -h[0])
     mass, mx, my, mt, sx, sy, st = hyps[0]
     converged = (

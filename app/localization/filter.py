@@ -29,7 +29,7 @@ from app.localization.estimate import (
 )
 from app.localization.evidence import EvidenceTracker
 from app.localization.kld import kld_sample_size
-from app.localization.motion import motion_log_penalty, sample_motion
+from app.localization.motion import penalized, sample_motion
 from app.localization.recovery import AugmentedMCL, sample_from_observation
 from app.localization.resampling import (
     effective_sample_size,
@@ -161,8 +161,8 @@ class ParticleFilter:
         self.x, self.y, self.theta = sample_motion(
             self.x, self.y, self.theta, odometry, self.config, self.rng
         )
-        self.log_w = self.log_w + motion_log_penalty(x0, y0, self.x, self.y, self.map)
-        if not np.logical_or.reduce(np.isfinite(self.log_w)):
+        self.log_w, possible = penalized(x0, y0, self.x, self.y, self.map, self.log_w)
+        if not possible:
             # Every hypothesis walked through a wall or off the map: the belief is
             # wrong everywhere. Start again from no knowledge rather than keep ghosts.
             self._restart_global()

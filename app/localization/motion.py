@@ -4,9 +4,9 @@ The motion (forward, left, turn) is perturbed per particle with zero-mean Gaussi
 noise whose standard deviation grows with the motion and never falls below a floor,
 in the spirit of *sample_motion_odometry* (Probabilistic Robotics, Table 5.6), but
 parameterized directly in the body frame that the API's odometry uses (docs/API.md). The
-Gaussian draws come from :func:`~app.localization.fastmath.fill_normal` (a tabulated
-inverse CDF, four times faster here than numpy's sampler) and the particle loop is
-compiled.
+Gaussian draws come from :func:`~app.localization.fastmath.normal_of` (a tabulated
+inverse CDF, four times faster here than numpy's sampler), made from the generator's
+random words inside the compiled particle loop.
 """
 
 from __future__ import annotations
@@ -18,7 +18,15 @@ from numba import njit
 from numpy.typing import NDArray
 
 from app.localization.config import FilterConfig
-from app.localization.fastmath import FAST, fill_normal, grid_cell, sincos
+from app.localization.fastmath import (
+    FAST,
+    FRACTION_BITS,
+    NORMAL_TABLE,
+    grid_cell,
+    normal_of,
+    normal_words,
+    sincos,
+)
 from app.localization.types import Odometry
 from app.maps.geometry import GEOMETRY_EPS
 from app.maps.model import WALL_CLEARANCE_M, SemanticMap
@@ -32,17 +40,19 @@ LONG_MOVE_M = 2 * WALL_CLEARANCE_M
 
 
 @njit(cache=True, nogil=True, fastmath=FAST, error_model="numpy")
-def _move(x, y, theta, fwd, left, turn, std_t, std_r, noise, new_x, new_y, new_theta):  # fmt: skip
-    """Apply the body-frame motion plus scaled standard-normal noise (3N,) to new arrays."""
+def _move(x, y, theta, fwd, left, turn, std_t, std_r, words, table, shift, new_x, new_y, new_theta):  # fmt: skip  # noqa: E501
+    """Apply the body-frame motion plus scaled standard-normal noise to new arrays: the
+    draws of the 3N random ``words`` (:func:`~app.localization.fastmath.normal_of`),
+    forward, left and turn for particle i from words i, N + i and 2N + i."""
     two_pi = 2.0 * np.pi
     n = x.shape[0]
     for i in range(n):
-        f = fwd + std_t * noise[i]
-        lft = left + std_t * noise[n + i]
+        f = fwd + std_t * normal_of(words[i], table, shift)
+        lft = left + std_t * normal_of(words[n + i], table, shift)
         s, c = sincos(theta[i])
         new_x[i] = x[i] + c * f - s * lft
         new_y[i] = y[i] + s * f + c * lft
-        t = theta[i] + turn + std_r * noise[2 * n + i]
+        t = theta[i] + turn + std_r * normal_of(words[2 * n + i], table, shift)
         t = t - two_pi * np.floor((t + np.pi) / two_pi)
         new_theta[i] = np.pi if t <= -np.pi else t
 
@@ -78,14 +88,14 @@ def sample_motion(
         )
         fwd, left, turn = odometry.forward_m, odometry.left_m, odometry.turn_rad
     n = x.shape[0]
-    noise = fill_normal(rng, 3 * n)
+    words = normal_words(rng, 3 * n)
     new_x, new_y, new_theta = (np.empty(n), np.empty(n), np.empty(n)) if out is None else out
     _move(
         np.ascontiguousarray(x, dtype=np.float64),
         np.ascontiguousarray(y, dtype=np.float64),
         np.ascontiguousarray(theta, dtype=np.float64),
-        float(fwd), float(left), float(turn), float(std_t), float(std_r), noise,
-        new_x, new_y, new_theta,
+        float(fwd), float(left), float(turn), float(std_t), float(std_r),
+        words, NORMAL_TABLE, FRACTION_BITS, new_x, new_y, new_theta,
     )  # fmt: skip
     return new_x, new_y, new_theta
 
@@ -100,11 +110,15 @@ def _crosses_a_wall(px, py, qx, qy, walls, eps):  # fmt: skip  # pragma: no cove
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def _free_check(x0, y0, x1, y1, mask, ox, oy, res, long_sq, walls, eps, penalty):  # fmt: skip
-    """In place: -inf penalty off the free space or through a wall, else 0."""
+def _free_check(x0, y0, x1, y1, mask, ox, oy, res, long_sq, walls, eps, base, penalty):  # fmt: skip
+    """In place: ``penalty`` = ``base`` plus the move's penalty (-inf off the free space
+    or through a wall, else 0; ``base`` may be empty: nothing added). Returns whether
+    any result is finite."""
     rows, cols = mask.shape
     flat = mask.reshape(-1)
     inv = 1.0 / res
+    added = base.shape[0] > 0
+    finite = False
     for i in range(x1.shape[0]):
         cell, inside = grid_cell(x1[i], y1[i], ox, oy, inv, rows, cols)
         free = inside and flat[int(cell)]
@@ -112,7 +126,10 @@ def _free_check(x0, y0, x1, y1, mask, ox, oy, res, long_sq, walls, eps, penalty)
         dy = y1[i] - y0[i]
         if free and dx * dx + dy * dy > long_sq:
             free = not _crosses_a_wall(x0[i], y0[i], x1[i], y1[i], walls, eps)
-        penalty[i] = 0.0 if free else -np.inf
+        step = 0.0 if free else -np.inf
+        penalty[i] = base[i] + step if added else step
+        finite = finite or np.isfinite(penalty[i])
+    return finite
 
 
 def motion_log_penalty(
@@ -128,14 +145,27 @@ def motion_log_penalty(
     ends in free space can only cross a wall if it is longer than twice that
     (``LONG_MOVE_M``); only those are ray-tested.
     """
+    return penalized(x0, y0, x1, y1, semantic_map, np.empty(0))[0]
+
+
+def penalized(
+    x0: NDArray[np.float64],
+    y0: NDArray[np.float64],
+    x1: NDArray[np.float64],
+    y1: NDArray[np.float64],
+    semantic_map: SemanticMap,
+    log_w: NDArray[np.float64],
+) -> tuple[NDArray[np.float64], bool]:
+    """``log_w + motion_log_penalty(...)`` (``log_w`` empty: the penalty alone), and
+    whether any of it is finite, in one pass."""
     fs = semantic_map.free_space
-    penalty = np.empty(x1.shape[0])
+    out = np.empty(x1.shape[0])
     walls = np.ascontiguousarray(semantic_map.walls, dtype=np.float64).reshape(-1, 4)
-    _free_check(
+    finite = _free_check(
         x0, y0, x1, y1, fs.mask, fs.origin_x, fs.origin_y, fs.resolution_m, LONG_MOVE_M**2,
-        walls, GEOMETRY_EPS, penalty,
+        walls, GEOMETRY_EPS, np.ascontiguousarray(log_w, dtype=np.float64), out,
     )  # fmt: skip
-    return penalty
+    return out, bool(finite)
 
 
 def compose_odometry(first: Odometry | None, then: Odometry | None) -> Odometry | None:

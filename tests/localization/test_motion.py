@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from numpy.random import default_rng
 
 from app.localization.config import FilterConfig
 from app.localization.motion import NO_ODOMETRY_STD_M, motion_log_penalty, sample_motion
@@ -11,6 +12,7 @@ from app.localization.tolerances import U64, motion_position_tolerance
 from app.localization.types import Odometry
 from app.maps.geometry import segments_cross_walls
 from tests.helpers import room
+from tests.localization.test_fastmath import fill_normal
 
 EXACT = FilterConfig(
     trans_noise_frac=0, rot_noise_frac=0, trans_noise_floor_m=0, rot_noise_floor_deg=0
@@ -44,6 +46,20 @@ def test_noise_grows_with_motion_and_has_a_floor() -> None:
     assert walk_x.std() == pytest.approx(expected, rel=0.05)
     lost_x, _, _ = sample_motion(zeros, zeros, zeros, None, cfg, rng)
     assert lost_x.std() == pytest.approx(NO_ODOMETRY_STD_M, rel=0.05)
+
+
+def test_motion_noise_is_the_tabulated_normal_of_the_filters_generator() -> None:
+    """Particle i's forward, left and turn noise are draws i, N + i and 2N + i of
+    fill_normal from the same generator (standing still, facing +x, each new
+    coordinate is just its scaled draw, with one rounding either way)."""
+    n, cfg = 1000, FilterConfig()
+    zeros = np.zeros(n)
+    nx, ny, nt = sample_motion(zeros, zeros, zeros, Odometry(0, 0, 0), cfg, default_rng(5))
+    z = fill_normal(default_rng(5), 3 * n).astype(np.float64)
+    std_t, std_r = cfg.trans_noise_floor_m, float(np.radians(cfg.rot_noise_floor_deg))
+    assert np.array_equal(nx, std_t * z[:n])
+    assert np.array_equal(ny, std_t * z[n : 2 * n])
+    assert np.array_equal(nt, std_r * z[2 * n :])
 
 
 def test_heading_stays_wrapped() -> None:
