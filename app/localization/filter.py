@@ -36,6 +36,7 @@ from app.localization.resampling import (
     log_sum_exp,
     normalized_weights,
     systematic_resample,
+    weights_and_log_sum_exp,
 )
 from app.localization.sensor import Observation, normalized_residuals, prepare_observation
 from app.localization.types import Detection, Estimate, InitialPose, Odometry
@@ -196,11 +197,16 @@ class ParticleFilter:
 
         A frame without usable detections changes nothing (no evidence).
         """
+        return self._correct(detections)[0]
+
+    def _correct(self, detections: Sequence[Detection]) -> tuple[float, NDArray[np.float64] | None]:
+        """:meth:`correct`, and the normalized weights it computed on the way (None
+        when it did not weigh: :attr:`weights` then computes them)."""
         obs = prepare_observation(detections, self.map, self.config)
         self.last_observation = obs
         if obs.empty:
             self.frames_without_evidence += 1
-            return 0.0
+            return 0.0, None
         self.frames_without_evidence = 0
         if self._seed_from_observation:
             self._seed_cloud(obs)
@@ -208,13 +214,14 @@ class ParticleFilter:
         before = log_sum_exp(self.log_w)
         self.log_w = self.log_w + log_lik
         # log of the prior-weighted mean likelihood: lse(w + l) - lse(w)
-        mean_ll = log_sum_exp(self.log_w) - before
+        w, after = weights_and_log_sum_exp(self.log_w)
+        mean_ll = after - before
         per_class = mean_ll / max(obs.group_kappa.size, 1)
         if not np.isfinite(per_class):
             per_class = -1e3
         if not self.config.recovery:
-            return 0.0
-        return self._recovery.update(per_class)
+            return 0.0, w
+        return self._recovery.update(per_class), w
 
     def _seed_cloud(self, obs: Observation) -> None:
         """Global start, first evidence: draw most particles from the observation.
@@ -279,10 +286,10 @@ class ParticleFilter:
         only adds noise to what they say (and to what the injected particles say).
         """
         self.predict(odometry)
-        inject = self.correct(detections)
+        inject, w_corrected = self._correct(detections)
         if heading is not None:
             self.log_w = self.log_w + compass_log_likelihood(self.theta, heading)
-        w = self.weights
+        w = self.weights if heading is not None or w_corrected is None else w_corrected
         ess = effective_sample_size(w)
         raw = estimate_pose(self.x, self.y, self.theta, w, ess=ess, rng=self.rng)
         share, confirmed = 0.0, 0.0

@@ -19,25 +19,30 @@ def normalized_weights(log_weights: NDArray[np.floating]) -> NDArray[np.float64]
     Never NaN and never all zero: when every log-weight is -inf (no particle is
     possible), the weights fall back to uniform so the caller can recover.
     """
-    lw = np.asarray(log_weights, dtype=np.float64)
-    # The ufuncs' own reductions: the same as .max() and .sum(), without their Python
-    # wrappers (called several times a frame).
-    top = np.maximum.reduce(lw) if lw.size else -np.inf
-    if not np.isfinite(top):
-        return np.full(lw.shape, 1.0 / max(lw.size, 1))
-    w = np.exp(lw - top)
-    return w / np.add.reduce(w)
+    return weights_and_log_sum_exp(log_weights)[0]
 
 
 def log_sum_exp(values: NDArray[np.floating]) -> float:
     """log(sum(exp(values))) without overflow; -inf for an empty or all -inf input."""
-    v = np.asarray(values, dtype=np.float64)
-    if v.size == 0:
-        return float("-inf")
-    top = np.maximum.reduce(v)
+    return weights_and_log_sum_exp(values)[1]
+
+
+def weights_and_log_sum_exp(
+    log_weights: NDArray[np.floating],
+) -> tuple[NDArray[np.float64], float]:
+    """:func:`normalized_weights` and :func:`log_sum_exp` of the same log-weights, from
+    one set of exponentials (the very numbers each would compute alone)."""
+    lw = np.asarray(log_weights, dtype=np.float64)
+    if lw.size == 0:
+        return np.full(lw.shape, 1.0), float("-inf")
+    # The ufuncs' own reductions: the same as .max() and .sum(), without their Python
+    # wrappers (called several times a frame).
+    top = np.maximum.reduce(lw)
     if not np.isfinite(top):
-        return float(top)
-    return float(top + np.log(np.add.reduce(np.exp(v - top))))
+        return np.full(lw.shape, 1.0 / lw.size), float(top)
+    e = np.exp(lw - top)
+    total = np.add.reduce(e)
+    return e / total, float(top + np.log(total))
 
 
 def effective_sample_size(weights: NDArray[np.floating]) -> float:

@@ -12,6 +12,7 @@ from app.localization.resampling import (
     normalized_weights,
     systematic_indexes,
     systematic_resample,
+    weights_and_log_sum_exp,
 )
 
 
@@ -85,6 +86,24 @@ def test_weights_never_nan_nor_all_zero() -> None:
     assert np.isclose(w.sum(), 1.0) and not np.isnan(w).any() and w[0] > w[1] > w[2] == 0
     assert log_sum_exp(np.array([-np.inf])) == -np.inf
     assert np.isclose(log_sum_exp(np.array([1000.0, 1000.0])), 1000.0 + np.log(2))
+
+
+def test_weights_and_their_log_sum_come_from_one_set_of_exponentials() -> None:
+    """Both are numpy's max-shifted exponentials, bit for bit (the filter takes its
+    weights from the correction's log-sum), and agree with the functions alone."""
+    rng = np.random.default_rng(5)
+    for m in (1, 7, 130, 2000, 10_000):
+        lw = rng.normal(-50.0, 30.0, m)
+        lw[rng.random(m) < 0.1] = -np.inf
+        lw[0] = -3.0  # at least one finite
+        w, lse = weights_and_log_sum_exp(lw)
+        e = np.exp(lw - lw.max())
+        assert np.array_equal(w, e / e.sum()) and lse == lw.max() + np.log(e.sum())
+        assert np.array_equal(w, normalized_weights(lw)) and lse == log_sum_exp(lw)
+    w, lse = weights_and_log_sum_exp(np.full(4, -np.inf))
+    assert w.tolist() == [0.25] * 4 and lse == -np.inf
+    w, lse = weights_and_log_sum_exp(np.empty(0))
+    assert w.shape == (0,) and lse == -np.inf
 
 
 def test_effective_sample_size() -> None:
