@@ -7,11 +7,10 @@ polynomial and table forms that the compiler vectorizes:
 
 * :func:`sincos`: sine and cosine of any angle within ``SINCOS_MAX_ERROR`` (Cody-Waite
   reduction to [-pi/4, pi/4], Taylor polynomials of degree 9 and 10 there).
-* :func:`normal_of`: standard-normal noise from raw 32-bit random words
-  (:func:`normal_words`) through a tabulated inverse CDF (``NORMAL_KNOTS`` intervals,
-  linear interpolation). The tails are cut at ``NORMAL_TAIL_SIGMA`` standard
-  deviations and the table is rescaled so the variance is exactly one; for motion
-  noise nothing beyond that matters.
+* :func:`fill_normal`: standard-normal noise from raw 32-bit random words through a
+  tabulated inverse CDF (``NORMAL_KNOTS`` intervals, linear interpolation). The tails
+  are cut at ``NORMAL_TAIL_SIGMA`` standard deviations and the table is rescaled so
+  the variance is exactly one; for motion noise nothing beyond that matters.
 """
 
 from __future__ import annotations
@@ -82,22 +81,27 @@ def _normal_table() -> NDArray[np.float32]:
 
 
 NORMAL_TABLE = _normal_table()
-#: Bits of a random word below the table index: the place within the interval.
-FRACTION_BITS = 32 - int(np.log2(NORMAL_KNOTS))
+_FRACTION_BITS = 32 - int(np.log2(NORMAL_KNOTS))
 
 
-@njit(cache=True, inline="always", fastmath=FAST)
-def normal_of(word, table, shift):  # fmt: skip  # pragma: no cover - compiled
-    """The standard-normal draw (float32) of one random 32-bit word: its top bits pick
-    the table's interval, the ``shift`` bits below them the place within it."""
-    j = np.int64(word >> np.uint32(shift))
-    f = np.float32(word & np.uint32((1 << shift) - 1)) * np.float32(1.0 / (1 << shift))
-    return table[j] + f * (table[j + 1] - table[j])
+@njit(cache=True, nogil=True, fastmath=FAST)
+def _fill_normal(words, table, shift, out):  # fmt: skip  # pragma: no cover - compiled
+    inv = np.float32(1.0 / (1 << shift))
+    mask = np.uint32((1 << shift) - 1)
+    sh = np.uint32(shift)
+    for i in range(out.shape[0]):
+        w = words[i]
+        j = np.int64(w >> sh)
+        f = np.float32(w & mask) * inv
+        out[i] = table[j] + f * (table[j + 1] - table[j])
 
 
-def normal_words(rng: np.random.Generator, n: int) -> NDArray[np.uint32]:
-    """``n`` random 32-bit words from ``rng``'s bit stream, for :func:`normal_of`."""
-    return rng.bit_generator.random_raw((n + 1) // 2).view(np.uint32)[:n]
+def fill_normal(rng: np.random.Generator, n: int) -> NDArray[np.float32]:
+    """``n`` standard-normal draws (float32) from ``rng``'s bit stream."""
+    words = rng.bit_generator.random_raw((n + 1) // 2).view(np.uint32)[:n]
+    out = np.empty(n, dtype=np.float32)
+    _fill_normal(words, NORMAL_TABLE, _FRACTION_BITS, out)
+    return out
 
 
 #: Beyond this |z| the softplus correction log(1 + e^-|z|) is below 2.1e-9: dropped.

@@ -4,9 +4,9 @@ The motion (forward, left, turn) is perturbed per particle with zero-mean Gaussi
 noise whose standard deviation grows with the motion and never falls below a floor,
 in the spirit of *sample_motion_odometry* (Probabilistic Robotics, Table 5.6), but
 parameterized directly in the body frame that the API's odometry uses (docs/API.md). The
-Gaussian draws come from :func:`~app.localization.fastmath.normal_of` (a tabulated
-inverse CDF, four times faster here than numpy's sampler), made from the generator's
-random words inside the compiled particle loop.
+Gaussian draws come from :func:`~app.localization.fastmath.fill_normal` (a tabulated
+inverse CDF, four times faster here than numpy's sampler) and the particle loop is
+compiled.
 """
 
 from __future__ import annotations
@@ -18,15 +18,7 @@ from numba import njit
 from numpy.typing import NDArray
 
 from app.localization.config import FilterConfig
-from app.localization.fastmath import (
-    FAST,
-    FRACTION_BITS,
-    NORMAL_TABLE,
-    grid_cell,
-    normal_of,
-    normal_words,
-    sincos,
-)
+from app.localization.fastmath import FAST, fill_normal, grid_cell, sincos
 from app.localization.types import Odometry
 from app.maps.geometry import GEOMETRY_EPS
 from app.maps.model import WALL_CLEARANCE_M, SemanticMap
@@ -40,19 +32,17 @@ LONG_MOVE_M = 2 * WALL_CLEARANCE_M
 
 
 @njit(cache=True, nogil=True, fastmath=FAST, error_model="numpy")
-def _move(x, y, theta, fwd, left, turn, std_t, std_r, words, table, shift, new_x, new_y, new_theta):  # fmt: skip  # noqa: E501
-    """Apply the body-frame motion plus scaled standard-normal noise to new arrays: the
-    draws of the 3N random ``words`` (:func:`~app.localization.fastmath.normal_of`),
-    forward, left and turn for particle i from words i, N + i and 2N + i."""
+def _move(x, y, theta, fwd, left, turn, std_t, std_r, noise, new_x, new_y, new_theta):  # fmt: skip
+    """Apply the body-frame motion plus scaled standard-normal noise (3N,) to new arrays."""
     two_pi = 2.0 * np.pi
     n = x.shape[0]
     for i in range(n):
-        f = fwd + std_t * normal_of(words[i], table, shift)
-        lft = left + std_t * normal_of(words[n + i], table, shift)
+        f = fwd + std_t * noise[i]
+        lft = left + std_t * noise[n + i]
         s, c = sincos(theta[i])
         new_x[i] = x[i] + c * f - s * lft
         new_y[i] = y[i] + s * f + c * lft
-        t = theta[i] + turn + std_r * normal_of(words[2 * n + i], table, shift)
+        t = theta[i] + turn + std_r * noise[2 * n + i]
         t = t - two_pi * np.floor((t + np.pi) / two_pi)
         new_theta[i] = np.pi if t <= -np.pi else t
 
@@ -88,14 +78,14 @@ def sample_motion(
         )
         fwd, left, turn = odometry.forward_m, odometry.left_m, odometry.turn_rad
     n = x.shape[0]
-    words = normal_words(rng, 3 * n)
+    noise = fill_normal(rng, 3 * n)
     new_x, new_y, new_theta = (np.empty(n), np.empty(n), np.empty(n)) if out is None else out
     _move(
         np.ascontiguousarray(x, dtype=np.float64),
         np.ascontiguousarray(y, dtype=np.float64),
         np.ascontiguousarray(theta, dtype=np.float64),
-        float(fwd), float(left), float(turn), float(std_t), float(std_r),
-        words, NORMAL_TABLE, FRACTION_BITS, new_x, new_y, new_theta,
+        float(fwd), float(left), float(turn), float(std_t), float(std_r), noise,
+        new_x, new_y, new_theta,
     )  # fmt: skip
     return new_x, new_y, new_theta
 

@@ -7,14 +7,11 @@ from numba import njit
 
 from app.localization.fastmath import (
     FAST,
-    FRACTION_BITS,
-    NORMAL_TABLE,
     NORMAL_TAIL_SIGMA,
     SINCOS_MAX_ERROR,
     SOFTPLUS_MAX_ERROR,
+    fill_normal,
     grid_cell,
-    normal_of,
-    normal_words,
     sincos,
     softplus,
 )
@@ -31,19 +28,6 @@ def _sincos_all(t, s, c):  # fmt: skip
 def _softplus_all(z, out):  # fmt: skip
     for i in range(z.shape[0]):
         out[i] = softplus(z[i])
-
-
-@njit(fastmath=FAST)
-def _normal_all(words, table, shift, out):  # fmt: skip
-    for i in range(out.shape[0]):
-        out[i] = normal_of(words[i], table, shift)
-
-
-def fill_normal(rng: np.random.Generator, n: int) -> np.ndarray:
-    """``n`` standard-normal draws (float32) from ``rng``, as the motion model makes them."""
-    out = np.empty(n, dtype=np.float32)
-    _normal_all(normal_words(rng, n), NORMAL_TABLE, FRACTION_BITS, out)
-    return out
 
 
 def test_sincos_matches_the_library_everywhere() -> None:

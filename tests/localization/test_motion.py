@@ -7,12 +7,12 @@ import pytest
 from numpy.random import default_rng
 
 from app.localization.config import FilterConfig
+from app.localization.fastmath import fill_normal
 from app.localization.motion import NO_ODOMETRY_STD_M, motion_log_penalty, sample_motion
 from app.localization.tolerances import U64, motion_position_tolerance
 from app.localization.types import Odometry
 from app.maps.geometry import segments_cross_walls
 from tests.helpers import room
-from tests.localization.test_fastmath import fill_normal
 
 EXACT = FilterConfig(
     trans_noise_frac=0, rot_noise_frac=0, trans_noise_floor_m=0, rot_noise_floor_deg=0
