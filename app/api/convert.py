@@ -8,22 +8,18 @@ or :class:`~app.service.types.FrameInput`, and a
 from __future__ import annotations
 
 import math
+from typing import Any
+
+import orjson
 
 from app.api.schemas import (
     CameraIn,
     DestinationIn,
     DestinationOut,
-    FeedbackItemOut,
-    FeedbackOut,
     Frame,
     FrameResult,
-    GuidanceOut,
-    HypothesisOut,
-    NextTurnOut,
-    PoseOut,
     SessionCreate,
     SessionOut,
-    Uncertainty,
 )
 from app.feedback import FeedbackOptions, clock_from_bearing_deg
 from app.guidance import DestinationSpec, Guidance, Target
@@ -131,6 +127,11 @@ def _deg(rad: float) -> float:
     return round(wrap_deg(math.degrees(rad)), 3)
 
 
+def _round(value: float, digits: int) -> float:
+    """``value`` rounded, as a plain float whatever number it was."""
+    return round(float(value), digits)
+
+
 def destination_spec(body: DestinationIn) -> DestinationSpec:
     """The service's description of a destination request."""
     if body.label is not None:
@@ -150,71 +151,90 @@ def destination_out(target: Target) -> DestinationOut:
     )
 
 
-def guidance_out(g: Guidance | None) -> GuidanceOut | None:
-    """The ``guidance`` of docs/API.md: clock directions from the bearings."""
+def _guidance_data(g: Guidance | None) -> dict[str, Any] | None:
+    """The ``guidance`` of docs/API.md as plain data: clock directions from the bearings."""
     if g is None:
         return None
     turn = None
     if g.next is not None:
-        turn = NextTurnOut(
-            clock=clock_from_bearing_deg(g.next.bearing_deg),
-            bearing_deg=g.next.bearing_deg,
-            distance_m=g.next.distance_m,
-            then_clock=clock_from_bearing_deg(g.next.then_deg),
-        )
-    return GuidanceOut(
-        target=g.target,
-        clock=clock_from_bearing_deg(g.bearing_deg),
-        bearing_deg=g.bearing_deg,
-        distance_m=g.distance_m,
-        path_m=g.path_m,
-        next=turn,
-        arrived=g.arrived,
-    )
+        turn = {
+            "clock": clock_from_bearing_deg(g.next.bearing_deg),
+            "bearing_deg": float(g.next.bearing_deg),
+            "distance_m": float(g.next.distance_m),
+            "then_clock": clock_from_bearing_deg(g.next.then_deg),
+        }
+    return {
+        "target": g.target,
+        "clock": clock_from_bearing_deg(g.bearing_deg),
+        "bearing_deg": float(g.bearing_deg),
+        "distance_m": float(g.distance_m),
+        "path_m": float(g.path_m),
+        "next": turn,
+        "arrived": bool(g.arrived),
+    }
+
+
+def frame_result_data(outcome: FrameOutcome) -> dict[str, Any]:
+    """One step's outcome as the plain data of a ``FrameResult`` (docs/API.md): its
+    fields in the model's order, under their wire names, every number a plain float
+    or int as the model would hold it (orjson writes an int without ".0" and refuses
+    numpy's scalars). The one place a result is shaped; :func:`frame_result`
+    validates it into the model, :func:`frame_result_json` writes it for a stream."""
+    estimate = outcome.estimate
+    feedback = outcome.feedback
+    return {
+        "seq": int(outcome.seq),
+        "pose": {
+            "x": _round(estimate.x, 4),
+            "y": _round(estimate.y, 4),
+            "theta_deg": _deg(estimate.theta_rad),
+        },
+        "uncertainty": {
+            "std_x_m": _round(min(estimate.std_x_m, 1e6), 4),
+            "std_y_m": _round(min(estimate.std_y_m, 1e6), 4),
+            "std_theta_deg": _round(math.degrees(estimate.std_theta_rad), 3),
+        },
+        "converged": bool(estimate.converged),
+        "protection_m": None if estimate.protection_m is None else _round(estimate.protection_m, 3),
+        "hypotheses": [
+            {
+                "x": _round(h.x, 4),
+                "y": _round(h.y, 4),
+                "theta_deg": _deg(h.theta_rad),
+                "weight": _round(h.weight, 4),
+                "region": region,
+            }
+            for h, region in zip(estimate.hypotheses[:3], outcome.regions, strict=False)
+        ],
+        "feedback": {
+            "text": feedback.text,
+            "items": [
+                {
+                    "class": i.cls,
+                    "label": i.label,
+                    "clock": None if i.clock is None else int(i.clock),
+                    "bearing_deg": None if i.bearing_deg is None else _round(i.bearing_deg, 1),
+                    "distance_m": None if i.distance_m is None else _round(i.distance_m, 2),
+                }
+                for i in feedback.items
+            ],
+        },
+        "warnings": list(outcome.warnings),
+        "guidance": _guidance_data(outcome.guidance),
+    }
 
 
 def frame_result(outcome: FrameOutcome) -> FrameResult:
-    """Shape one step's outcome as the ``FrameResult`` of docs/API.md."""
-    estimate = outcome.estimate
-    feedback = outcome.feedback
-    return FrameResult(
-        seq=outcome.seq,
-        pose=PoseOut(
-            x=round(estimate.x, 4), y=round(estimate.y, 4), theta_deg=_deg(estimate.theta_rad)
-        ),
-        uncertainty=Uncertainty(
-            std_x_m=round(min(estimate.std_x_m, 1e6), 4),
-            std_y_m=round(min(estimate.std_y_m, 1e6), 4),
-            std_theta_deg=round(math.degrees(estimate.std_theta_rad), 3),
-        ),
-        converged=estimate.converged,
-        protection_m=None if estimate.protection_m is None else round(estimate.protection_m, 3),
-        hypotheses=[
-            HypothesisOut(
-                x=round(h.x, 4),
-                y=round(h.y, 4),
-                theta_deg=_deg(h.theta_rad),
-                weight=round(h.weight, 4),
-                region=region,
-            )
-            for h, region in zip(estimate.hypotheses[:3], outcome.regions, strict=False)
-        ],
-        feedback=FeedbackOut(
-            text=feedback.text,
-            items=[
-                FeedbackItemOut(
-                    cls=i.cls,
-                    label=i.label,
-                    clock=i.clock,
-                    bearing_deg=None if i.bearing_deg is None else round(i.bearing_deg, 1),
-                    distance_m=None if i.distance_m is None else round(i.distance_m, 2),
-                )
-                for i in feedback.items
-            ],
-        ),
-        warnings=list(outcome.warnings),
-        guidance=guidance_out(outcome.guidance),
-    )
+    """Shape one step's outcome as the ``FrameResult`` of docs/API.md (validated: one
+    call into pydantic's core for the whole tree)."""
+    return FrameResult.model_validate(frame_result_data(outcome))
+
+
+def frame_result_json(outcome: FrameOutcome) -> str:
+    """The JSON text of :func:`frame_result`, without building the model: orjson writes
+    the plain data (the same text as the model's ``model_dump_json(by_alias=True)``, a
+    test holds them equal; a stream answers every frame with it, at half the cost)."""
+    return orjson.dumps(frame_result_data(outcome)).decode()
 
 
 def session_out(session: Session) -> SessionOut:

@@ -22,7 +22,7 @@ from typing import Any
 from fastapi import WebSocket, WebSocketDisconnect
 from pydantic import ValidationError
 
-from app.api.convert import frame_input, frame_result
+from app.api.convert import frame_input, frame_result_json
 from app.api.errors import describe_validation, limit_body
 from app.api.schemas import Frame
 from app.localization.camera import BoxError
@@ -183,7 +183,7 @@ class Stream:
                     text = error_message("internal_error", "this frame could not be processed")
                 else:
                     if cache is None or cache[0] is not outcome:
-                        cache = (outcome, frame_result(outcome).model_dump_json(by_alias=True))
+                        cache = (outcome, frame_result_json(outcome))
                     text = cache[1]
             await self.ws.send_text(text)
             self._room.release()
