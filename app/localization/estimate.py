@@ -94,9 +94,13 @@ def _cluster(
         mx, my, mc, ms = _centre(w, x, y, cos_t, sin_t, members)
         for _ in range(3):  # re-centre on the particles near the centre
             _near(x, y, cos_t, sin_t, remaining, mx, my, mc, ms, r2, cos_window, near)
-            if not near.any():
+            anyone = False
+            same = True
+            for i in range(n):  # near.any() and (near == members).all(), in one pass
+                anyone = anyone or near[i]
+                same = same and near[i] == members[i]
+            if not anyone:
                 break
-            same = (near == members).all()
             members[:] = near
             if same:
                 break
@@ -126,7 +130,10 @@ def _refine(x, y, theta, w, rows, found, radius_m, heading_window_rad):  # pragm
         mx, my, mt = rows[h, 1], rows[h, 2], rows[h, 3]
         mc, ms = np.cos(mt), np.sin(mt)
         _near(x, y, cos_t, sin_t, remaining, mx, my, mc, ms, r2, cos_window, members)
-        if w[members].sum() <= 0.0:
+        weighed = False  # w[members].sum() > 0 (the weights are never negative)
+        for i in range(n):
+            weighed = weighed or (members[i] and w[i] > 0.0)
+        if not weighed:
             continue  # keep the subsample's summary
         _summary(w, x, y, cos_t, sin_t, members, rows[h])
         for i in range(n):
