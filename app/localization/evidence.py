@@ -735,10 +735,9 @@ class EvidenceTracker:
         :meth:`window`); may add alternatives. The main mode, every tracked alternative
         and the finalists are polished together."""
         st = self.settings
-        # The frames since the last search of this mode (all of the history at its first).
-        segment = self.window(
-            newest=self._since_search if self.mode_searches else len(self._history), stride=1
-        )
+        # The frames since the last search of this mode (all of the history at its first),
+        # packed below only if an alternative is tracked to be weighed on them.
+        segment_frames = self._since_search if self.mode_searches else len(self._history)
         self._since_search = 0
         self.searched_ago = 0
         self.searches += 1
@@ -747,7 +746,7 @@ class EvidenceTracker:
         obs = self._history[-1][1]
         fs = self.map.free_space
         area = fs.free_cells.size * fs.resolution_m**2
-        n = int(np.clip(st.candidates_per_m2 * area, st.min_candidates, st.max_candidates))
+        n = int(min(max(st.candidates_per_m2 * area, st.min_candidates), st.max_candidates))
         cx, cy, ct = sample_from_observation(
             n, obs, self.map, self.rng, self.config.bearing_std_rad("")
         )
@@ -760,13 +759,17 @@ class EvidenceTracker:
             k = min(st.shortlist, cx.size)
             top = np.argpartition(-score, k - 1)[:k]
             rx, ry, rt, rs = self._refined(cx[top], cy[top], ct[top], st.refine, window)
-            for i in np.argsort(-rs):
-                h = Hypothesis(float(rx[i]), float(ry[i]), float(rt[i]), 0.0)
-                if not np.isfinite(rs[i]) or len(picked) >= st.finalists:
+            # The best distinct places, in plain Python over precomputed flags (a numpy
+            # call on one element per candidate cost more than the comparisons).
+            close = _near_pairs(rx, ry, rt, st)
+            finite = np.isfinite(rs).tolist()
+            for i in np.argsort(-rs).tolist():
+                if not finite[i] or len(picked) >= st.finalists:
                     break
-                if picked and _near(rx[picked], ry[picked], rt[picked], h, st).any():
+                row = close[i]
+                if any(row[j] for j in picked):
                     continue
-                picked.append(int(i))
+                picked.append(i)
         # One polish: the main mode, the tracked alternatives, the finalists.
         ax, ay, at = self._centres() if self.count else (np.empty(0),) * 3
         a = ax.size
@@ -784,7 +787,7 @@ class EvidenceTracker:
                 np.concatenate([[mx], qx[:a]]),
                 np.concatenate([[my], qy[:a]]),
                 np.concatenate([[mt], qt[:a]]),
-                segment,
+                self.window(newest=segment_frames, stride=1),
             )
             self.seg = self.seg + (on_segment[1:] - on_segment[0])
         self._recentre(main_pose, (qx[:a], qy[:a], qt[:a]))
@@ -1065,6 +1068,17 @@ def _near(
     """Whether poses are the same place as ``h`` (within ``distinct_m`` and ``_rad``)."""
     return (np.hypot(np.asarray(x) - h.x, np.asarray(y) - h.y) < st.distinct_m) & (
         np.abs(wrap_angle(np.asarray(t) - h.theta_rad)) < st.distinct_rad
+    )
+
+
+def _near_pairs(
+    x: NDArray[np.float64], y: NDArray[np.float64], t: NDArray[np.float64], st: EvidenceSettings
+) -> NDArray[np.bool_]:
+    """:func:`_near` of every pose against every pose, shape (N, N): row ``i`` is
+    ``_near(x, y, t, pose i)``, with the same arithmetic (one call instead of one a
+    pose)."""
+    return (np.hypot(x[None, :] - x[:, None], y[None, :] - y[:, None]) < st.distinct_m) & (
+        np.abs(wrap_angle(t[None, :] - t[:, None])) < st.distinct_rad
     )
 
 

@@ -16,13 +16,15 @@ from app.localization.evidence import (
     DEFAULT_EVIDENCE,
     PATTERN,
     EvidenceTracker,
+    _near,
+    _near_pairs,
     jitter_search_reference,
     pattern_search_reference,
 )
 from app.localization.filter import ParticleFilter
 from app.localization.sensor import log_likelihood_reference, prepare_observation
 from app.localization.tolerances import U64, candidate_flip_mask, log_likelihood_tolerance
-from app.localization.types import Odometry
+from app.localization.types import Hypothesis, Odometry
 from app.maps.model import SemanticMap
 from app.simulation.scenarios import paper_config
 from app.simulation.simulator import SimulationConfig, simulate
@@ -210,6 +212,25 @@ def test_compiled_jitter_search_is_the_reference(paper_office: SemanticMap) -> N
         ]
         assert_same_numbers(got, jitter_search_reference(x, y, t, jitter, *args))
         assert tracker.rng.bit_generator.state == drawn.bit_generator.state
+
+
+def test_near_pairs_is_near_of_every_pose() -> None:
+    """The search's finalists are told apart by one call for all pairs: row i is what
+    _near says of every pose against pose i, also at the thresholds themselves."""
+    st = DEFAULT_EVIDENCE
+    rng = np.random.default_rng(14)
+    x, y = rng.uniform(0.0, 3.0, 60), rng.uniform(0.0, 3.0, 60)
+    t = rng.uniform(-np.pi, np.pi, 60)
+    # Pairs exactly a threshold apart (and wrapped across +-pi).
+    x[1], y[1], t[1] = x[0] + st.distinct_m, y[0], t[0]
+    x[3], y[3], t[3] = x[2], y[2], t[2] + st.distinct_rad
+    x[5], y[5], t[5] = x[4], y[4], np.pi - st.distinct_rad / 2
+    t[4] = -np.pi + st.distinct_rad / 2
+    pairs = _near_pairs(x, y, t, st)
+    for i in range(x.size):
+        h = Hypothesis(float(x[i]), float(y[i]), float(t[i]), 0.0)
+        assert np.array_equal(pairs[i], _near(x, y, t, h, st))
+    assert 60 < np.count_nonzero(pairs) < 60 * 60  # some pairs near, most not
 
 
 @pytest.mark.parametrize("seed", [0, 1])
