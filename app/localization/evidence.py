@@ -699,26 +699,20 @@ class EvidenceTracker:
         window: sensor_kernel.ObservationWindow,
     ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
         """Each pose moved to the best of its jittered copies over the window (``rounds``
-        of random jitter), with its window score."""
-        score = self.window_score(x, y, t, window)
+        of random jitter), with its window score. The jitter is drawn first, round by
+        round (x, y, heading), then every round runs in one compiled call."""
         m = x.shape[0]
-        for count, std_m, std_rad in rounds:
-            jx = x[:, None] + self.rng.normal(0.0, std_m, (m, count))
-            jy = y[:, None] + self.rng.normal(0.0, std_m, (m, count))
-            jt = wrap_angle(t[:, None] + self.rng.normal(0.0, std_rad, (m, count)))
-            js = self.window_score(jx.reshape(-1), jy.reshape(-1), jt.reshape(-1), window)
-            js = np.where(self.map.free_space.is_free(jx, jy), js.reshape(m, count), -np.inf)
-            best = np.argmax(js, axis=1)
-            better = js[np.arange(m), best] > score
-            rows = np.flatnonzero(better)
-            x, y, t = x.copy(), y.copy(), t.copy()
-            x[rows], y[rows], t[rows] = (
-                jx[rows, best[rows]],
-                jy[rows, best[rows]],
-                jt[rows, best[rows]],
+        jitter = [
+            (
+                self.rng.normal(0.0, std_m, (m, count)),
+                self.rng.normal(0.0, std_m, (m, count)),
+                self.rng.normal(0.0, std_rad, (m, count)),
             )
-            score = np.where(better, js[np.arange(m), best], score)
-        return x, y, t, score
+            for count, std_m, std_rad in rounds
+        ]
+        return sensor_kernel.window_jitter_search(
+            x, y, t, jitter, window, self.map, self.config, self.grid
+        )
 
     def _polished(
         self,
@@ -729,38 +723,21 @@ class EvidenceTracker:
     ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
         """Pattern search over the window: each round tries the 27 steps of -1, 0, +1 in
         x, y and heading around each pose, moves to the best, and halves the steps.
-        Every pose of a search goes through one call (one compiled scoring per round)."""
+        Every pose of a search and every round go through one compiled call."""
         st = self.settings
-        m = x.shape[0]
-        grid = np.array(np.meshgrid([-1.0, 0.0, 1.0], [-1.0, 0.0, 1.0], [-1.0, 0.0, 1.0]))
-        dx, dy, dt = (g.reshape(-1) for g in grid)  # 27 steps, (0, 0, 0) among them
-        step_m, step_rad = st.polish_step_m, st.polish_step_rad
-        score = self.window_score(x, y, t, window)
-        rows = np.arange(m)
-        for _ in range(st.polish_rounds):
-            jx = x[:, None] + step_m * dx[None, :]
-            jy = y[:, None] + step_m * dy[None, :]
-            jt = wrap_angle(t[:, None] + step_rad * dt[None, :])
-            js = self.window_score(jx.reshape(-1), jy.reshape(-1), jt.reshape(-1), window)
-            js = np.where(self.map.free_space.is_free(jx, jy), js.reshape(m, 27), -np.inf)
-            best = np.argmax(js, axis=1)
-            better = js[rows, best] > score
-            x = np.where(better, jx[rows, best], x)
-            y = np.where(better, jy[rows, best], y)
-            t = np.where(better, jt[rows, best], t)
-            score = np.maximum(score, js[rows, best])
-            step_m, step_rad = step_m / 2.0, step_rad / 2.0
-        return x, y, t, score
+        return sensor_kernel.window_pattern_search(
+            x, y, t, PATTERN, st.polish_step_m, st.polish_step_rad, st.polish_rounds,
+            window, self.map, self.config, self.grid,
+        )  # fmt: skip
 
     def _search(self, main: Hypothesis, window: sensor_kernel.ObservationWindow) -> None:
         """One global consistency search (module docstring) over ``window`` (this frame's
         :meth:`window`); may add alternatives. The main mode, every tracked alternative
         and the finalists are polished together."""
         st = self.settings
-        # The frames since the last search of this mode (all of the history at its first).
-        segment = self.window(
-            newest=self._since_search if self.mode_searches else len(self._history), stride=1
-        )
+        # The frames since the last search of this mode (all of the history at its first),
+        # packed below only if an alternative is tracked to be weighed on them.
+        segment_frames = self._since_search if self.mode_searches else len(self._history)
         self._since_search = 0
         self.searched_ago = 0
         self.searches += 1
@@ -769,7 +746,7 @@ class EvidenceTracker:
         obs = self._history[-1][1]
         fs = self.map.free_space
         area = fs.free_cells.size * fs.resolution_m**2
-        n = int(np.clip(st.candidates_per_m2 * area, st.min_candidates, st.max_candidates))
+        n = int(min(max(st.candidates_per_m2 * area, st.min_candidates), st.max_candidates))
         cx, cy, ct = sample_from_observation(
             n, obs, self.map, self.rng, self.config.bearing_std_rad("")
         )
@@ -782,13 +759,17 @@ class EvidenceTracker:
             k = min(st.shortlist, cx.size)
             top = np.argpartition(-score, k - 1)[:k]
             rx, ry, rt, rs = self._refined(cx[top], cy[top], ct[top], st.refine, window)
-            for i in np.argsort(-rs):
-                h = Hypothesis(float(rx[i]), float(ry[i]), float(rt[i]), 0.0)
-                if not np.isfinite(rs[i]) or len(picked) >= st.finalists:
+            # The best distinct places, in plain Python over precomputed flags (a numpy
+            # call on one element per candidate cost more than the comparisons).
+            close = _near_pairs(rx, ry, rt, st)
+            finite = np.isfinite(rs).tolist()
+            for i in np.argsort(-rs).tolist():
+                if not finite[i] or len(picked) >= st.finalists:
                     break
-                if picked and _near(rx[picked], ry[picked], rt[picked], h, st).any():
+                row = close[i]
+                if any(row[j] for j in picked):
                     continue
-                picked.append(int(i))
+                picked.append(i)
         # One polish: the main mode, the tracked alternatives, the finalists.
         ax, ay, at = self._centres() if self.count else (np.empty(0),) * 3
         a = ax.size
@@ -806,7 +787,7 @@ class EvidenceTracker:
                 np.concatenate([[mx], qx[:a]]),
                 np.concatenate([[my], qy[:a]]),
                 np.concatenate([[mt], qt[:a]]),
-                segment,
+                self.window(newest=segment_frames, stride=1),
             )
             self.seg = self.seg + (on_segment[1:] - on_segment[0])
         self._recentre(main_pose, (qx[:a], qy[:a], qt[:a]))
@@ -979,6 +960,89 @@ class EvidenceTracker:
         return nx, ny, nt
 
 
+#: The pattern search's 27 steps (x, y, heading; each -1, 0 or +1), shape (3, 27), in
+#: the order of ``np.meshgrid``'s grid flattened: the search takes the first of equal
+#: candidates, so the order is part of its result.
+PATTERN = np.array(np.meshgrid([-1.0, 0.0, 1.0], [-1.0, 0.0, 1.0], [-1.0, 0.0, 1.0])).reshape(3, -1)
+
+
+def pattern_search_reference(
+    x: NDArray[np.float64],
+    y: NDArray[np.float64],
+    t: NDArray[np.float64],
+    pattern: NDArray[np.float64],
+    step_m: float,
+    step_rad: float,
+    rounds: int,
+    window: sensor_kernel.ObservationWindow,
+    semantic_map: SemanticMap,
+    config: FilterConfig,
+    grid: VisibilityGrid | None = None,
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """The pattern search of :meth:`EvidenceTracker._polished` in numpy, the definition
+    :func:`~app.localization.sensor_kernel.window_pattern_search` computes: each round
+    scores every step of ``pattern`` (3, K) around every pose over the window, -inf
+    outside the free space, moves each pose to its best step (the first of equals) if
+    that beats its score, keeps the larger score, and halves the steps."""
+    dx, dy, dt = pattern
+    m = x.shape[0]
+    k = dx.size
+    score = sensor_kernel.window_log_likelihood(x, y, t, window, semantic_map, config, grid)
+    rows = np.arange(m)
+    for _ in range(rounds):
+        jx = x[:, None] + step_m * dx[None, :]
+        jy = y[:, None] + step_m * dy[None, :]
+        jt = wrap_angle(t[:, None] + step_rad * dt[None, :])
+        js = sensor_kernel.window_log_likelihood(
+            jx.reshape(-1), jy.reshape(-1), jt.reshape(-1), window, semantic_map, config, grid
+        )
+        js = np.where(semantic_map.free_space.is_free(jx, jy), js.reshape(m, k), -np.inf)
+        best = np.argmax(js, axis=1)
+        better = js[rows, best] > score
+        x = np.where(better, jx[rows, best], x)
+        y = np.where(better, jy[rows, best], y)
+        t = np.where(better, jt[rows, best], t)
+        score = np.maximum(score, js[rows, best])
+        step_m, step_rad = step_m / 2.0, step_rad / 2.0
+    return x, y, t, score
+
+
+def jitter_search_reference(
+    x: NDArray[np.float64],
+    y: NDArray[np.float64],
+    t: NDArray[np.float64],
+    jitter: Sequence[tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]],
+    window: sensor_kernel.ObservationWindow,
+    semantic_map: SemanticMap,
+    config: FilterConfig,
+    grid: VisibilityGrid | None = None,
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """The jitter search of :meth:`EvidenceTracker._refined` in numpy, the definition
+    :func:`~app.localization.sensor_kernel.window_jitter_search` computes: each round
+    adds its offsets (x, y, heading; each (N, K)) to the poses, scores the copies over
+    the window, -inf outside the free space, and moves each pose to its best copy (the
+    first of equals) if that beats its score."""
+    score = sensor_kernel.window_log_likelihood(x, y, t, window, semantic_map, config, grid)
+    m = x.shape[0]
+    rows = np.arange(m)
+    for ox, oy, ot in jitter:
+        k = ox.shape[1]
+        jx = x[:, None] + ox
+        jy = y[:, None] + oy
+        jt = wrap_angle(t[:, None] + ot)
+        js = sensor_kernel.window_log_likelihood(
+            jx.reshape(-1), jy.reshape(-1), jt.reshape(-1), window, semantic_map, config, grid
+        )
+        js = np.where(semantic_map.free_space.is_free(jx, jy), js.reshape(m, k), -np.inf)
+        best = np.argmax(js, axis=1)
+        better = js[rows, best] > score
+        x = np.where(better, jx[rows, best], x)
+        y = np.where(better, jy[rows, best], y)
+        t = np.where(better, jt[rows, best], t)
+        score = np.where(better, js[rows, best], score)
+    return x, y, t, score
+
+
 def _same_place(x: float, y: float, t: float, h: Hypothesis, st: EvidenceSettings) -> bool:
     """:func:`_near` for one pose, in plain float arithmetic (it runs several times a
     frame, where numpy's overhead on scalars was most of its cost)."""
@@ -1004,6 +1068,17 @@ def _near(
     """Whether poses are the same place as ``h`` (within ``distinct_m`` and ``_rad``)."""
     return (np.hypot(np.asarray(x) - h.x, np.asarray(y) - h.y) < st.distinct_m) & (
         np.abs(wrap_angle(np.asarray(t) - h.theta_rad)) < st.distinct_rad
+    )
+
+
+def _near_pairs(
+    x: NDArray[np.float64], y: NDArray[np.float64], t: NDArray[np.float64], st: EvidenceSettings
+) -> NDArray[np.bool_]:
+    """:func:`_near` of every pose against every pose, shape (N, N): row ``i`` is
+    ``_near(x, y, t, pose i)``, with the same arithmetic (one call instead of one a
+    pose)."""
+    return (np.hypot(x[None, :] - x[:, None], y[None, :] - y[:, None]) < st.distinct_m) & (
+        np.abs(wrap_angle(t[None, :] - t[:, None])) < st.distinct_rad
     )
 
 

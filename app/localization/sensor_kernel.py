@@ -11,8 +11,16 @@ log-likelihoods are summed (eq. 2). Inner loops run over particles and are branc
 so that they vectorize. The result differs from the float64 reference by float32
 rounding only, within the bound that
 :func:`app.localization.tolerances.log_likelihood_tolerance` derives (a few 1e-3 in
-log-likelihood where weights matter). Compiled code is cached on disk;
-:func:`warm_up` compiles it at start-up so no request waits.
+log-likelihood where weights matter).
+
+The evidence tracker scores poses over a window of recent frames
+(:func:`window_log_likelihood`) and searches around them there: a pattern search
+(:func:`window_pattern_search`) and a refinement among jittered copies
+(:func:`window_jitter_search`). Each search runs whole, every round, in one compiled
+call to :func:`_window_search` (a search of no rounds is the plain window score), with
+numpy's arithmetic to the bit: the searches' numpy definitions are in
+:mod:`app.localization.evidence`. Compiled code is cached on disk;
+:func:`app.localization.filter.warm_up` compiles it at start-up so no request waits.
 """
 
 from __future__ import annotations
@@ -29,6 +37,7 @@ from app.localization.compass import CompassReading, compass_terms
 from app.localization.config import FilterConfig
 from app.localization.fastmath import FAST, grid_cell, sincos, softplus
 from app.localization.sensor import Observation
+from app.maps.geometry import wrap_scalar
 from app.maps.model import SemanticMap
 from app.maps.visibility import VisibilityGrid
 
@@ -229,6 +238,15 @@ def log_likelihood(
 
 
 # ------------------------------------------------------------------ windows
+#: An :class:`ObservationWindow`'s arrays as one tuple (:attr:`ObservationWindow.arrays`).
+WindowArrays = tuple[
+    NDArray[np.float64], NDArray[np.int64], NDArray[np.int64], NDArray[np.int64],
+    NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64],
+    NDArray[np.int64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64],
+    NDArray[np.float64], NDArray[np.int64], NDArray[np.int64],
+]  # fmt: skip
+
+
 @dataclass(frozen=True)
 class ObservationWindow:
     """Several frames' observations, each seen from a pose fixed relative to the one
@@ -263,6 +281,16 @@ class ObservationWindow:
     @property
     def frames(self) -> int:
         return int(self.rel.shape[0])
+
+    @property
+    def arrays(self) -> WindowArrays:
+        """The arrays in the order the compiled searches unpack them."""
+        return (
+            self.rel, self.det_start, self.group_start, self.start_of_frame, self.compass,
+            self.det_cos, self.det_sin, self.det_score, self.det_group,
+            self.group_kappa, self.group_weight, self.group_log_floor, self.group_log_keep,
+            self.member_start, self.members,
+        )  # fmt: skip
 
 
 def pack_window(
@@ -355,6 +383,148 @@ def _window_kernel(
                 out[i] += hi + np.log1p(np.exp(-abs(vm - log_floor)))
 
 
+# ----------------------------------------------------------- local searches
+@njit(cache=True, nogil=True, inline="always")
+def _score(x, y, theta, window, setup, out):  # fmt: skip  # pragma: no cover - compiled
+    """:func:`_window_kernel` with the window's arrays and the sensor setup as tuples
+    (:attr:`ObservationWindow.arrays`, :func:`_sensor_setup`)."""
+    rel, det_start, group_start, start_of_frame, compass = window[:5]
+    det_cos, det_sin, det_score, det_group = window[5:9]
+    group_kappa, group_weight, group_log_floor, group_log_keep = window[9:13]
+    member_start, members = window[13], window[14]
+    use_vis, grid, vis_bits, cos_half_fov, check_fov, fov_cos, fov_sin = setup[:7]
+    max_range_sq, obj_xy = setup[7], setup[8]
+    _window_kernel(
+        x, y, theta, rel, det_start, group_start, start_of_frame, compass,
+        use_vis, grid, vis_bits, cos_half_fov, check_fov, fov_cos, fov_sin, max_range_sq, obj_xy,
+        det_cos, det_sin, det_score, det_group,
+        group_kappa, group_weight, group_log_floor, group_log_keep, member_start, members, out,
+    )  # fmt: skip
+
+
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _move_to_best(
+    x, y, theta, score, cx, cy, ct, keep_max, free, free_grid, window, setup, js,
+):  # fmt: skip  # pragma: no cover - compiled
+    """One round of a local search, in place: score the candidates ``cx, cy, ct`` (the
+    same number for each pose, pose after pose) over the window, -inf outside the free
+    space, and move each pose to its best candidate (the first of equals, or the first
+    NaN, as ``np.argmax`` picks) if that beats the pose's score. The score becomes the
+    best candidate's where it won, and with ``keep_max`` also where that is NaN (what
+    ``np.maximum`` gives)."""
+    if not cx.shape[0]:
+        return  # no candidates (a round of no copies): every pose stays
+    _score(cx, cy, ct, window, setup, js)
+    ox, oy, inv_res, rows, cols = free_grid
+    for i in range(cx.shape[0]):
+        cell, inside = grid_cell(cx[i], cy[i], ox, oy, inv_res, rows, cols)
+        if not (inside and free[int(cell)]):
+            js[i] = -np.inf
+    m = x.shape[0]
+    k = cx.shape[0] // m
+    for p in range(m):
+        b = p * k
+        for j in range(p * k + 1, p * k + k):
+            if js[b] != js[b]:
+                break
+            if js[j] > js[b] or js[j] != js[j]:
+                b = j
+        best = js[b]
+        better = best > score[p]
+        if better:
+            x[p], y[p], theta[p] = cx[b], cy[b], ct[b]
+        if better or (keep_max and best != best):
+            score[p] = best
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _window_search(
+    x, y, theta, counts, jitter, pattern, step_m, step_rad, rounds, free, free_grid, window,
+    setup, score,
+):  # fmt: skip  # pragma: no cover - compiled
+    """Window scores of the poses (x, y, theta moved in place, ``score`` written), then
+    the jitter rounds (``counts`` copies per pose each, offsets in the columns of
+    ``jitter``, shape (3, N * sum(counts))), then ``rounds`` rounds of the steps
+    ``pattern`` (3, K) scaled by ``step_m``, ``step_rad``, halved each round.
+
+    ``free`` is the free-space mask flattened, ``free_grid`` its grid; ``window`` and
+    ``setup`` are :attr:`ObservationWindow.arrays` and :func:`_sensor_setup`'s tuple.
+    Not fast-math: the candidates' sums and the wrap round as numpy's do (the scoring
+    inside, :func:`_window_kernel`, keeps its own liberties and so its own numbers).
+    """
+    m = x.shape[0]
+    _score(x, y, theta, window, setup, score)
+    # Jitter rounds: round r adds columns start:start + m * counts[r] of ``jitter``.
+    start = 0
+    for r in range(counts.shape[0]):
+        n = m * counts[r]
+        cx, cy, ct, js = np.empty(n), np.empty(n), np.empty(n), np.empty(n)
+        for i in range(n):
+            p = i // counts[r]
+            cx[i] = x[p] + jitter[0, start + i]
+            cy[i] = y[p] + jitter[1, start + i]
+            ct[i] = wrap_scalar(theta[p] + jitter[2, start + i])
+        _move_to_best(x, y, theta, score, cx, cy, ct, False, free, free_grid, window, setup, js)
+        start += n
+    # Pattern rounds: every step of ``pattern`` around every pose, the steps halved.
+    k = pattern.shape[1]
+    cx, cy, ct, js = np.empty(m * k), np.empty(m * k), np.empty(m * k), np.empty(m * k)
+    for _ in range(rounds):
+        for p in range(m):
+            for j in range(k):
+                i = p * k + j
+                cx[i] = x[p] + step_m * pattern[0, j]
+                cy[i] = y[p] + step_m * pattern[1, j]
+                ct[i] = wrap_scalar(theta[p] + step_rad * pattern[2, j])
+        _move_to_best(x, y, theta, score, cx, cy, ct, True, free, free_grid, window, setup, js)
+        step_m, step_rad = step_m / 2.0, step_rad / 2.0
+
+
+def _free_space_setup(
+    semantic_map: SemanticMap,
+) -> tuple[NDArray[np.bool_], tuple[float, float, float, float, float]]:
+    """The free-space mask flattened row-major, and its grid (origin x, origin y,
+    1 / resolution, rows, cols) as floats, one compiled signature for every map: the
+    numbers :meth:`~app.maps.freespace.FreeSpaceGrid.is_free` gives
+    :func:`~app.maps.geometry.grid_cell` (which compares and multiplies the counts as
+    floats anyway), so both put every point into the same cell."""
+    fs = semantic_map.free_space
+    rows, cols = fs.mask.shape
+    grid = (float(fs.origin_x), float(fs.origin_y), 1.0 / fs.resolution_m, float(rows), float(cols))
+    return fs.mask.reshape(-1), grid
+
+
+#: No jitter rounds, no pattern steps: what :func:`window_log_likelihood` passes.
+_NO_COUNTS = np.empty(0, dtype=np.int64)
+_NO_STEPS = np.empty((3, 0))
+
+
+def _searched(
+    x: NDArray[np.float64],
+    y: NDArray[np.float64],
+    theta: NDArray[np.float64],
+    counts: NDArray[np.int64],
+    jitter: NDArray[np.float64],
+    pattern: NDArray[np.float64],
+    step_m: float,
+    step_rad: float,
+    rounds: int,
+    window: ObservationWindow,
+    semantic_map: SemanticMap,
+    config: FilterConfig,
+    grid: VisibilityGrid | None,
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """One call of :func:`_window_search` on copies of the poses: (x, y, theta, score)."""
+    x, y, theta = (np.array(v, dtype=np.float64) for v in (x, y, theta))
+    score = np.empty(x.shape[0])
+    _window_search(
+        x, y, theta, counts, jitter, np.ascontiguousarray(pattern, dtype=np.float64),
+        float(step_m), float(step_rad), int(rounds), *_free_space_setup(semantic_map),
+        window.arrays, _sensor_setup(semantic_map, config, grid), score,
+    )  # fmt: skip
+    return x, y, theta, score
+
+
 def window_log_likelihood(
     x: NDArray[np.float64],
     y: NDArray[np.float64],
@@ -365,19 +535,77 @@ def window_log_likelihood(
     grid: VisibilityGrid | None = None,
 ) -> NDArray[np.float64]:
     """Sum over the window's frames of log P(Z_f | pose ⊕ rel_f, M) (and the compass's
-    log-likelihood where a frame has one), one compiled call, shape (N,)."""
-    out = np.zeros(x.shape[0], dtype=np.float64)
+    log-likelihood where a frame has one), one compiled call, shape (N,).
+
+    The call is the local searches' (:func:`window_pattern_search`) with no rounds: the
+    window's scoring and its searches are one compiled function, so compiling one (the
+    start-up warm-up scores a window) compiles both.
+    """
     if not window.frames or not x.shape[0]:
-        return out
-    w = window
-    _window_kernel(
-        np.ascontiguousarray(x, dtype=np.float64),
-        np.ascontiguousarray(y, dtype=np.float64),
-        np.ascontiguousarray(theta, dtype=np.float64),
-        w.rel, w.det_start, w.group_start, w.start_of_frame, w.compass,
-        *_sensor_setup(semantic_map, config, grid),
-        w.det_cos, w.det_sin, w.det_score, w.det_group,
-        w.group_kappa, w.group_weight, w.group_log_floor, w.group_log_keep,
-        w.member_start, w.members, out,
+        return np.zeros(x.shape[0], dtype=np.float64)
+    return _searched(
+        x, y, theta, _NO_COUNTS, _NO_STEPS, _NO_STEPS, 0.0, 0.0, 0,
+        window, semantic_map, config, grid,
+    )[3]  # fmt: skip
+
+
+def window_pattern_search(
+    x: NDArray[np.float64],
+    y: NDArray[np.float64],
+    theta: NDArray[np.float64],
+    pattern: NDArray[np.float64],
+    step_m: float,
+    step_rad: float,
+    rounds: int,
+    window: ObservationWindow,
+    semantic_map: SemanticMap,
+    config: FilterConfig,
+    grid: VisibilityGrid | None = None,
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """Pattern search over the window, every round in one compiled call.
+
+    Each round tries the steps ``pattern`` (shape (3, K): x, y, heading, in units of the
+    round's steps) around every pose, wraps the headings, moves each pose to its best
+    candidate in the free space if that beats its window score, keeps the larger
+    score, and halves the steps (``step_m``, ``step_rad`` the first round's). The
+    arithmetic is the numpy definition's,
+    :func:`app.localization.evidence.pattern_search_reference`, to the bit. Returns the
+    poses and their window scores, each shape (N,).
+    """
+    return _searched(
+        x, y, theta, _NO_COUNTS, _NO_STEPS, pattern, step_m, step_rad, rounds,
+        window, semantic_map, config, grid,
     )  # fmt: skip
-    return out
+
+
+def window_jitter_search(
+    x: NDArray[np.float64],
+    y: NDArray[np.float64],
+    theta: NDArray[np.float64],
+    jitter: Sequence[tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]],
+    window: ObservationWindow,
+    semantic_map: SemanticMap,
+    config: FilterConfig,
+    grid: VisibilityGrid | None = None,
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """Each pose moved to the best of its jittered copies, round after round, in one
+    compiled call.
+
+    ``jitter`` holds each round's offsets (x, y, heading), each shape (N, K) for K
+    copies per pose: drawn beforehand, since they do not depend on the search. A copy
+    replaces its pose when it lies in the free space and beats the pose's window score.
+    The arithmetic is the numpy definition's,
+    :func:`app.localization.evidence.jitter_search_reference`, to the bit. Returns the
+    poses and their window scores, each shape (N,).
+    """
+    counts = np.array([ox.shape[1] for ox, _, _ in jitter], dtype=np.int64)
+    offsets = np.empty((3, x.shape[0] * int(counts.sum())))
+    start = 0
+    for round_offsets in jitter:
+        n = round_offsets[0].size
+        for row, part in zip(offsets, round_offsets, strict=True):
+            row[start : start + n] = part.reshape(-1)
+        start += n
+    return _searched(
+        x, y, theta, counts, offsets, _NO_STEPS, 0.0, 0.0, 0, window, semantic_map, config, grid
+    )

@@ -9,12 +9,22 @@ import numpy as np
 import pytest
 
 from app.experiments.hard_maps import rotation_room
+from app.localization import sensor_kernel
 from app.localization.compass import CompassReading, compass_log_likelihood, compass_terms
 from app.localization.config import FilterConfig
+from app.localization.evidence import (
+    DEFAULT_EVIDENCE,
+    PATTERN,
+    EvidenceTracker,
+    _near,
+    _near_pairs,
+    jitter_search_reference,
+    pattern_search_reference,
+)
 from app.localization.filter import ParticleFilter
 from app.localization.sensor import log_likelihood_reference, prepare_observation
 from app.localization.tolerances import U64, candidate_flip_mask, log_likelihood_tolerance
-from app.localization.types import Odometry
+from app.localization.types import Hypothesis, Odometry
 from app.maps.model import SemanticMap
 from app.simulation.scenarios import paper_config
 from app.simulation.simulator import SimulationConfig, simulate
@@ -95,6 +105,132 @@ def test_window_score_is_the_chained_sum_of_frames(paper_office: SemanticMap, fo
     assert np.array_equal(np.isfinite(got[sure]), np.isfinite(want[sure]))
     assert (np.abs(got[finite] - want[finite]) <= bound[finite]).all()
     assert np.ptp(want[finite]) > 10.0  # the poses really differ
+
+
+def search_windows(m: SemanticMap) -> list[EvidenceTracker]:
+    """Trackers holding a walk's history, each with its case: a full camera and a
+    compass; a 90 deg camera with clutter and misses; visibility off (no grid); a
+    compass alone (every position of a heading scores the same: ties); no frames."""
+    cases = [
+        ("360, compass", FilterConfig(), dict(compass_std_deg=10.0)),
+        ("90, clutter", FilterConfig(fov_deg=90.0), dict(false_rate=1.0, miss_prob=0.2)),
+        ("no visibility", FilterConfig(visibility=False), {}),
+        ("compass only", FilterConfig(), dict(compass_std_deg=10.0)),
+        ("no frames", FilterConfig(), {}),
+    ]
+    out = []
+    for seed, (name, cfg, sim_changes) in enumerate(cases):
+        sim = replace(paper_config("nominal", cfg.fov_deg), duration_s=4.0, **sim_changes)
+        grid = m.visibility if cfg.visibility else None
+        tracker = EvidenceTracker(m, cfg, grid, np.random.default_rng(seed))
+        frames = [] if name == "no frames" else simulate(m, sim, np.random.default_rng(seed))
+        for f in frames[:12]:
+            heading = None if f.compass_rad is None else CompassReading(f.compass_rad, 0.2)
+            detections = [] if name == "compass only" else f.detections
+            tracker._history.append((f.odometry, prepare_observation(detections, m, cfg), heading))
+        out.append(tracker)
+    return out
+
+
+def search_poses(m: SemanticMap, rng: np.random.Generator, n: int):
+    """Poses to search from: most in the free space, some anywhere in and around the
+    map (walls, outside, off the free-space grid), two repeated, one heading NaN (a
+    NaN score: the first one wins, as np.argmax picks it)."""
+    inside = m.free_space.sample(n - n // 4, rng)
+    lo_x, lo_y, hi_x, hi_y = m.bounds
+    x = np.concatenate([inside[:, 0], rng.uniform(lo_x - 2.0, hi_x + 2.0, n // 4)])
+    y = np.concatenate([inside[:, 1], rng.uniform(lo_y - 2.0, hi_y + 2.0, n // 4)])
+    t = rng.uniform(-np.pi, np.pi, n)
+    x[1], y[1], t[1] = x[0], y[0], t[0]
+    t[2] = np.nan
+    return x, y, t
+
+
+def assert_same_numbers(got, want) -> None:
+    """Equal to the bit, NaN where NaN (a NaN's payload is not a number)."""
+    for g, w in zip(got, want, strict=True):
+        assert g.shape == w.shape
+        assert np.array_equal(np.isnan(g), np.isnan(w))
+        ok = ~np.isnan(w)
+        assert np.array_equal(g[ok].view(np.int64), w[ok].view(np.int64))
+
+
+def test_compiled_pattern_search_is_the_reference(paper_office: SemanticMap) -> None:
+    """The compiled pattern search does the numpy definition's arithmetic: the same
+    candidates, wrap, free-space test, tie rule and updates give the same bits, for
+    the polish's own steps and for coarse random ones (more candidates off the free
+    space) over windows of every kind; and a step to a NaN heading (a NaN score, which
+    wins as np.argmax picks it and stays as np.maximum keeps it) does what numpy does."""
+    rng = np.random.default_rng(11)
+    moved = off_free = 0
+    for tracker in search_windows(paper_office):
+        window = tracker.window()
+        for trial in range(6):
+            x, y, t = search_poses(paper_office, rng, int(rng.integers(3, 40)))
+            if trial == 0:
+                steps = (DEFAULT_EVIDENCE.polish_step_m, DEFAULT_EVIDENCE.polish_step_rad, 8)
+            else:
+                steps = (rng.uniform(0.05, 2.0), rng.uniform(0.01, 1.5), int(rng.integers(1, 9)))
+            pattern = PATTERN if trial != 1 else np.insert(PATTERN, 13, [0, 0, np.nan], axis=1)
+            args = (window, paper_office, tracker.config, tracker.grid)
+            got = sensor_kernel.window_pattern_search(x, y, t, pattern, *steps, *args)
+            want = pattern_search_reference(x, y, t, pattern, *steps, *args)
+            assert_same_numbers(got, want)
+            if trial == 0:  # the polish is this search
+                assert_same_numbers(tracker._polished(x, y, t, window), want)
+            moved += int(np.count_nonzero((got[0] != x) | (got[1] != y)))
+            off_free += int(np.count_nonzero(~paper_office.free_space.is_free(x, y)))
+    assert moved > 100 and off_free > 50  # the searches really moved, from everywhere
+
+
+def test_compiled_jitter_search_is_the_reference(paper_office: SemanticMap) -> None:
+    """The compiled jitter search gives the numpy definition's bits for random rounds
+    of copies (one copy's heading NaN: its NaN score wins the pose's round, as
+    np.argmax picks it, and changes nothing); the refinement draws its jitter as the
+    definition consumes it (per round x, y, heading), so it ends in the same poses and
+    the same generator state."""
+    rng = np.random.default_rng(12)
+    for tracker in search_windows(paper_office):
+        window = tracker.window()
+        args = (window, paper_office, tracker.config, tracker.grid)
+        for _ in range(6):
+            x, y, t = search_poses(paper_office, rng, int(rng.integers(3, 40)))
+            jitter = [
+                tuple(rng.normal(0.0, std, (x.size, count)) for std in (0.5, 0.5, 0.3))
+                for count in rng.integers(1, 20, int(rng.integers(1, 4)))
+            ]
+            jitter[0][2][0, -1] = np.nan
+            got = sensor_kernel.window_jitter_search(x, y, t, jitter, *args)
+            assert_same_numbers(got, jitter_search_reference(x, y, t, jitter, *args))
+        rounds = ((16, 0.2, 0.1), (5, 0.05, 0.02))
+        tracker.rng = np.random.default_rng(13)
+        got = tracker._refined(x, y, t, rounds, window)
+        drawn = np.random.default_rng(13)
+        jitter = [
+            tuple(drawn.normal(0.0, std, (x.size, count)) for std in (s_m, s_m, s_rad))
+            for count, s_m, s_rad in rounds
+        ]
+        assert_same_numbers(got, jitter_search_reference(x, y, t, jitter, *args))
+        assert tracker.rng.bit_generator.state == drawn.bit_generator.state
+
+
+def test_near_pairs_is_near_of_every_pose() -> None:
+    """The search's finalists are told apart by one call for all pairs: row i is what
+    _near says of every pose against pose i, also at the thresholds themselves."""
+    st = DEFAULT_EVIDENCE
+    rng = np.random.default_rng(14)
+    x, y = rng.uniform(0.0, 3.0, 60), rng.uniform(0.0, 3.0, 60)
+    t = rng.uniform(-np.pi, np.pi, 60)
+    # Pairs exactly a threshold apart (and wrapped across +-pi).
+    x[1], y[1], t[1] = x[0] + st.distinct_m, y[0], t[0]
+    x[3], y[3], t[3] = x[2], y[2], t[2] + st.distinct_rad
+    x[5], y[5], t[5] = x[4], y[4], np.pi - st.distinct_rad / 2
+    t[4] = -np.pi + st.distinct_rad / 2
+    pairs = _near_pairs(x, y, t, st)
+    for i in range(x.size):
+        h = Hypothesis(float(x[i]), float(y[i]), float(t[i]), 0.0)
+        assert np.array_equal(pairs[i], _near(x, y, t, h, st))
+    assert 60 < np.count_nonzero(pairs) < 60 * 60  # some pairs near, most not
 
 
 @pytest.mark.parametrize("seed", [0, 1])
