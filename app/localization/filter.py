@@ -27,7 +27,7 @@ from app.localization.estimate import (
     protection_radius,
     with_alternatives,
 )
-from app.localization.evidence import EvidenceTracker
+from app.localization.evidence import PATTERN, EvidenceTracker
 from app.localization.kld import kld_sample_size
 from app.localization.motion import penalized, sample_motion
 from app.localization.recovery import AugmentedMCL, sample_from_observation
@@ -544,6 +544,9 @@ def warm_up() -> None:
         compass = CompassReading(0.0, 0.1)
         window = sensor_kernel.pack_window([((0.0, 0.0, 0.0), obs, compass)])
         sensor_kernel.window_log_likelihood(pf.x, pf.y, pf.theta, window, tiny, cfg, pf._vis)
+        sensor_kernel.window_pattern_search(
+            pf.x[:2], pf.y[:2], pf.theta[:2], PATTERN, 0.1, 0.1, 1, window, tiny, cfg, pf._vis
+        )
         est = estimate_pose(pf.x, pf.y, pf.theta, pf.weights, rng=pf.rng, max_points=10)
         protection_radius(pf.x, pf.y, pf.weights, est, pf.rng)
         kld_sample_size(pf.x, pf.y, pf.theta, pf.weights, 10, 50)

@@ -494,7 +494,7 @@ def _free_space_setup(
     return fs.mask.reshape(-1), grid
 
 
-#: No jitter rounds, no pattern steps: what :func:`window_log_likelihood` passes.
+#: No jitter rounds, or no pattern steps.
 _NO_COUNTS = np.empty(0, dtype=np.int64)
 _NO_STEPS = np.empty((3, 0))
 
@@ -535,18 +535,22 @@ def window_log_likelihood(
     grid: VisibilityGrid | None = None,
 ) -> NDArray[np.float64]:
     """Sum over the window's frames of log P(Z_f | pose ⊕ rel_f, M) (and the compass's
-    log-likelihood where a frame has one), one compiled call, shape (N,).
-
-    The call is the local searches' (:func:`window_pattern_search`) with no rounds: the
-    window's scoring and its searches are one compiled function, so compiling one (the
-    start-up warm-up scores a window) compiles both.
-    """
+    log-likelihood where a frame has one), one compiled call, shape (N,)."""
+    out = np.zeros(x.shape[0], dtype=np.float64)
     if not window.frames or not x.shape[0]:
-        return np.zeros(x.shape[0], dtype=np.float64)
-    return _searched(
-        x, y, theta, _NO_COUNTS, _NO_STEPS, _NO_STEPS, 0.0, 0.0, 0,
-        window, semantic_map, config, grid,
-    )[3]  # fmt: skip
+        return out
+    w = window
+    _window_kernel(
+        np.ascontiguousarray(x, dtype=np.float64),
+        np.ascontiguousarray(y, dtype=np.float64),
+        np.ascontiguousarray(theta, dtype=np.float64),
+        w.rel, w.det_start, w.group_start, w.start_of_frame, w.compass,
+        *_sensor_setup(semantic_map, config, grid),
+        w.det_cos, w.det_sin, w.det_score, w.det_group,
+        w.group_kappa, w.group_weight, w.group_log_floor, w.group_log_keep,
+        w.member_start, w.members, out,
+    )  # fmt: skip
+    return out
 
 
 def window_pattern_search(
