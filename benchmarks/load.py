@@ -102,9 +102,11 @@ async def one_session(
     async with httpx.AsyncClient(base_url=f"http://{url}", timeout=30) as http:
         body = {"map": "paper_office", "particles": particles, "seed": seed}
         r = await http.post("/sessions", json=body)
-        for _ in range(10):  # a busy worker says 503 and when to come back, as an app would
-            if r.status_code != 503:
-                break
+        # A busy worker says 503 and when to come back; an app comes back, for a minute
+        # (ten tries were not enough while 120 sessions localized from nothing at once:
+        # the sessions given up on left the steady load short of what was asked).
+        patience = time.perf_counter() + 60.0
+        while r.status_code == 503 and time.perf_counter() < patience:
             await asyncio.sleep(float(r.headers.get("retry-after", 1.0)))
             r = await http.post("/sessions", json=body)
         r.raise_for_status()
