@@ -985,24 +985,13 @@ def pattern_search_reference(
     outside the free space, moves each pose to its best step (the first of equals) if
     that beats its score, keeps the larger score, and halves the steps."""
     dx, dy, dt = pattern
-    m = x.shape[0]
-    k = dx.size
+    scoring = (window, semantic_map, config, grid)
     score = sensor_kernel.window_log_likelihood(x, y, t, window, semantic_map, config, grid)
-    rows = np.arange(m)
     for _ in range(rounds):
         jx = x[:, None] + step_m * dx[None, :]
         jy = y[:, None] + step_m * dy[None, :]
         jt = wrap_angle(t[:, None] + step_rad * dt[None, :])
-        js = sensor_kernel.window_log_likelihood(
-            jx.reshape(-1), jy.reshape(-1), jt.reshape(-1), window, semantic_map, config, grid
-        )
-        js = np.where(semantic_map.free_space.is_free(jx, jy), js.reshape(m, k), -np.inf)
-        best = np.argmax(js, axis=1)
-        better = js[rows, best] > score
-        x = np.where(better, jx[rows, best], x)
-        y = np.where(better, jy[rows, best], y)
-        t = np.where(better, jt[rows, best], t)
-        score = np.maximum(score, js[rows, best])
+        x, y, t, score = _best_candidates(x, y, t, score, jx, jy, jt, True, scoring)
         step_m, step_rad = step_m / 2.0, step_rad / 2.0
     return x, y, t, score
 
@@ -1022,25 +1011,49 @@ def jitter_search_reference(
     adds its offsets (x, y, heading; each (N, K)) to the poses, scores the copies over
     the window, -inf outside the free space, and moves each pose to its best copy (the
     first of equals) if that beats its score."""
+    scoring = (window, semantic_map, config, grid)
     score = sensor_kernel.window_log_likelihood(x, y, t, window, semantic_map, config, grid)
-    m = x.shape[0]
-    rows = np.arange(m)
     for ox, oy, ot in jitter:
-        k = ox.shape[1]
         jx = x[:, None] + ox
         jy = y[:, None] + oy
         jt = wrap_angle(t[:, None] + ot)
-        js = sensor_kernel.window_log_likelihood(
-            jx.reshape(-1), jy.reshape(-1), jt.reshape(-1), window, semantic_map, config, grid
-        )
-        js = np.where(semantic_map.free_space.is_free(jx, jy), js.reshape(m, k), -np.inf)
-        best = np.argmax(js, axis=1)
-        better = js[rows, best] > score
-        x = np.where(better, jx[rows, best], x)
-        y = np.where(better, jy[rows, best], y)
-        t = np.where(better, jt[rows, best], t)
-        score = np.where(better, js[rows, best], score)
+        x, y, t, score = _best_candidates(x, y, t, score, jx, jy, jt, False, scoring)
     return x, y, t, score
+
+
+#: What scores a pose over a window: the window, the map, the configuration, the grid.
+_Scoring = tuple[sensor_kernel.ObservationWindow, SemanticMap, FilterConfig, VisibilityGrid | None]
+
+
+def _best_candidates(
+    x: NDArray[np.float64],
+    y: NDArray[np.float64],
+    t: NDArray[np.float64],
+    score: NDArray[np.float64],
+    jx: NDArray[np.float64],
+    jy: NDArray[np.float64],
+    jt: NDArray[np.float64],
+    keep_max: bool,
+    scoring: _Scoring,
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """One round of the references above: each pose's candidates (row i of ``jx, jy,
+    jt``, shape (N, K)) scored over the window, -inf outside the free space; the pose
+    moves to its best (the first of equals) where that beats its score, which becomes
+    the best's there (and everywhere the larger of the two with ``keep_max``)."""
+    window, semantic_map, config, grid = scoring
+    m, k = jx.shape
+    rows = np.arange(m)
+    js = sensor_kernel.window_log_likelihood(
+        jx.reshape(-1), jy.reshape(-1), jt.reshape(-1), window, semantic_map, config, grid
+    )
+    js = np.where(semantic_map.free_space.is_free(jx, jy), js.reshape(m, k), -np.inf)
+    best = np.argmax(js, axis=1)
+    better = js[rows, best] > score
+    x = np.where(better, jx[rows, best], x)
+    y = np.where(better, jy[rows, best], y)
+    t = np.where(better, jt[rows, best], t)
+    top = js[rows, best]
+    return x, y, t, (np.maximum(score, top) if keep_max else np.where(better, top, score))
 
 
 def _same_place(x: float, y: float, t: float, h: Hypothesis, st: EvidenceSettings) -> bool:
