@@ -286,10 +286,12 @@ class ParticleFilter:
         only adds noise to what they say (and to what the injected particles say).
         """
         self.predict(odometry)
-        inject, w_corrected = self._correct(detections)
+        inject, w = self._correct(detections)
         if heading is not None:
             self.log_w = self.log_w + compass_log_likelihood(self.theta, heading)
-        w = self.weights if heading is not None or w_corrected is None else w_corrected
+            w = None  # the correction's weights no longer hold
+        if w is None:
+            w = self.weights
         ess = effective_sample_size(w)
         raw = estimate_pose(self.x, self.y, self.theta, w, ess=ess, rng=self.rng)
         share, confirmed = 0.0, 0.0

@@ -102,12 +102,10 @@ def _crosses_a_wall(px, py, qx, qy, walls, eps):  # fmt: skip  # pragma: no cove
 @njit(cache=True, nogil=True, error_model="numpy")
 def _free_check(x0, y0, x1, y1, mask, ox, oy, res, long_sq, walls, eps, base, penalty):  # fmt: skip
     """In place: ``penalty`` = ``base`` plus the move's penalty (-inf off the free space
-    or through a wall, else 0; ``base`` may be empty: nothing added). Returns whether
-    any result is finite."""
+    or through a wall, else 0). Returns whether any result is finite."""
     rows, cols = mask.shape
     flat = mask.reshape(-1)
     inv = 1.0 / res
-    added = base.shape[0] > 0
     finite = False
     for i in range(x1.shape[0]):
         cell, inside = grid_cell(x1[i], y1[i], ox, oy, inv, rows, cols)
@@ -116,8 +114,7 @@ def _free_check(x0, y0, x1, y1, mask, ox, oy, res, long_sq, walls, eps, base, pe
         dy = y1[i] - y0[i]
         if free and dx * dx + dy * dy > long_sq:
             free = not _crosses_a_wall(x0[i], y0[i], x1[i], y1[i], walls, eps)
-        step = 0.0 if free else -np.inf
-        penalty[i] = base[i] + step if added else step
+        penalty[i] = base[i] + (0.0 if free else -np.inf)
         finite = finite or np.isfinite(penalty[i])
     return finite
 
@@ -135,7 +132,7 @@ def motion_log_penalty(
     ends in free space can only cross a wall if it is longer than twice that
     (``LONG_MOVE_M``); only those are ray-tested.
     """
-    return penalized(x0, y0, x1, y1, semantic_map, np.empty(0))[0]
+    return penalized(x0, y0, x1, y1, semantic_map, np.zeros(x1.shape[0]))[0]
 
 
 def penalized(
@@ -146,8 +143,7 @@ def penalized(
     semantic_map: SemanticMap,
     log_w: NDArray[np.float64],
 ) -> tuple[NDArray[np.float64], bool]:
-    """``log_w + motion_log_penalty(...)`` (``log_w`` empty: the penalty alone), and
-    whether any of it is finite, in one pass."""
+    """``log_w + motion_log_penalty(...)`` and whether any of it is finite, in one pass."""
     fs = semantic_map.free_space
     out = np.empty(x1.shape[0])
     walls = np.ascontiguousarray(semantic_map.walls, dtype=np.float64).reshape(-1, 4)

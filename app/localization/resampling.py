@@ -24,7 +24,8 @@ def normalized_weights(log_weights: NDArray[np.floating]) -> NDArray[np.float64]
 
 def log_sum_exp(values: NDArray[np.floating]) -> float:
     """log(sum(exp(values))) without overflow; -inf for an empty or all -inf input."""
-    return weights_and_log_sum_exp(values)[1]
+    top, e = _shifted_exp(values)
+    return float(top) if e is None else float(top + np.log(np.add.reduce(e)))
 
 
 def weights_and_log_sum_exp(
@@ -32,17 +33,23 @@ def weights_and_log_sum_exp(
 ) -> tuple[NDArray[np.float64], float]:
     """:func:`normalized_weights` and :func:`log_sum_exp` of the same log-weights, from
     one set of exponentials (the very numbers each would compute alone)."""
-    lw = np.asarray(log_weights, dtype=np.float64)
-    if lw.size == 0:
-        return np.full(lw.shape, 1.0), float("-inf")
-    # The ufuncs' own reductions: the same as .max() and .sum(), without their Python
-    # wrappers (called several times a frame).
-    top = np.maximum.reduce(lw)
-    if not np.isfinite(top):
-        return np.full(lw.shape, 1.0 / lw.size), float(top)
-    e = np.exp(lw - top)
+    top, e = _shifted_exp(log_weights)
+    if e is None:
+        return np.full(np.shape(log_weights), 1.0 / max(np.size(log_weights), 1)), float(top)
     total = np.add.reduce(e)
     return e / total, float(top + np.log(total))
+
+
+def _shifted_exp(values: NDArray[np.floating]) -> tuple[float, NDArray[np.float64] | None]:
+    """The largest value and ``exp(values - largest)``; None instead of the exponentials
+    when there is nothing finite to shift by (no value, or all -inf). The ufuncs' own
+    reductions: the same as .max() and .sum(), without their Python wrappers (called
+    several times a frame)."""
+    v = np.asarray(values, dtype=np.float64)
+    top = np.maximum.reduce(v) if v.size else -np.inf
+    if not np.isfinite(top):
+        return float(top), None
+    return top, np.exp(v - top)
 
 
 def effective_sample_size(weights: NDArray[np.floating]) -> float:

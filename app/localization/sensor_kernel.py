@@ -17,10 +17,10 @@ The evidence tracker scores poses over a window of recent frames
 (:func:`window_log_likelihood`) and searches around them there: a pattern search
 (:func:`window_pattern_search`) and a refinement among jittered copies
 (:func:`window_jitter_search`). Each search runs whole, every round, in one compiled
-call to :func:`_window_search` (a search of no rounds is the plain window score), with
-numpy's arithmetic to the bit: the searches' numpy definitions are in
-:mod:`app.localization.evidence`. Compiled code is cached on disk;
-:func:`app.localization.filter.warm_up` compiles it at start-up so no request waits.
+call to :func:`_window_search`, with numpy's arithmetic to the bit: the searches'
+numpy definitions are in :mod:`app.localization.evidence`. Compiled code is cached on
+disk; :func:`app.localization.filter.warm_up` compiles it at start-up so no request
+waits.
 """
 
 from __future__ import annotations
@@ -539,16 +539,12 @@ def window_log_likelihood(
     out = np.zeros(x.shape[0], dtype=np.float64)
     if not window.frames or not x.shape[0]:
         return out
-    w = window
+    arrays = window.arrays  # the frames' poses and compass first, then the detections
     _window_kernel(
         np.ascontiguousarray(x, dtype=np.float64),
         np.ascontiguousarray(y, dtype=np.float64),
         np.ascontiguousarray(theta, dtype=np.float64),
-        w.rel, w.det_start, w.group_start, w.start_of_frame, w.compass,
-        *_sensor_setup(semantic_map, config, grid),
-        w.det_cos, w.det_sin, w.det_score, w.det_group,
-        w.group_kappa, w.group_weight, w.group_log_floor, w.group_log_keep,
-        w.member_start, w.members, out,
+        *arrays[:5], *_sensor_setup(semantic_map, config, grid), *arrays[5:], out,
     )  # fmt: skip
     return out
 

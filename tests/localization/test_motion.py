@@ -8,7 +8,12 @@ from numpy.random import default_rng
 
 from app.localization.config import FilterConfig
 from app.localization.fastmath import fill_normal
-from app.localization.motion import NO_ODOMETRY_STD_M, motion_log_penalty, sample_motion
+from app.localization.motion import (
+    NO_ODOMETRY_STD_M,
+    motion_log_penalty,
+    penalized,
+    sample_motion,
+)
 from app.localization.tolerances import U64, motion_position_tolerance
 from app.localization.types import Odometry
 from app.maps.geometry import segments_cross_walls
@@ -83,6 +88,21 @@ def test_moves_through_walls_or_off_the_map_are_impossible() -> None:
     y1 = np.array([2.0, 2.0, 1.0, 2.0])
     penalty = motion_log_penalty(x0, y0, x1, y1, m)
     assert penalty.tolist() == [-np.inf, 0.0, 0.0, -np.inf]
+
+
+def test_penalized_weights_are_the_weights_plus_the_penalty() -> None:
+    """The filter's one pass: log-weights plus the move's penalty, and whether any is
+    left finite (none once every move is impossible)."""
+    m = room([{"class": "door", "x": 6, "y": 2}], walls=[{"x1": 3, "y1": 0, "x2": 3, "y2": 4}])
+    x0 = np.array([2.5, 2.5, 1.0, 2.0])
+    y0 = np.array([2.0, 2.0, 1.0, 2.0])
+    x1 = np.array([3.5, 2.8, 1.2, 7.0])
+    y1 = np.array([2.0, 2.0, 1.0, 2.0])
+    log_w = np.array([-1.5, -0.25, -np.inf, 3.0])
+    got, possible = penalized(x0, y0, x1, y1, m, log_w)
+    assert got.tolist() == (log_w + motion_log_penalty(x0, y0, x1, y1, m)).tolist()
+    assert got.tolist() == [-np.inf, -0.25, -np.inf, -np.inf] and possible
+    assert not penalized(x0[[0, 3]], y0[[0, 3]], x1[[0, 3]], y1[[0, 3]], m, log_w[:2])[1]
 
 
 def test_wall_test_of_long_moves_agrees_with_the_geometry_module() -> None:
