@@ -35,7 +35,7 @@ from app.feedback.phrasing import (
     distance_phrase,
 )
 from app.localization.types import Detection, Estimate
-from app.maps.geometry import wrap_angle
+from app.maps.geometry import wrap_rad
 from app.maps.model import SemanticMap
 
 #: Repeat an unchanged announcement after this long (seconds).
@@ -212,9 +212,8 @@ class Narrator:
         )
         ordered, rel, dist = self._ordered_objects(estimate, dets, fov)
         shown = ordered[: opts.max_items]
-        # One wrap_angle call for all items: the same numbers as one call per item.
         turns = [math.atan2(dy, dx) - estimate.theta_rad for dx, dy in rel[shown].tolist()]
-        bearings = [math.degrees(b) for b in wrap_angle(turns).tolist()]
+        bearings = [math.degrees(wrap_rad(t)) for t in turns]
         items = [
             FeedbackItem(
                 self.map.class_of(n),

@@ -28,7 +28,7 @@ from numpy.typing import NDArray
 from app.localization.fastmath import FAST, sincos
 from app.localization.resampling import systematic_indexes
 from app.localization.types import Estimate, Hypothesis
-from app.maps.geometry import wrap_angle
+from app.maps.geometry import wrap_rad
 from app.state import from_plain
 
 
@@ -387,7 +387,7 @@ class ConvergenceGate:
         last = self._last
         self._last = raw
         step = float(np.hypot(raw.x - last.x, raw.y - last.y)) if last is not None else np.inf
-        turn = abs(float(wrap_angle(raw.theta_rad - last.theta_rad))) if last else np.pi
+        turn = abs(wrap_rad(float(raw.theta_rad - last.theta_rad))) if last else np.pi
         if self._held:
             top = raw.hypotheses[0] if raw.hypotheses else None
             light = top is None or top.weight < self.hold_mass
@@ -415,7 +415,7 @@ class ConvergenceGate:
                 self._streak = 0
                 #: Why ``converged`` was last lost (for diagnostics and the suite).
                 self.lost_because = tuple(k for k, v in reasons.items() if v)
-            return replace(raw, converged=self._held)
+            return raw.with_converged(self._held)
         fits = (
             quality is not None
             and quality.fit <= self.gain_fit
@@ -437,7 +437,7 @@ class ConvergenceGate:
             and searched_ago < self._streak
             and alternatives <= self.gain_alternatives
         )
-        return replace(raw, converged=self._held)
+        return raw.with_converged(self._held)
 
 
 #: Probability the protection radius must hold (docs/API.md, FrameResult.protection_m).

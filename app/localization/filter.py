@@ -322,7 +322,7 @@ class ParticleFilter:
         if est.converged:
             reach = self.evidence.farthest_m(est.x, est.y) if self.evidence is not None else 0.0
             radius = protection_radius(self.x, self.y, w, est, self.rng, share, reach)
-            est = replace(est, protection_m=radius)
+            est = est.with_protection(radius)
         self.estimate = est
         self._resample(w, ess, inject)
         self.steps += 1

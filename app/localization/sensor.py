@@ -105,6 +105,45 @@ def _class_terms(std_rad: float, eps: float) -> tuple[float, float, float]:
     return k, (math.log(eps * scaled_bessel_i0(k)) if eps > 0.0 else -math.inf), math.log1p(-eps)
 
 
+#: A frame's class groups: kappa, log floor and log keep per group, then member_start
+#: and members (:class:`Observation`'s fields of those names).
+_Layout = tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.int64], NDArray[np.int64]]  # fmt: skip  # noqa: E501
+#: Layouts kept per map (a session sees the same few sets of classes frame after frame).
+LAYOUT_CACHE = 512
+
+
+def _class_layout(
+    semantic_map: SemanticMap, config: FilterConfig, classes: tuple[str, ...], eps: float
+) -> _Layout:
+    """The per-group arrays of :func:`prepare_observation` that do not depend on the
+    detections themselves, only on which classes were seen; kept per map (a dict on
+    the map's ``derived``), shared by every frame with the same classes and config
+    terms. Nothing writes into an observation's arrays."""
+    key = ("observation", classes, eps, config.bearing_std_deg, tuple(config.class_bearing_std_deg.items()))  # fmt: skip  # noqa: E501
+    cache = semantic_map.derived
+    layout = cache.get(key)
+    if layout is None:
+        kappa, floor, keep, starts, members = [], [], [], [0], []
+        for cls in classes:
+            k, log_floor, log_keep = _class_terms(config.bearing_std_rad(cls), eps)
+            kappa.append(k)
+            floor.append(log_floor)
+            keep.append(log_keep)
+            members.extend(semantic_map.class_members[cls].tolist())
+            starts.append(len(members))
+        layout = (
+            np.array(kappa, dtype=np.float64),
+            np.array(floor, dtype=np.float64),
+            np.array(keep, dtype=np.float64),
+            np.array(starts, dtype=np.int64),
+            np.array(members, dtype=np.int64),
+        )
+        if len(cache) >= LAYOUT_CACHE:
+            cache.pop(next(iter(cache)))
+        cache[key] = layout
+    return layout
+
+
 def prepare_observation(
     detections: Sequence[Detection], semantic_map: SemanticMap, config: FilterConfig
 ) -> Observation:
@@ -119,22 +158,16 @@ def prepare_observation(
             continue
         by_class.setdefault(d.cls, []).append(d)
     classes = tuple(sorted(by_class))
-    bearing_l, score_l, group_l = [], [], []
-    kappa, weight, floor, keep, starts, members = [], [], [], [], [0], []
-    eps = config.clutter_prob if config.clutter else 0.0
+    bearing_l, score_l, group_l, weight = [], [], [], []
     for g, cls in enumerate(classes):
         dets = by_class[cls]
         for d in dets:
             bearing_l.append(float(d.bearing_rad))
             score_l.append(min(float(d.score), 1.0))
             group_l.append(g)
-        k, log_floor, log_keep = _class_terms(config.bearing_std_rad(cls), eps)
-        kappa.append(k)
         weight.append(1.0 / len(dets))
-        floor.append(log_floor)
-        keep.append(log_keep)
-        members.extend(semantic_map.class_members[cls].tolist())
-        starts.append(len(members))
+    eps = config.clutter_prob if config.clutter else 0.0
+    kappa, floor, keep, starts, members = _class_layout(semantic_map, config, classes, eps)
     bearing = np.array(bearing_l, dtype=np.float64)
     return Observation(
         det_bearing=bearing,
@@ -142,12 +175,12 @@ def prepare_observation(
         det_sin=np.sin(bearing),
         det_score=np.array(score_l, dtype=np.float64),
         det_group=np.array(group_l, dtype=np.int64),
-        group_kappa=np.array(kappa, dtype=np.float64),
+        group_kappa=kappa,
         group_weight=np.array(weight, dtype=np.float64),
-        group_log_floor=np.array(floor, dtype=np.float64),
-        group_log_keep=np.array(keep, dtype=np.float64),
-        member_start=np.array(starts, dtype=np.int64),
-        members=np.array(members, dtype=np.int64),
+        group_log_floor=floor,
+        group_log_keep=keep,
+        member_start=starts,
+        members=members,
         classes=classes,
         ignored=tuple(ignored),
     )

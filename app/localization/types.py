@@ -87,3 +87,20 @@ class Estimate:
     n_particles: int = 0
     ess: float = 0.0
     protection_m: float | None = None
+
+    # dataclasses.replace costs about 2.7 us a call (it walks the fields by name); the
+    # filter changes these two fields of every frame's estimate, so they are spelt out
+    # (tests/localization/test_types.py holds them to replace for every field).
+    def with_converged(self, converged: bool) -> Estimate:
+        """This estimate with ``converged`` set."""
+        return Estimate(
+            self.x, self.y, self.theta_rad, self.std_x_m, self.std_y_m, self.std_theta_rad,
+            converged, self.hypotheses, self.n_particles, self.ess, self.protection_m,
+        )  # fmt: skip
+
+    def with_protection(self, protection_m: float | None) -> Estimate:
+        """This estimate with ``protection_m`` set."""
+        return Estimate(
+            self.x, self.y, self.theta_rad, self.std_x_m, self.std_y_m, self.std_theta_rad,
+            self.converged, self.hypotheses, self.n_particles, self.ess, protection_m,
+        )  # fmt: skip

@@ -32,6 +32,22 @@ def wrap_angle(angle_rad: ArrayLike) -> FloatArray:
     return wrapped[0] if a.ndim == 0 else wrapped.reshape(a.shape)
 
 
+def wrap_rad(angle: float) -> float:
+    """:func:`wrap_angle` of one Python float, without numpy: the same IEEE operations
+    (``math.fmod`` is C's ``fmod``, the additions exact), so the same bits, in a tenth
+    of the time of a numpy call (the convergence gate wraps one angle every frame)."""
+    if not math.isfinite(angle):
+        return math.nan  # (math.fmod raises on infinities where C's gives NaN)
+    two_pi = 2.0 * math.pi
+    m = math.fmod(angle + math.pi, two_pi)
+    if m < 0.0:
+        m += two_pi
+    elif m == 0.0:
+        m = 0.0
+    w = m - math.pi
+    return math.pi if w <= -math.pi else w
+
+
 @njit(cache=True, inline="always")
 def wrap_scalar(angle: float) -> float:  # pragma: no cover - compiled
     """:func:`wrap_angle` of one angle, for compiled kernels."""

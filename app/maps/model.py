@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import re
 from functools import cached_property
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -155,6 +155,9 @@ class SemanticMap:
 
     def __init__(self, spec: MapFile, *, grid_resolution_m: float | None = None) -> None:
         self.spec = spec
+        #: Values other modules derive from the map and keep with it (keyed by a tuple
+        #: whose first item names the user), so they go when the map goes.
+        self.derived: dict[tuple[object, ...], Any] = {}
         self.name = spec.name
         self.description = spec.description
         self.walls = np.array(

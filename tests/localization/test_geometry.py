@@ -13,6 +13,7 @@ from app.maps.geometry import (
     segments_cross_walls,
     wrap_angle,
     wrap_deg,
+    wrap_rad,
 )
 
 
@@ -56,6 +57,27 @@ def test_wrap_angle_matches_numpy_mod_to_the_bit_in_any_shape() -> None:
         assert np.float64(got_one).view(np.int64) == np.float64(_numpy_wrap(np.array(v))).view(
             np.int64
         )
+
+
+def test_wrap_rad_matches_the_array_wrap_to_the_bit() -> None:
+    rng = np.random.default_rng(4)
+    values = np.concatenate(
+        [
+            [0.0, -0.0, np.pi, -np.pi, 2 * np.pi, -2 * np.pi, 3 * np.pi, 1e300, -1e300],
+            [5e-324, np.nextafter(np.pi, 0), np.nextafter(-np.pi, 0), np.nextafter(np.pi, 4)],
+            [np.nextafter(-np.pi, -4), np.nan, np.inf, -np.inf],
+            rng.uniform(-10.0, 10.0, 5000),
+            rng.normal(0.0, 1e6, 2000),
+        ]
+    )
+    for v in values.tolist():
+        got = wrap_rad(v)
+        assert isinstance(got, float)
+        want = float(wrap_angle(v))
+        if np.isnan(want):
+            assert np.isnan(got)
+        else:
+            assert np.float64(got).view(np.int64) == np.float64(want).view(np.int64), v
 
 
 def test_wrap_deg_edges() -> None:
