@@ -86,13 +86,19 @@ class UnseenObjects:
         self.expected = np.zeros(n)
         self.seen = np.zeros(n)
         self._at: tuple[float, float] | None = None
+        self._contradicted: bool | None = None  # None: compute from the counts
         #: The last frame's objects in clear view, and how many of them went unreported.
         self.frame_expected = 0
         self.frame_missed = 0
 
     @property
     def contradicted(self) -> bool:
-        """Whether an object in clear view has gone unreported (module docstring)."""
+        """Whether an object in clear view has gone unreported (module docstring).
+
+        After :meth:`update` the frame's kernel has answered it already (the same
+        comparisons, element by element); otherwise it is computed here."""
+        if self._contradicted is not None:
+            return self._contradicted
         st = self.settings
         flagged = (self.expected >= st.min_expected) & (
             self.seen <= st.max_seen_share * self.expected
@@ -123,14 +129,20 @@ class UnseenObjects:
         # C library's that compiled code calls (numpy has its own SIMD version).
         dx = self.map.object_xy[:, 0] - x
         dy = self.map.object_xy[:, 1] - y
-        self.expected, self.seen, self.frame_expected, self.frame_missed = _count_frame(
+        (
+            self.expected,
+            self.seen,
+            self.frame_expected,
+            self.frame_missed,
+            self._contradicted,
+        ) = _count_frame(
             dx, dy, np.arctan2(dy, dx), float(theta), self.map.object_class, self.reported,
             np.ascontiguousarray(visible_row if with_row else self.reported, dtype=np.bool_),
             with_row, fov_check,
             float(np.radians(self.config.fov_centre_deg)),
             float(np.radians(self.config.fov_deg) / 2.0 - st.margin_rad),
             obs.det_bearing, obs.det_group, group_class, obs.group_kappa,
-            st.near_m, st.min_m, st.cutoff_sigmas, st.decay,
+            st.near_m, st.min_m, st.cutoff_sigmas, st.decay, st.min_expected, st.max_seen_share,
             self.reach_m, self.expected, self.seen,
         )  # fmt: skip
 
@@ -156,18 +168,20 @@ class UnseenObjects:
         self.reach_m = np.array(state.get("reach", np.zeros(self.reported.size)), dtype=float)
         at = state["at"]
         self._at = None if at is None else (float(at[0]), float(at[1]))
+        self._contradicted = None
 
 
 @njit(cache=True)
-def _count_frame(dx, dy, direction, theta, object_class, reported, visible_row, with_row, fov_check, fov_centre, half_fov, det_bearing, det_group, group_class, group_kappa, near_m, min_m, cutoff_sigmas, decay, reach, expected, seen):  # fmt: skip  # noqa: E501  # pragma: no cover - compiled
+def _count_frame(dx, dy, direction, theta, object_class, reported, visible_row, with_row, fov_check, fov_centre, half_fov, det_bearing, det_group, group_class, group_kappa, near_m, min_m, cutoff_sigmas, decay, min_expected, max_seen_share, reach, expected, seen):  # fmt: skip  # noqa: E501  # pragma: no cover - compiled
     """One frame's counts at the pose (its offsets ``dx``, ``dy`` to the objects, their
     ``direction`` and the heading ``theta``), with numpy's arithmetic of the
     vectorized form it replaces, element by element (the same bits; compiled because
     the filter runs it every frame on a few dozen objects, where numpy's per-call cost
     was most of the time): the objects in view, those a detection of their class
     points at, the detector's reach per class (``reach``, updated in place), then the
-    decayed counts. Returns the new counts and the frame's objects in clear view and
-    missed."""
+    decayed counts. Returns the new counts, the frame's objects in clear view and
+    missed, and whether an object is now flagged as unseen (:attr:`UnseenObjects.
+    contradicted`'s comparisons)."""
     n = object_class.shape[0]
     dist = np.empty(n)
     view = np.zeros(n, dtype=np.bool_)
@@ -202,6 +216,7 @@ def _count_frame(dx, dy, direction, theta, object_class, reported, visible_row, 
     new_seen = np.empty(n)
     in_clear = 0
     missed = 0
+    flagged = False
     for i in range(n):
         r = reach[object_class[i]]
         clear = view[i] and dist[i] <= (r if r > 0.0 else top)
@@ -211,4 +226,6 @@ def _count_frame(dx, dy, direction, theta, object_class, reported, visible_row, 
             in_clear += 1
             if not hit[i]:
                 missed += 1
-    return new_expected, new_seen, in_clear, missed
+        if new_expected[i] >= min_expected and new_seen[i] <= max_seen_share * new_expected[i]:
+            flagged = True
+    return new_expected, new_seen, in_clear, missed, flagged

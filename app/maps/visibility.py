@@ -68,6 +68,15 @@ class VisibilityGrid:
         since the estimate, the fit check and the narrator all ask for the same point
         every frame.
         """
+        memo = self._last_row
+        last = memo[0]
+        if last is not None and last[0] == x and last[1] == y:
+            return last[2]
+        row = self._point_row(x, y)
+        memo[0] = (x, y, row)  # one assignment: a reader on another thread sees all or none
+        return row
+
+    def _point_row(self, x: float, y: float) -> NDArray[np.bool_]:
         rows, cols = self.shape
         x, y, inv = float(x), float(y), 1.0 / self.resolution_m
         fx, fy = (x - self.origin_x) * inv, (y - self.origin_y) * inv
@@ -90,6 +99,12 @@ class VisibilityGrid:
                 cache.pop(next(iter(cache)))
             cache[cell] = hit
         return hit
+
+    @cached_property
+    def _last_row(self) -> list[tuple[float, float, NDArray[np.bool_]] | None]:
+        """The last point :meth:`row` answered and its row (the fit check and the
+        narrator ask for the same estimate one after the other)."""
+        return [None]
 
     @cached_property
     def _rows(self) -> dict[int, NDArray[np.bool_]]:

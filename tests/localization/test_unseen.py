@@ -66,13 +66,15 @@ def test_compiled_frame_count_matches_numpy_to_the_bit(
     unseen = UnseenObjects(sm, cfg)
     rng = np.random.default_rng(7)
     x, y = 6.0, 5.0
-    for _ in range(60):
+    answers = set()
+    for frame in range(60):
         # A wandering pose (small steps, so the counts are not reset by a jump) and
         # detections: some aimed at objects (noisy), some of a class the map lacks.
         x = float(np.clip(x + rng.normal(0.0, 0.2), 0.5, 19.5))
         y = float(np.clip(y + rng.normal(0.0, 0.2), 0.5, 11.5))
         theta = float(rng.uniform(-4.0, 4.0))
-        aims = rng.choice(sm.object_count, size=rng.integers(1, 8))
+        # From frame 40 on, one object only: the others in view go unreported.
+        aims = rng.choice(sm.object_count, size=rng.integers(1, 8) if frame < 40 else 1)
         dets = [
             Detection(
                 sm.class_of(int(i)),
@@ -90,4 +92,11 @@ def test_compiled_frame_count_matches_numpy_to_the_bit(
         assert np.array_equal(_bits(got[1]), _bits(want[1]))
         assert got[2:] == want[2:4]
         assert np.array_equal(_bits(unseen.reach_m), _bits(want[4]))
+        # The kernel's answer to "contradicted" is the counts' (the property's formula).
+        st = unseen.settings
+        flagged = (got[0] >= st.min_expected) & (got[1] <= st.max_seen_share * got[0])
+        assert unseen.contradicted == bool(flagged.any())
+        answers.add(unseen.contradicted)
     assert unseen.expected.max() > 1.0  # objects were in clear view, some frames running
+    if fov_deg == 360.0:  # the full view meets both answers (a narrow one may not)
+        assert answers == {True, False}, answers

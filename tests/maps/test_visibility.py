@@ -72,6 +72,10 @@ def test_one_point_rows_are_the_grid_cells_rows() -> None:
     ]
     odd = [(-1e308, 2.0), (1e308, -1e308), (3.0, 1e300), (float("inf"), 0.0)]
     rng = np.random.default_rng(1)
-    for x, y in [*rng.uniform(-3, 9, (500, 2)).tolist(), *edges, *odd]:
+    points = [*rng.uniform(-3, 9, (500, 2)).tolist(), *edges, *odd]
+    for x, y in points:
         with np.errstate(over="ignore"):
             assert np.array_equal(grid.row(x, y), grid.visible([x], [y])[0]), (x, y)
+            # The same point again (answered from the last point's memo), as numpy floats.
+            again = grid.row(np.float64(x), np.float64(y))
+            assert np.array_equal(again, grid.visible([x], [y])[0]), (x, y)
