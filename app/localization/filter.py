@@ -519,7 +519,7 @@ def warm_up() -> None:
     Runs each compiled path once on a tiny map, so no request waits for a compiler:
     both sensor configurations, motion with and without odometry (and a move long
     enough for the wall test), resampling, clustering, KLD-sampling, the residual
-    check and the evidence window's scoring.
+    check, the evidence window's scoring and the visibility grid's rows.
     """
     from app.maps.model import parse_map
 
@@ -551,4 +551,5 @@ def warm_up() -> None:
         )
         est = estimate_pose(pf.x, pf.y, pf.theta, pf.weights, rng=pf.rng, max_points=10)
         protection_radius(pf.x, pf.y, pf.weights, est, pf.rng)
+        tiny.visibility.row(1.0, 1.0)  # a cell's row unpacked (the fit check's, the narrator's)
         kld_sample_size(pf.x, pf.y, pf.theta, pf.weights, 10, 50)

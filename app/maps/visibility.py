@@ -15,6 +15,7 @@ from dataclasses import dataclass
 from functools import cached_property
 
 import numpy as np
+from numba import njit
 from numpy.typing import ArrayLike, NDArray
 
 from app.maps.geometry import grid_cell, grid_cells
@@ -93,7 +94,8 @@ class VisibilityGrid:
         cache = self._rows
         hit = cache.get(cell)
         if hit is None:
-            hit = unpack_bits(self.bits[cell : cell + 1], self.n_objects)[0]
+            # Compiled: with many people walking, most frames meet a cell not kept.
+            hit = _unpack_row(self.bits[cell], self.n_objects)
             hit.flags.writeable = False
             if len(cache) >= ROW_CACHE:
                 cache.pop(next(iter(cache)))
@@ -119,6 +121,16 @@ def pack_bits(table: NDArray[np.bool_]) -> NDArray[np.uint64]:
     padded[:, :n] = table
     packed = np.packbits(padded.reshape(cells, words, 64), axis=2, bitorder="little")
     return packed.view("<u8").reshape(cells, words).astype(np.uint64)
+
+
+@njit(cache=True, nogil=True)
+def _unpack_row(words: NDArray[np.uint64], n: int) -> NDArray[np.bool_]:  # pragma: no cover
+    """One cell's row of :func:`unpack_bits`: bit ``o % 64`` of word ``o // 64``."""
+    out = np.empty(n, dtype=np.bool_)
+    one = np.uint64(1)
+    for o in range(n):
+        out[o] = (words[o >> 6] >> np.uint64(o & 63)) & one
+    return out
 
 
 def unpack_bits(bits: NDArray[np.uint64], n: int) -> NDArray[np.bool_]:

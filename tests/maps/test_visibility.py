@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from app.maps.visibility import pack_bits
+from app.maps.visibility import _unpack_row, pack_bits, unpack_bits
 from tests.helpers import room
 
 #: An inner wall at x = 3 with a door in it at (3, 2); a window on the west wall, a table
@@ -79,3 +79,17 @@ def test_one_point_rows_are_the_grid_cells_rows() -> None:
             # The same point again (answered from the last point's memo), as numpy floats.
             again = grid.row(np.float64(x), np.float64(y))
             assert np.array_equal(again, grid.visible([x], [y])[0]), (x, y)
+
+
+def test_a_cells_row_unpacks_like_the_table() -> None:
+    """The compiled one-row unpacking against numpy's, for tables of 1 to 200 objects
+    (one word, a word's edge, several words)."""
+    rng = np.random.default_rng(5)
+    for n in (1, 2, 63, 64, 65, 127, 128, 129, 200):
+        table = rng.random((40, n)) < 0.5
+        bits = pack_bits(table)
+        for cell in range(40):
+            row = _unpack_row(bits[cell], n)
+            assert row.dtype == np.bool_
+            assert np.array_equal(row, unpack_bits(bits[cell : cell + 1], n)[0]), (n, cell)
+            assert np.array_equal(row, table[cell])
