@@ -23,7 +23,8 @@ def test_warm_up_compiles_every_kernel_a_step_calls() -> None:
         names = [f"app.localization.{info.name}" for info in pkgutil.iter_modules(pkg.__path__)]
         # The step's kernels outside the engine: the angle wrap, the visibility rows and
         # the narrator's match.
-        for module_name in names + ["app.maps.geometry", "app.maps.visibility", "app.feedback.narrator"]:
+        outside = ["app.maps.geometry", "app.maps.visibility", "app.feedback.narrator"]
+        for module_name in names + outside:
             module = importlib.import_module(module_name)
             for name, obj in vars(module).items():
                 if not isinstance(obj, CPUDispatcher) or obj.__module__ != module.__name__:
