@@ -10,6 +10,7 @@ structure of arrays (x, y, theta, log-weight); nothing loops over particles in P
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Mapping, Sequence
 from dataclasses import replace
 from typing import Any
@@ -211,7 +212,9 @@ class ParticleFilter:
         if self._seed_from_observation:
             self._seed_cloud(obs)
         log_lik = self.observation_log_likelihood(obs)
-        before = log_sum_exp(self.log_w)
+        # Right after a resampling the log-weights are all zero (about 60 % of a
+        # localized walk's frames): their log-sum is then the one kept for that size.
+        before = log_sum_exp(self.log_w) if self.log_w.any() else _log_sum_exp_of_zeros(self.n)
         self.log_w = self.log_w + log_lik
         # log of the prior-weighted mean likelihood: lse(w + l) - lse(w)
         w, after = weights_and_log_sum_exp(self.log_w)
@@ -494,6 +497,12 @@ class ParticleFilter:
             unexplained = q.unexplained + a_share * (unexplained - q.unexplained)
         contradicted = self.unseen is not None and self.unseen.contradicted
         self.quality = FitQuality(fit, unexplained, bad, contradicted)
+
+
+@functools.lru_cache(maxsize=64)
+def _log_sum_exp_of_zeros(n: int) -> float:
+    """:func:`log_sum_exp` of ``n`` zeros (the same function on the same input, kept)."""
+    return log_sum_exp(np.zeros(n))
 
 
 def _rng_state_out(state: Mapping[str, Any]) -> dict[str, Any]:
