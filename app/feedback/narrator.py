@@ -34,6 +34,7 @@ from app.feedback.phrasing import (
     direction_phrase,
     distance_phrase,
 )
+from app.localization.sensor import Observation
 from app.localization.types import Detection, Estimate
 from app.maps.geometry import wrap_rad
 from app.maps.model import SemanticMap
@@ -94,6 +95,7 @@ class Narrator:
         self._ambiguity: tuple[str, ...] = ()
         self._objects_at: float | None = None
         self._class_index = {c: i for i, c in enumerate(semantic_map.classes)}
+        self._groups: dict[tuple[str, ...], NDArray[np.int64]] = {}
 
     # ------------------------------------------------------------- checkpoints
     def checkpoint(self) -> dict[str, Any]:
@@ -131,16 +133,20 @@ class Narrator:
         describe: bool = False,
         fov_deg: float = 360.0,
         fov_centre_deg: float = 0.0,
+        observation: Observation | None = None,
     ) -> Feedback:
         """Feedback for one frame (see the module docstring for the rules).
 
         ``fov_deg`` and ``fov_centre_deg``: the camera's field of view and the direction
-        of its middle relative to the body (a yawed phone camera).
+        of its middle relative to the body (a yawed phone camera). ``observation``: the
+        filter's :func:`~app.localization.sensor.prepare_observation` of these very
+        detections on this map, when at hand (its arrays are then used as they are).
         """
         now = time.monotonic() if timestamp_s is None else float(timestamp_s)
-        dets = [d for d in detections if d.score > 0 and d.cls in self.map.class_members]
         if estimate.converged:
-            return self._located(estimate, dets, now, describe, (fov_deg, fov_centre_deg))
+            fov = (fov_deg, fov_centre_deg)
+            return self._located(estimate, detections, now, describe, fov, observation)
+        dets = [d for d in detections if d.score > 0 and d.cls in self.map.class_members]
         return self._uncertain(estimate, dets, now, describe)
 
     # ------------------------------------------------------------- not located
@@ -201,16 +207,17 @@ class Narrator:
     def _located(
         self,
         estimate: Estimate,
-        dets: list[Detection],
+        detections: Sequence[Detection],
         now: float,
         describe: bool,
         fov: tuple[float, float],
+        observation: Observation | None,
     ) -> Feedback:
         opts = self.options
         certain = max(estimate.std_x_m, estimate.std_y_m) <= CERTAIN_STD_M and (
             estimate.protection_m is None or estimate.protection_m <= CERTAIN_PROTECTION_M
         )
-        ordered, rel, dist = self._ordered_objects(estimate, dets, fov)
+        ordered, rel, dist = self._ordered_objects(estimate, detections, fov, observation)
         shown = ordered[: opts.max_items]
         turns = [math.atan2(dy, dx) - estimate.theta_rad for dx, dy in rel[shown].tolist()]
         bearings = [math.degrees(wrap_rad(t)) for t in turns]
@@ -251,7 +258,11 @@ class Narrator:
         return Feedback(" ".join(parts), items)
 
     def _ordered_objects(
-        self, estimate: Estimate, dets: list[Detection], fov: tuple[float, float]
+        self,
+        estimate: Estimate,
+        detections: Sequence[Detection],
+        fov: tuple[float, float],
+        observation: Observation | None = None,
     ) -> tuple[list[int], NDArray[np.float64], NDArray[np.float64]]:
         """Objects matched to this frame's detections first (nearest first), then the
         nearest visible others (the first object on a tie in distance).
@@ -266,13 +277,25 @@ class Narrator:
         look off the body's forward by centre_deg: the pose turns by it and the bearings
         (relative to the body) by the opposite, so each detection still points the same
         way while the field of view is centred on the camera.
+
+        The filter's observation of the frame holds the same detections (those of the
+        map's classes with a positive score) in the same order, their cosines and sines
+        computed already: with the camera facing forward they are used as they are.
         """
         fov_deg, centre_deg = fov
         centre = math.radians(centre_deg)
         theta = estimate.theta_rad + centre
-        by_class = sorted(dets, key=lambda d: d.cls)
-        bearing = np.array([d.bearing_rad - centre for d in by_class], dtype=np.float64)
-        cls = np.array([self._class_index[d.cls] for d in by_class], dtype=np.int64)
+        if observation is not None and centre == 0.0:
+            cos_b, sin_b = observation.det_cos, observation.det_sin
+            cls = self._group_classes(observation.classes)[observation.det_group]
+        else:
+            by_class = sorted(
+                (d for d in detections if d.score > 0 and d.cls in self.map.class_members),
+                key=lambda d: d.cls,
+            )
+            bearing = np.array([d.bearing_rad - centre for d in by_class], dtype=np.float64)
+            cos_b, sin_b = np.cos(bearing), np.sin(bearing)
+            cls = np.array([self._class_index[d.cls] for d in by_class], dtype=np.int64)
         # Line of sight from the map's precomputed grid (the cell around the pose).
         visible = self.map.visibility.row(estimate.x, estimate.y)
         # The cosines and sines by numpy (its own SIMD versions: the compiled code's C
@@ -280,10 +303,20 @@ class Narrator:
         order, rel, dist = _order_objects(
             float(estimate.x), float(estimate.y), float(np.cos(theta)), float(np.sin(theta)),
             self.map.object_xy, visible, fov_deg < 360.0,
-            float(np.cos(np.radians(fov_deg) / 2.0)), np.cos(bearing), np.sin(bearing), cls,
+            float(np.cos(np.radians(fov_deg) / 2.0)), cos_b, sin_b, cls,
             self.map.object_class,
         )  # fmt: skip
         return order.tolist(), rel, dist
+
+    def _group_classes(self, classes: tuple[str, ...]) -> NDArray[np.int64]:
+        """The map's class index of each of an observation's class groups (kept)."""
+        found = self._groups.get(classes)
+        if found is None:
+            found = np.array([self._class_index[c] for c in classes], dtype=np.int64)
+            if len(self._groups) >= 256:
+                self._groups.pop(next(iter(self._groups)))
+            self._groups[classes] = found
+        return found
 
     # ------------------------------------------------------------ repetition
     def _gap_passed(self, now: float) -> bool:

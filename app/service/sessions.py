@@ -175,6 +175,7 @@ class Session:
                 describe=frame.describe,
                 fov_deg=self.filter.config.fov_deg,
                 fov_centre_deg=self.filter.config.fov_centre_deg,
+                observation=self.filter.last_observation,
             )
             now = time.monotonic() if frame.timestamp is None else frame.timestamp
             guidance, said = self._guide(estimate, now, warnings)

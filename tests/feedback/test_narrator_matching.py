@@ -72,6 +72,15 @@ def test_same_objects_as_the_sensor_model(m: SemanticMap) -> None:
         centre = (0.0, 30.0, -170.0)[k % 3 if k % 2 else 0]
         order, _, _ = Narrator(m)._ordered_objects(pose(x, y, theta), dets, (fov, centre))
         assert order == sensor_model_order(m, pose(x, y, theta), dets, fov, centre), k
+        # Given the filter's observation of the same detections (with some the filter
+        # leaves out: a class the map lacks, a zero score), the very same answer.
+        given = [*dets, Detection("unicorn", 0.3, 1.0), Detection(m.classes[0], 0.1, 0.0)]
+        rng.shuffle(given)
+        obs = prepare_observation(given, m, FilterConfig())
+        plain = Narrator(m)._ordered_objects(pose(x, y, theta), given, (fov, centre))
+        got = Narrator(m)._ordered_objects(pose(x, y, theta), given, (fov, centre), obs)
+        assert got[0] == plain[0], k
+        assert np.array_equal(got[1], plain[1]) and np.array_equal(got[2], plain[2]), k
 
 
 def test_a_tie_goes_to_the_first_object() -> None:
