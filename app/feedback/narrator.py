@@ -95,7 +95,6 @@ class Narrator:
         self._ambiguity: tuple[str, ...] = ()
         self._objects_at: float | None = None
         self._class_index = {c: i for i, c in enumerate(semantic_map.classes)}
-        self._groups: dict[tuple[str, ...], NDArray[np.int64]] = {}
 
     # ------------------------------------------------------------- checkpoints
     def checkpoint(self) -> dict[str, Any]:
@@ -287,7 +286,7 @@ class Narrator:
         theta = estimate.theta_rad + centre
         if observation is not None and centre == 0.0:
             cos_b, sin_b = observation.det_cos, observation.det_sin
-            cls = self._group_classes(observation.classes)[observation.det_group]
+            cls = self.map.class_indexes(observation.classes)[observation.det_group]
         else:
             by_class = sorted(
                 (d for d in detections if d.score > 0 and d.cls in self.map.class_members),
@@ -307,16 +306,6 @@ class Narrator:
             self.map.object_class,
         )  # fmt: skip
         return order.tolist(), rel, dist
-
-    def _group_classes(self, classes: tuple[str, ...]) -> NDArray[np.int64]:
-        """The map's class index of each of an observation's class groups (kept)."""
-        found = self._groups.get(classes)
-        if found is None:
-            found = np.array([self._class_index[c] for c in classes], dtype=np.int64)
-            if len(self._groups) >= 256:
-                self._groups.pop(next(iter(self._groups)))
-            self._groups[classes] = found
-        return found
 
     # ------------------------------------------------------------ repetition
     def _gap_passed(self, now: float) -> bool:

@@ -108,21 +108,17 @@ def _class_terms(std_rad: float, eps: float) -> tuple[float, float, float]:
 #: A frame's class groups: kappa, log floor and log keep per group, then member_start
 #: and members (:class:`Observation`'s fields of those names).
 _Layout = tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.int64], NDArray[np.int64]]  # fmt: skip  # noqa: E501
-#: Layouts kept per map (a session sees the same few sets of classes frame after frame).
-LAYOUT_CACHE = 512
 
 
 def _class_layout(
     semantic_map: SemanticMap, config: FilterConfig, classes: tuple[str, ...], eps: float
 ) -> _Layout:
     """The per-group arrays of :func:`prepare_observation` that do not depend on the
-    detections themselves, only on which classes were seen; kept per map (a dict on
-    the map's ``derived``), shared by every frame with the same classes and config
-    terms. Nothing writes into an observation's arrays."""
-    key = ("observation", classes, eps, config.bearing_std_deg, tuple(config.class_bearing_std_deg.items()))  # fmt: skip  # noqa: E501
-    cache = semantic_map.derived
-    layout = cache.get(key)
-    if layout is None:
+    detections themselves, only on which classes were seen; kept with the map
+    (:meth:`SemanticMap.derived_value`), shared by every frame with the same classes
+    and config terms. Nothing writes into an observation's arrays."""
+
+    def make() -> _Layout:
         kappa, floor, keep, starts, members = [], [], [], [0], []
         for cls in classes:
             k, log_floor, log_keep = _class_terms(config.bearing_std_rad(cls), eps)
@@ -131,17 +127,17 @@ def _class_layout(
             keep.append(log_keep)
             members.extend(semantic_map.class_members[cls].tolist())
             starts.append(len(members))
-        layout = (
+        return (
             np.array(kappa, dtype=np.float64),
             np.array(floor, dtype=np.float64),
             np.array(keep, dtype=np.float64),
             np.array(starts, dtype=np.int64),
             np.array(members, dtype=np.int64),
         )
-        if len(cache) >= LAYOUT_CACHE:
-            cache.pop(next(iter(cache)))
-        cache[key] = layout
-    return layout
+
+    std_deg = config.bearing_std_deg
+    per_class = tuple(config.class_bearing_std_deg.items())
+    return semantic_map.derived_value(("observation", classes, eps, std_deg, per_class), make)
 
 
 def prepare_observation(

@@ -77,7 +77,6 @@ class UnseenObjects:
         #: Per class, the farthest an object of it was seen from the estimate (m; 0 while
         #: none was): how far this detector reports such objects.
         self.reach_m = np.zeros(len(semantic_map.classes))
-        self._class_index = {c: i for i, c in enumerate(semantic_map.classes)}
         self.reset()
 
     def reset(self) -> None:
@@ -121,7 +120,7 @@ class UnseenObjects:
             self.reset()
         self._at = (x, y)
         # The observation's class groups as the map's class indices.
-        group_class = np.array([self._class_index[c] for c in obs.classes], dtype=np.int64)
+        group_class = self.map.class_indexes(obs.classes)
         self.reported[group_class] = True
         with_row = visible_row is not None and self.config.visibility
         fov_check = self.config.fov_deg < 360.0

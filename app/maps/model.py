@@ -11,8 +11,9 @@ structures the filter needs (free space and visibility grids, see
 from __future__ import annotations
 
 import re
+from collections.abc import Callable
 from functools import cached_property
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, TypeVar
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -41,6 +42,11 @@ CLASS_PATTERN = re.compile(r"^[a-z][a-z0-9_-]*$")
 NAME_PATTERN = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]*$")
 #: An object closer than this to a wall is mounted in it (doors, windows), in metres.
 MOUNT_TOLERANCE_M = 0.05
+#: Values kept per map in :attr:`SemanticMap.derived` (per set of detected classes: a
+#: few dozen in a real walk).
+DERIVED_LIMIT = 1024
+
+T = TypeVar("T")
 
 
 class WallSpec(StrictInput):
@@ -187,6 +193,25 @@ class SemanticMap:
     @property
     def object_count(self) -> int:
         return int(self.object_xy.shape[0])
+
+    def derived_value(self, key: tuple[object, ...], make: Callable[[], T]) -> T:
+        """The value kept under ``key`` in :attr:`derived`, made (and kept) if absent;
+        the oldest goes when :data:`DERIVED_LIMIT` values are kept."""
+        found = self.derived.get(key)
+        if found is None:
+            found = make()
+            if len(self.derived) >= DERIVED_LIMIT:
+                self.derived.pop(next(iter(self.derived)))
+            self.derived[key] = found
+        return found
+
+    def class_indexes(self, classes: tuple[str, ...]) -> NDArray[np.int64]:
+        """The index in :attr:`classes` of each of ``classes`` (kept per tuple: the
+        filter asks for the same few sets of detected classes frame after frame)."""
+        return self.derived_value(
+            ("class_indexes", classes),
+            lambda: np.array([self.classes.index(c) for c in classes], dtype=np.int64),
+        )
 
     def class_of(self, index: int) -> str:
         return self.classes[int(self.object_class[index])]
