@@ -214,7 +214,8 @@ class ParticleFilter:
         log_lik = self.observation_log_likelihood(obs)
         # Right after a resampling the log-weights are all zero (about 60 % of a
         # localized walk's frames): their log-sum is then the one kept for that size.
-        before = log_sum_exp(self.log_w) if self.log_w.any() else _log_sum_exp_of_zeros(self.n)
+        nonzero = np.logical_or.reduce(self.log_w)  # .any() without its Python wrapper
+        before = log_sum_exp(self.log_w) if nonzero else _log_sum_exp_of_zeros(self.n)
         self.log_w = self.log_w + log_lik
         # log of the prior-weighted mean likelihood: lse(w + l) - lse(w)
         w, after = weights_and_log_sum_exp(self.log_w)
