@@ -13,6 +13,7 @@ from typing import Any
 import orjson
 
 from app.api.schemas import (
+    BoxIn,
     CameraIn,
     DestinationIn,
     DestinationOut,
@@ -66,37 +67,37 @@ def session_spec(body: SessionCreate) -> SessionSpec:
     )
 
 
-def _bearing_deg(frame: Frame, camera: Camera | None) -> list[float]:
-    """Each detection's bearing in degrees: as given, or from its box through ``camera``.
+def _box_bearing_deg(i: int, box: BoxIn, camera: Camera | None) -> float:
+    """Detection ``i``'s bearing in degrees from its pixel ``box`` through ``camera``.
 
     Raises:
-        BoxError: a box without a session camera, or one that does not fit the image;
-            the message names the detection.
+        BoxError: no session camera, or a box that does not fit the image; the message
+            names the detection.
     """
-    out = []
-    for i, d in enumerate(frame.detections):
-        if d.box is None:
-            out.append(float(d.bearing_deg))  # type: ignore[arg-type]  # validated: one of two
-            continue
-        if camera is None:
-            raise BoxError(
-                f"detections.{i}.box: this session has no camera, so a pixel box cannot be "
-                "turned into a bearing; create the session with a camera (e.g. "
-                '{"model": "equirectangular", "width_px": 3840}) or send bearing_deg'
-            )
-        try:
-            out.append(camera.box_bearing_deg(d.box.u_min_px, d.box.u_max_px))
-        except BoxError as exc:
-            raise BoxError(f"detections.{i}.{exc}") from None
-    return out
+    if camera is None:
+        raise BoxError(
+            f"detections.{i}.box: this session has no camera, so a pixel box cannot be "
+            "turned into a bearing; create the session with a camera (e.g. "
+            '{"model": "equirectangular", "width_px": 3840}) or send bearing_deg'
+        )
+    try:
+        return camera.box_bearing_deg(box.u_min_px, box.u_max_px)
+    except BoxError as exc:
+        raise BoxError(f"detections.{i}.{exc}") from None
 
 
 def frame_input(frame: Frame, camera: Camera | None = None) -> FrameInput:
     """A ``Frame`` in the service's units: radians, bearings wrapped to (-pi, pi].
 
     Pixel boxes become bearings through the session's ``camera`` (raises
-    :class:`~app.localization.camera.BoxError` when that cannot be done).
+    :class:`~app.localization.camera.BoxError` when that cannot be done). It runs for
+    every frame on the event loop, so the detections are converted in one plain loop.
     """
+    detections = []
+    for i, d in enumerate(frame.detections):
+        bearing = d.bearing_deg if d.box is None else _box_bearing_deg(i, d.box, camera)
+        # (bearing_deg is a number when there is no box: the model checks one of the two)
+        detections.append(Detection(d.cls, math.radians(wrap_deg(bearing)), d.score))  # type: ignore[arg-type]
     odometry = None
     if frame.odometry is not None:
         o = frame.odometry
@@ -113,10 +114,7 @@ def frame_input(frame: Frame, camera: Camera | None = None) -> FrameInput:
     return FrameInput(
         timestamp=frame.timestamp,
         odometry=odometry,
-        detections=tuple(
-            Detection(d.cls, math.radians(wrap_deg(b)), d.score)
-            for d, b in zip(frame.detections, _bearing_deg(frame, camera), strict=True)
-        ),
+        detections=tuple(detections),
         describe=frame.describe,
         truth=truth,
         heading=heading,
