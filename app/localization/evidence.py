@@ -58,10 +58,10 @@ prior counted equal to each alternative's), gates ``converged`` (see
 from __future__ import annotations
 
 import math
+from array import array
 from collections import deque
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from itertools import chain
 from typing import Any
 
 import numpy as np
@@ -150,6 +150,35 @@ def _log_mean_exp_rows(a: NDArray[np.float64]) -> NDArray[np.float64]:
         return safe + np.log(np.exp(a - safe[:, None]).mean(axis=1))
 
 
+class _Trail:
+    """The main mode's last ``size`` positions (x, y), oldest first, kept as flat doubles:
+    a checkpoint (once a second) copies them as one buffer instead of walking 300
+    pairs (43 us)."""
+
+    def __init__(self, size: int) -> None:
+        self.size = size
+        self._xy = array("d")
+
+    def append(self, x: float, y: float) -> None:
+        xy = self._xy
+        xy.append(x)
+        xy.append(y)
+        if len(xy) > 4 * self.size:  # drop the oldest now and then, not at every frame
+            del xy[: len(xy) - 2 * self.size]
+
+    def clear(self) -> None:
+        del self._xy[:]
+
+    def __len__(self) -> int:
+        return min(len(self._xy) // 2, self.size)
+
+    def points(self) -> NDArray[np.float64]:
+        """The positions, shape (len, 2) (a copy)."""
+        xy = self._xy
+        kept = xy[-2 * self.size :] if len(xy) > 2 * self.size else xy
+        return np.array(kept, dtype=np.float64).reshape(-1, 2)
+
+
 class EvidenceTracker:
     """Alternative hypotheses of one filter, with their accumulated evidence."""
 
@@ -182,7 +211,7 @@ class EvidenceTracker:
         #: stayed the same: found again, they are known dead, not newcomers.
         self._graves = np.empty((0, 3))
         #: The main mode's positions since it formed (the walk so far, as it believes).
-        self._trail: deque[tuple[float, float]] = deque(maxlen=self.settings.trail)
+        self._trail = _Trail(self.settings.trail)
         #: The anchor cloud of the main belief, rows x, y, theta; None until drawn.
         self._anchor = None
         self._history: deque[tuple[Odometry | None, Observation, CompassReading | None]] = deque(
@@ -211,7 +240,7 @@ class EvidenceTracker:
             "seg": self.seg,
             "age": self.age,
             "graves": self._graves,
-            "trail": np.fromiter(chain.from_iterable(self._trail), np.float64).reshape(-1, 2),
+            "trail": self._trail.points(),
             "anchor": self._anchor,
             "history": {
                 "odometry": [odo for odo, _, _ in self._history],
@@ -235,7 +264,8 @@ class EvidenceTracker:
         self.age = np.array(state["age"], dtype=np.int64)
         self._graves = np.array(state["graves"], dtype=np.float64).reshape(-1, 3)
         self._trail.clear()
-        self._trail.extend(map(tuple, np.asarray(state["trail"]).tolist()))
+        for x, y in np.asarray(state["trail"], dtype=np.float64).reshape(-1, 2).tolist():
+            self._trail.append(x, y)
         anchor = state["anchor"]
         self._anchor = None if anchor is None else np.array(anchor, dtype=np.float64)
         history = state["history"]
@@ -422,7 +452,7 @@ class EvidenceTracker:
             self._graves = np.empty((0, 3))
             self._trail.clear()
         if main is not None:
-            self._trail.append((main.x, main.y))
+            self._trail.append(main.x, main.y)
         self._since_search += 1
         if (
             main is not None
@@ -893,7 +923,7 @@ class EvidenceTracker:
         (the odometry is the same for both; the window alone forgets the rest)."""
         if not self._trail:
             return True
-        tx, ty = (np.array(v) for v in zip(*self._trail, strict=True))
+        tx, ty = self._trail.points().T.copy()
         cx, cy, _ = _carry(move[None], tx, ty, np.zeros_like(tx))
         return bool(self.map.free_space.is_free(cx[0], cy[0]).all())
 

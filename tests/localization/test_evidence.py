@@ -304,3 +304,17 @@ def test_paper_model_has_no_evidence_tracker(paper_office: SemanticMap) -> None:
         paper_office, FilterConfig.paper(particles=100), rng=np.random.default_rng(0)
     )
     assert pf.evidence is None
+
+
+def test_the_trail_keeps_the_last_positions_in_order() -> None:
+    from app.localization.evidence import _Trail
+
+    trail = _Trail(5)
+    assert len(trail) == 0 and trail.points().shape == (0, 2)
+    for k in range(23):  # past the point where the oldest are dropped
+        trail.append(float(k), -float(k))
+        want = [[float(i), -float(i)] for i in range(max(0, k - 4), k + 1)]
+        assert trail.points().tolist() == want, k
+        assert len(trail) == len(want)
+    trail.clear()
+    assert len(trail) == 0 and not trail
