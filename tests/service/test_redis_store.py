@@ -132,6 +132,28 @@ def test_journal_entries_from_many_sessions_in_one_round_trip(
     assert all(len(store.load(sid)[1]) == 3 for sid in ids)
 
 
+def test_the_journal_goes_on_after_redis_forgets_its_script_or_drops_it(
+    url: str, runner: asyncio.Runner
+) -> None:
+    """The journal writes through a connection of its own: a Redis that restarted (its
+    scripts gone) or that closed that connection must not lose an entry."""
+    r = redis.Redis.from_url(url)
+    r.flushdb()
+    store = RedisStore(url)
+    try:
+        assert store.acquire("s1", "w1", 5)
+        append = lambda seq: runner.run(store.append("s1", b"%d|{}" % seq, "w1", 60, 5))  # noqa: E731
+        assert append(1)
+        r.script_flush()
+        assert append(2)
+        r.client_kill_filter(_type="normal", skipme=True)
+        assert append(3)
+        assert store.load("s1")[1] == [b"1|{}", b"2|{}", b"3|{}"]
+    finally:
+        runner.run(store.aclose())
+        store.close()
+
+
 def test_a_burst_of_checkpoints_waits_for_connections_rather_than_failing(
     store: SessionStore, runner: asyncio.Runner
 ) -> None:
