@@ -10,6 +10,7 @@ structures the filter needs (free space and visibility grids, see
 
 from __future__ import annotations
 
+import contextlib
 import re
 from collections.abc import Callable
 from functools import cached_property
@@ -197,12 +198,16 @@ class SemanticMap:
     def derived_value(self, key: tuple[object, ...], make: Callable[[], T]) -> T:
         """The value kept under ``key`` in :attr:`derived`, made (and kept) if absent;
         the oldest goes when :data:`DERIVED_LIMIT` values are kept."""
-        found = self.derived.get(key)
+        derived = self.derived
+        found = derived.get(key)
         if found is None:
             found = make()
-            if len(self.derived) >= DERIVED_LIMIT:
-                self.derived.pop(next(iter(self.derived)))
-            self.derived[key] = found
+            if len(derived) >= DERIVED_LIMIT:
+                # Another thread (the view, a planner) may be changing the dict too: then
+                # some other value goes, or none; a value made twice is the same value.
+                with contextlib.suppress(StopIteration, RuntimeError, KeyError):
+                    derived.pop(next(iter(derived)))
+            derived[key] = found
         return found
 
     def class_indexes(self, classes: tuple[str, ...]) -> NDArray[np.int64]:

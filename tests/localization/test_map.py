@@ -118,3 +118,24 @@ def test_regions_and_json_round_trip() -> None:
     again = parse_map(json.loads(json.dumps(m.to_json())))
     assert again.to_json() == m.to_json()
     assert m.to_json()["objects"][0]["class"] == "door"
+
+
+def test_derived_values_are_made_once_and_the_oldest_go_first(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    import app.maps.model as model
+
+    m = paper_office()
+    classes = ("window", "door")
+    assert m.class_indexes(classes).tolist() == [m.classes.index(c) for c in classes]
+    assert m.class_indexes(classes) is m.class_indexes(classes)  # kept
+    monkeypatch.setattr(model, "DERIVED_LIMIT", 3)
+    m.derived.clear()
+    made: list[int] = []
+
+    def value(k: int) -> int:
+        return m.derived_value(("test", k), lambda: made.append(k) or k)  # type: ignore[func-returns-value]
+
+    assert [value(k) for k in (1, 2, 1, 3, 4, 1)] == [1, 2, 1, 3, 4, 1]
+    assert made == [1, 2, 3, 4, 1]  # 1 made again: the oldest, it went when 4 came
+    assert len(m.derived) == 3
