@@ -53,6 +53,10 @@ T = TypeVar("T")
 
 #: How often a waiting worker asks again for a lease another worker holds (seconds).
 POLL_S = 0.05
+#: How long before ``checkpoint_interval_s`` runs out a round of checkpoints starts
+#: (seconds; at most a quarter of the interval), so that each session's checkpoints are
+#: at most the interval apart (docs/API.md: at least once a second).
+CHECKPOINT_EARLY_S = 0.05
 
 
 class SessionSharing:
@@ -86,6 +90,9 @@ class SessionSharing:
         self._lost_lock = threading.Lock()
         self._saved: dict[str, int] = {}  # session id -> version last checkpointed
         self._saved_at = time.monotonic()
+        #: Checkpoints are due this much before the interval runs out: the event loop may
+        #: wake the keeper late, and a round of checkpoints takes a while to pack.
+        self._early = min(CHECKPOINT_EARLY_S, checkpoint_interval_s / 4)
 
     async def _run(self, fn: Callable[..., T], *args: Any) -> T:
         return await asyncio.get_running_loop().run_in_executor(self._io, fn, *args)
@@ -304,7 +311,12 @@ class SessionSharing:
         tick = max(0.05, min(self.lease_s / 3, self.checkpoint_interval_s / 2))
         try:
             while True:
-                await asyncio.sleep(tick)
+                # Every tick, and in time for the next checkpoint (a fixed tick of 0.4 s
+                # checkpointed every 1.2 s where the interval says 1 s).
+                due_in = (
+                    self._saved_at + self.checkpoint_interval_s - self._early - time.monotonic()
+                )
+                await asyncio.sleep(max(0.0, min(tick, due_in)))
                 try:
                     await self.keep()
                 except Exception:
@@ -325,7 +337,7 @@ class SessionSharing:
         now = time.monotonic()
         live = sessions
         idle = [s for s in live if now - s.last_active > self.handoff_idle_s and not s.busy]
-        due = now - self._saved_at >= self.checkpoint_interval_s
+        due = now - self._saved_at >= self.checkpoint_interval_s - self._early
         changed = [s for s in live if self._saved.get(s.id) != s.version and (due or s in idle)]
         if due:
             self._saved_at = now

@@ -334,6 +334,41 @@ def test_a_session_moves_between_workers_and_goes_on_exactly() -> None:
     asyncio.run(main())
 
 
+def test_a_stepping_session_is_checkpointed_at_least_once_an_interval() -> None:
+    """docs/API.md: at least once a second (here every 0.2 s) while the session changes;
+    and not far more often than that either."""
+
+    async def main() -> None:
+        store = MemoryStore(shared=True)
+        a = manager(store)  # checkpoint_interval_s 0.2
+        sid = (await a.create(SPEC)).id
+        times: list[float] = []
+        save = store.save
+
+        async def timed_save(items: Any, owner: str, ttl_s: float) -> list[bool]:
+            if any(item[0] == sid for item in items):
+                times.append(asyncio.get_running_loop().time())
+            return await save(items, owner, ttl_s)
+
+        store.save = timed_save  # type: ignore[method-assign]
+        keeper = asyncio.create_task(a.sharing.run_keeper())
+        loop = asyncio.get_running_loop()
+        end = loop.time() + 1.6
+        i = 0
+        while loop.time() < end:
+            await a.process(sid, frame(i % 60))
+            i += 1
+            await asyncio.sleep(0.02)
+        keeper.cancel()
+        gaps = np.diff(times)
+        assert len(gaps) >= 5, times
+        assert gaps.max() <= 0.2, gaps  # a fixed tick left some 0.3 s apart
+        assert gaps.mean() >= 0.1, gaps
+        a.close()
+
+    asyncio.run(main())
+
+
 def test_a_worker_that_lost_its_lease_never_forks_the_session() -> None:
     async def main() -> None:
         store = MemoryStore(shared=True)
