@@ -316,11 +316,12 @@ class SessionSharing:
                 due_in = (
                     self._saved_at + self.checkpoint_interval_s - self._early - time.monotonic()
                 )
-                await asyncio.sleep(max(0.0, min(tick, due_in)))
+                await asyncio.sleep(max(0.01, min(tick, due_in)))
                 try:
                     await self.keep()
                 except Exception:
                     log.exception("session store upkeep failed; retrying")
+                    await asyncio.sleep(tick)  # not at once, however overdue
         finally:
             stop.set()
 
