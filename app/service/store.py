@@ -428,9 +428,11 @@ class _OnLoop:
                 self._journal = None
                 await conn.disconnect()
                 await self.pool.release(conn)
-                # A connection Redis closed (restarted, or killed it) ran nothing: once
-                # more on a new one, as the client's own retry would. Not after a
-                # timeout: the entries may have been stored.
+                # A connection Redis closed (restarted, or killed it): once more on a new
+                # one, as the client's own retry would (should the first call have
+                # stored the entries after all, a replay skips the second copies: an
+                # entry carries its step's number). Not after a timeout: Redis is slow,
+                # and the frames are better answered with an error at once.
                 if attempt or not isinstance(exc, ConnectionError):
                     raise
         raise AssertionError("unreachable")  # pragma: no cover
