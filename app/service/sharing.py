@@ -90,9 +90,12 @@ class SessionSharing:
         self._lost_lock = threading.Lock()
         self._saved: dict[str, int] = {}  # session id -> version last checkpointed
         self._saved_at = time.monotonic()
-        #: Checkpoints are due this much before the interval runs out: the event loop may
-        #: wake the keeper late, and a round of checkpoints takes a while to pack.
-        self._early = min(CHECKPOINT_EARLY_S, checkpoint_interval_s / 4)
+        #: Seconds from one round of checkpoints to the next: a little less than the
+        #: interval, since the event loop may wake the keeper late and a round takes a
+        #: while to pack.
+        self._round_every = checkpoint_interval_s - min(
+            CHECKPOINT_EARLY_S, checkpoint_interval_s / 4
+        )
 
     async def _run(self, fn: Callable[..., T], *args: Any) -> T:
         return await asyncio.get_running_loop().run_in_executor(self._io, fn, *args)
@@ -313,9 +316,7 @@ class SessionSharing:
             while True:
                 # Every tick, and in time for the next checkpoint (a fixed tick of 0.4 s
                 # checkpointed every 1.2 s where the interval says 1 s).
-                due_in = (
-                    self._saved_at + self.checkpoint_interval_s - self._early - time.monotonic()
-                )
+                due_in = self._saved_at + self._round_every - time.monotonic()
                 await asyncio.sleep(max(0.01, min(tick, due_in)))
                 try:
                     await self.keep()
@@ -338,7 +339,7 @@ class SessionSharing:
         now = time.monotonic()
         live = sessions
         idle = [s for s in live if now - s.last_active > self.handoff_idle_s and not s.busy]
-        due = now - self._saved_at >= self.checkpoint_interval_s - self._early
+        due = now - self._saved_at >= self._round_every
         changed = [s for s in live if self._saved.get(s.id) != s.version and (due or s in idle)]
         if due:
             self._saved_at = now

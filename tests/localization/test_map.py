@@ -134,7 +134,11 @@ def test_derived_values_are_made_once_and_the_oldest_go_first(
     made: list[int] = []
 
     def value(k: int) -> int:
-        return m.derived_value(("test", k), lambda: made.append(k) or k)  # type: ignore[func-returns-value]
+        def make() -> int:
+            made.append(k)
+            return k
+
+        return m.derived_value(("test", k), make)
 
     assert [value(k) for k in (1, 2, 1, 3, 4, 1)] == [1, 2, 1, 3, 4, 1]
     assert made == [1, 2, 3, 4, 1]  # 1 made again: the oldest, it went when 4 came
