@@ -36,8 +36,10 @@ _AS_IS = object()
 def _one_level(value: Any) -> Any:
     """A dataclass as a dict of its fields, any other mapping as a dict (string keys), a
     numpy scalar as a number; anything else :data:`_AS_IS`."""
-    if dataclasses.is_dataclass(value) and not isinstance(value, type):
-        return {name: getattr(value, name) for name in _names(type(value))}
+    kind: type = type(value)
+    names = _dataclass_names(kind)
+    if names is not None:
+        return {name: getattr(value, name) for name in names}
     if isinstance(value, Mapping):
         return {str(k): v for k, v in value.items()}
     if isinstance(value, np.generic):
@@ -105,6 +107,14 @@ def from_columns(kind: type[T], columns: Mapping[str, Any]) -> list[T]:
 @functools.cache
 def _names(cls: type) -> tuple[str, ...]:
     return tuple(f.name for f in dataclasses.fields(cls))
+
+
+@functools.cache
+def _dataclass_names(cls: type) -> tuple[str, ...] | None:
+    """The field names of a dataclass type, None for any other type (a dataclass type
+    itself is a value of type ``type``): one lookup for each value a checkpoint meets,
+    where ``dataclasses.is_dataclass`` took several."""
+    return _names(cls) if dataclasses.is_dataclass(cls) else None
 
 
 @functools.cache

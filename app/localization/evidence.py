@@ -73,12 +73,12 @@ from app.localization.config import FilterConfig
 from app.localization.motion import motion_log_penalty, sample_motion
 from app.localization.recovery import sample_from_observation
 from app.localization.resampling import systematic_resample
-from app.localization.sensor import Observation
+from app.localization.sensor import Observation, observation_columns, observations_from_columns
 from app.localization.types import Hypothesis, Odometry
 from app.maps.geometry import wrap_angle, wrap_deg
 from app.maps.model import SemanticMap
 from app.maps.visibility import VisibilityGrid
-from app.state import from_columns, from_plain, to_columns
+from app.state import from_columns, from_plain
 
 
 @dataclass(frozen=True)
@@ -231,9 +231,8 @@ class EvidenceTracker:
     # ---------------------------------------------------------- checkpoints
     def checkpoint(self) -> dict[str, Any]:
         """The anchor, the alternatives (motions, evidence, ages), the dropped ones, the
-        main mode's trail and the recent frames (prepared observations as columns, see
-        :func:`~app.state.to_columns`), as plain data, arrays and frozen values; the
-        random generator is the filter's."""
+        main mode's trail and the recent frames (:meth:`_history_columns`), as plain
+        data, arrays and frozen values; the random generator is the filter's."""
         return {
             "moves": self.moves,
             "llr": self.llr,
@@ -242,11 +241,7 @@ class EvidenceTracker:
             "graves": self._graves,
             "trail": self._trail.points(),
             "anchor": self._anchor,
-            "history": {
-                "odometry": [odo for odo, _, _ in self._history],
-                "observations": to_columns([obs for _, obs, _ in self._history]),
-                "compass": [compass for _, _, compass in self._history],
-            },
+            "history": self._history_columns(),
             "since_search": self._since_search,
             "quiet": self._quiet,
             "searched_ago": self.searched_ago,
@@ -268,22 +263,8 @@ class EvidenceTracker:
             self._trail.append(x, y)
         anchor = state["anchor"]
         self._anchor = None if anchor is None else np.array(anchor, dtype=np.float64)
-        history = state["history"]
-        if isinstance(history, Mapping):
-            odometry, compass = history["odometry"], history["compass"]
-            observations = from_columns(Observation, history["observations"])
-        else:  # checkpoint format 1: one (odometry, observation, compass) record a frame
-            odometry, plain, compass = zip(*history, strict=True) if history else ((), (), ())
-            observations = [from_plain(Observation, obs) for obs in plain]
         self._history.clear()
-        self._history.extend(
-            zip(
-                [from_plain(Odometry | None, odo) for odo in odometry],
-                observations,
-                [from_plain(CompassReading | None, c) for c in compass],
-                strict=True,
-            )
-        )
+        self._history.extend(self._history_from(state["history"]))
         self._since_search = int(state["since_search"])
         self._quiet = int(state.get("quiet", 0))
         self.searched_ago = state["searched_ago"]
@@ -291,6 +272,52 @@ class EvidenceTracker:
         self.swaps = int(state["swaps"])
         self.mode_searches = int(state["mode_searches"])
         self._last_main = from_plain(Hypothesis | None, state["last_main"])
+
+    def _history_columns(self) -> dict[str, Any]:
+        """The window of recent frames as a few arrays: the odometry as rows (forward,
+        left, turn; ``moved`` False where a frame had none), the observations as
+        :func:`~app.localization.sensor.observation_columns`, the compass readings as
+        they are (mostly None)."""
+        history = self._history
+        moved = np.array([odo is not None for odo, _, _ in history], dtype=bool)
+        motion = np.array(
+            [
+                (0.0, 0.0, 0.0) if o is None else (o.forward_m, o.left_m, o.turn_rad)
+                for o, _, _ in history
+            ],
+            dtype=np.float64,
+        ).reshape(-1, 3)
+        return {
+            "motion": motion,
+            "moved": moved,
+            "observations": observation_columns([obs for _, obs, _ in history]),
+            "compass": [compass for _, _, compass in history],
+        }
+
+    def _history_from(
+        self, history: Any
+    ) -> list[tuple[Odometry | None, Observation, CompassReading | None]]:
+        """The window :meth:`_history_columns` wrote, or the forms of earlier checkpoint
+        formats: 3 kept the odometry as records and every field of the observations
+        (:func:`~app.state.to_columns`), 1 one (odometry, observation, compass) record
+        a frame."""
+        if isinstance(history, Mapping) and "motion" in history:
+            rows = np.asarray(history["motion"], dtype=np.float64).reshape(-1, 3).tolist()
+            moved = np.asarray(history["moved"], dtype=bool).tolist()
+            odometry = [Odometry(*row) if m else None for row, m in zip(rows, moved, strict=True)]
+            observations = observations_from_columns(history["observations"], self.map, self.config)
+        else:
+            if isinstance(history, Mapping):  # formats 2 and 3
+                plain_odometry = history["odometry"]
+                observations = from_columns(Observation, history["observations"])
+            else:  # format 1
+                records = zip(*history, strict=True) if history else ((), (), ())
+                plain_odometry, plain, compass_1 = records
+                observations = [from_plain(Observation, obs) for obs in plain]
+                history = {"compass": compass_1}
+            odometry = [from_plain(Odometry | None, odo) for odo in plain_odometry]
+        compass = [from_plain(CompassReading | None, c) for c in history["compass"]]
+        return list(zip(odometry, observations, compass, strict=True))
 
     @property
     def _anchor(self) -> NDArray[np.float64] | None:

@@ -33,8 +33,9 @@ from __future__ import annotations
 
 import functools
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numba import njit
@@ -162,24 +163,115 @@ def prepare_observation(
             score_l.append(min(float(d.score), 1.0))
             group_l.append(g)
         weight.append(1.0 / len(dets))
+    bearing = np.array(bearing_l, dtype=np.float64)
+    return _assemble(
+        bearing,
+        np.cos(bearing),
+        np.sin(bearing),
+        np.array(score_l, dtype=np.float64),
+        np.array(group_l, dtype=np.int64),
+        np.array(weight, dtype=np.float64),
+        classes,
+        tuple(ignored),
+        semantic_map,
+        config,
+    )
+
+
+def _assemble(
+    bearing: NDArray[np.float64],
+    cos: NDArray[np.float64],
+    sin: NDArray[np.float64],
+    score: NDArray[np.float64],
+    group: NDArray[np.int64],
+    weight: NDArray[np.float64],
+    classes: tuple[str, ...],
+    ignored: tuple[str, ...],
+    semantic_map: SemanticMap,
+    config: FilterConfig,
+) -> Observation:
+    """An observation from its detections' arrays and its classes: the class groups'
+    arrays come from the map (:func:`_class_layout`)."""
     eps = config.clutter_prob if config.clutter else 0.0
     kappa, floor, keep, starts, members = _class_layout(semantic_map, config, classes, eps)
-    bearing = np.array(bearing_l, dtype=np.float64)
     return Observation(
         det_bearing=bearing,
-        det_cos=np.cos(bearing),
-        det_sin=np.sin(bearing),
-        det_score=np.array(score_l, dtype=np.float64),
-        det_group=np.array(group_l, dtype=np.int64),
+        det_cos=cos,
+        det_sin=sin,
+        det_score=score,
+        det_group=group,
         group_kappa=kappa,
-        group_weight=np.array(weight, dtype=np.float64),
+        group_weight=weight,
         group_log_floor=floor,
         group_log_keep=keep,
         member_start=starts,
         members=members,
         classes=classes,
-        ignored=tuple(ignored),
+        ignored=ignored,
     )
+
+
+#: The per-detection arrays :func:`observation_columns` keeps: field and dtype.
+_DETECTION_FIELDS: dict[str, Any] = {
+    "det_bearing": np.float64,
+    "det_cos": np.float64,
+    "det_sin": np.float64,
+    "det_score": np.float64,
+    "det_group": np.int64,
+}
+
+
+def observation_columns(observations: Sequence[Observation]) -> dict[str, Any]:
+    """Observations as the few values they are made of, for a checkpoint: their
+    detections' arrays joined end to end (bearings, their cosines and sines, scores,
+    class groups), how many detections each has, and each one's classes and ignored
+    class words. The class groups' arrays are left out: they follow from the classes
+    and the map, and :func:`observations_from_columns` takes them from there. Half the
+    arrays, and a third of the time, of storing every field
+    (:func:`~app.state.to_columns`)."""
+    return {
+        # (the empty array first gives the dtype when there are no observations)
+        **{
+            f: np.concatenate([np.empty(0, dtype), *(getattr(o, f) for o in observations)])
+            for f, dtype in _DETECTION_FIELDS.items()
+        },
+        "counts": np.array([o.det_bearing.size for o in observations], dtype=np.int64),
+        "classes": [o.classes for o in observations],
+        "ignored": [o.ignored for o in observations],
+    }
+
+
+def observations_from_columns(
+    columns: Mapping[str, Any], semantic_map: SemanticMap, config: FilterConfig
+) -> list[Observation]:
+    """The observations :func:`observation_columns` was given, on the map and with the
+    configuration they were made with (each array a slice of one writable copy)."""
+    bearing, cos, sin, score, group = (
+        np.array(columns[f], dtype=dtype) for f, dtype in _DETECTION_FIELDS.items()
+    )
+    counts = np.asarray(columns["counts"]).tolist()
+    out = []
+    start = 0
+    for count, classes, ignored in zip(counts, columns["classes"], columns["ignored"], strict=True):
+        part = slice(start, start + count)
+        start += count
+        # Each class's detections weigh 1 / their number (eq. 2), as prepare_observation
+        # divides.
+        weight = 1.0 / np.bincount(group[part], minlength=len(classes)).astype(np.float64)
+        observation = _assemble(
+            bearing[part],
+            cos[part],
+            sin[part],
+            score[part],
+            group[part],
+            weight,
+            tuple(classes),
+            tuple(ignored),
+            semantic_map,
+            config,
+        )
+        out.append(observation)
+    return out
 
 
 def candidate_mask(

@@ -18,11 +18,14 @@ particles, the main mode's trail, the window's observations as columns), so the 
 stays a few KB: a checkpoint of a converged session (2,000 particles, the evidence
 tracker's window of 10 observations) is 40 to 57 KB, 43 KB for the paper office's walk.
 
-Formats: 3 writes the header in MessagePack, whose numbers are binary (JSON spent most
-of a checkpoint's packing writing a hundred-odd floats out in decimal). 2 and 1 wrote
-JSON (a header opening with ``{``); 1 kept the evidence window as one plain record per
-frame rather than as columns. All three are read, so sessions checkpointed by an older
-version resume on upgraded workers.
+Formats: 4 keeps the evidence window's observations as the few arrays they are made of
+(:func:`~app.localization.sensor.observation_columns`), its odometry as rows, and the
+last detections as rows: a checkpoint of a converged session takes about half the time
+to capture and pack as in format 3 (benchmarks/README.md). 3 wrote the header in
+MessagePack, whose numbers are binary (JSON spent most of a checkpoint's packing writing
+a hundred-odd floats out in decimal). 2 and 1 wrote JSON (a header opening with ``{``);
+1 kept the evidence window as one plain record per frame rather than as columns. All
+four are read, so sessions checkpointed by an older version resume on upgraded workers.
 """
 
 from __future__ import annotations
@@ -49,10 +52,11 @@ if TYPE_CHECKING:
     from app.service.sessions import Session
 
 MAGIC = b"BRGC1"
-FORMAT_VERSION = 3
+FORMAT_VERSION = 4
 #: Formats this version reads: 1 and 2 have a JSON header (1 differs in the evidence
-#: window), 3 a MessagePack one.
-READABLE_FORMATS = (1, 2, 3)
+#: window), 3 and 4 a MessagePack one (4 differs in the evidence window and the last
+#: detections).
+READABLE_FORMATS = (1, 2, 3, 4)
 _ARRAY = "__array__"
 
 
@@ -139,7 +143,7 @@ def capture(session: Session) -> dict[str, Any]:
         "destination": None if plan is None else plan.target,
         "last_timestamp": session.last_timestamp,
         "last_outcome": session.last_outcome,
-        "last_detections": list(session.last_detections),
+        "last_detections": [[d.cls, d.bearing_rad, d.score] for d in session.last_detections],
         "truth": session.truth,
         "filter": None if fresh else session.filter.checkpoint(),
         "narrator": None if fresh else session.narrator.checkpoint(),
@@ -169,7 +173,10 @@ def apply(session: Session, state: Mapping[str, Any]) -> None:
         session.destination = Plan(session.map, from_plain(Target, state["destination"]))
     session.last_timestamp = state["last_timestamp"]
     session.last_outcome = from_plain(FrameOutcome | None, state["last_outcome"])
-    session.last_detections = from_plain(list[Detection], state["last_detections"])
+    session.last_detections = [
+        Detection(*d) if isinstance(d, list) else from_plain(Detection, d)  # rows since format 4
+        for d in state["last_detections"]
+    ]
     session.truth = from_plain(Pose | None, state["truth"])
     session.version += 1
 

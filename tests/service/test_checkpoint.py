@@ -22,7 +22,12 @@ from app.guidance.targets import DestinationSpec
 from app.localization.compass import CompassReading
 from app.localization.config import FilterConfig
 from app.localization.filter import CHECKPOINT_PARTICLES, ParticleFilter
-from app.localization.sensor import Observation, prepare_observation
+from app.localization.sensor import (
+    Observation,
+    observation_columns,
+    observations_from_columns,
+    prepare_observation,
+)
 from app.localization.types import Detection, InitialPose, Pose
 from app.maps.check import load_map
 from app.resources import bundled_maps_dir
@@ -132,31 +137,44 @@ def _pack_with_a_json_header(state: dict[str, Any]) -> bytes:
     return b"".join([checkpoint.MAGIC, struct.pack("<I", len(header)), header, *blobs])
 
 
-def test_a_format_1_checkpoint_of_the_previous_version_is_still_read() -> None:
-    """Format 1 kept the evidence window as one plain record per frame; a session
-    checkpointed by the previous version must resume on an upgraded worker."""
+def _format_3_window(pf: ParticleFilter) -> dict[str, Any]:
+    """The evidence window as formats 2 and 3 kept it: the odometry as records, every
+    field of the observations as columns (:func:`to_columns`)."""
+    assert pf.evidence is not None
+    history = list(pf.evidence._history)
+    assert history  # the window holds frames, so the old layout is exercised
+    return {
+        "odometry": [to_plain(odo) for odo, _, _ in history],
+        "observations": to_columns([obs for _, obs, _ in history]),
+        "compass": [to_plain(compass) for _, _, compass in history],
+    }
+
+
+@pytest.mark.parametrize("version", [1, 3])
+def test_a_checkpoint_of_an_earlier_format_is_still_read(version: int) -> None:
+    """Format 1 kept the evidence window as one plain record per frame, 3 every field of
+    its observations as columns; a session checkpointed by an earlier version must
+    resume on an upgraded worker, exactly as from the current format."""
     config = FilterConfig(particles=4000)
     a = ParticleFilter(OFFICE, config, rng=np.random.default_rng(3))
     for i in range(40):
         a.step(WALK[i].odometry, WALK[i].detections)
     state = round_trip(a.checkpoint())
-    window = state["evidence"]["history"]
-    old = [
-        [to_plain(odo), to_plain(obs), to_plain(compass)]
-        for odo, obs, compass in zip(
-            window["odometry"],
-            from_columns(Observation, window["observations"]),
-            window["compass"],
-            strict=True,
-        )
-    ]
-    assert old  # the window holds frames, so the old layout is exercised
-    state["evidence"]["history"] = old
-    data = _pack_with_a_json_header({"format": 1, "filter": state})
+    window = _format_3_window(a)
+    if version == 1:
+        observations = from_columns(Observation, window["observations"])
+        records = zip(window["odometry"], observations, window["compass"], strict=True)
+        state["evidence"]["history"] = [[odo, to_plain(obs), c] for odo, obs, c in records]
+        data = _pack_with_a_json_header({"format": 1, "filter": state})
+    else:
+        state["evidence"]["history"] = window
+        data = checkpoint.pack({"format": 3, "filter": state})
     b = ParticleFilter(OFFICE, config, rng=np.random.default_rng(99))
     b.restore(checkpoint.unpack(data)["filter"])
     c = ParticleFilter(OFFICE, config, rng=np.random.default_rng(99))
     c.restore(round_trip(a.checkpoint()))
+    assert b.evidence is not None and c.evidence is not None
+    assert len(b.evidence._history) == len(c.evidence._history)
     for i in range(40, 60):
         eb = b.step(WALK[i].odometry, WALK[i].detections)
         ec = c.step(WALK[i].odometry, WALK[i].detections)
@@ -227,26 +245,39 @@ def test_bad_bytes_are_refused_with_a_reason() -> None:
         checkpoint.unpack(checkpoint.pack({"format": 99}))
 
 
-def test_observations_as_columns_come_back_exactly() -> None:
-    config = FilterConfig()
+def _assert_same_observations(a: list[Observation], b: list[Observation]) -> None:
+    assert len(a) == len(b)
+    for x, y in zip(a, b, strict=True):
+        for f in dataclasses.fields(Observation):
+            vx, vy = getattr(x, f.name), getattr(y, f.name)
+            if isinstance(vx, np.ndarray):
+                assert vx.dtype == vy.dtype and np.array_equal(vx, vy), f.name
+                assert vy.flags.writeable and vy.flags.c_contiguous
+            else:
+                assert vx == vy, f.name
+
+
+@pytest.mark.parametrize("clutter", [True, False])
+def test_observations_as_columns_come_back_exactly(clutter: bool) -> None:
+    config = FilterConfig(clutter=clutter, class_bearing_std_deg={"door": 5.0})
     frames = [*WALK[:4], WALK[4]]
     detections = [list(f.detections) for f in frames]
     detections[3] = []  # a frame with nothing usable ...
     detections[4].append(Detection("unicorn", 0.5, 1.0))  # ... and one with a stranger
+    detections[1].append(Detection("door", 0.3, 0.0))  # a score of 0 carries nothing
     observations = [prepare_observation(d, OFFICE, config) for d in detections]
+    assert any(len(set(o.det_group.tolist())) < o.det_group.size for o in observations)
     for packed in (False, True):
+        # Every field (format 3) ...
         columns = to_columns(observations)
         back = from_columns(Observation, round_trip(columns) if packed else columns)
-        assert len(back) == len(observations)
-        for a, b in zip(observations, back, strict=True):
-            for f in dataclasses.fields(Observation):
-                va, vb = getattr(a, f.name), getattr(b, f.name)
-                if isinstance(va, np.ndarray):
-                    assert va.dtype == vb.dtype and np.array_equal(va, vb)
-                    assert vb.flags.writeable and vb.flags.c_contiguous
-                else:
-                    assert va == vb
+        _assert_same_observations(observations, back)
+        # ... and what they are made of (format 4), the rest taken from the map.
+        compact = observation_columns(observations)
+        compact = round_trip(compact) if packed else compact
+        _assert_same_observations(observations, observations_from_columns(compact, OFFICE, config))
     assert from_columns(Observation, round_trip(to_columns([]))) == []
+    assert observations_from_columns(round_trip(observation_columns([])), OFFICE, config) == []
 
 
 def test_pack_converts_values_on_the_way() -> None:
