@@ -12,7 +12,9 @@ arrays, and numbers, strings and booleans. Non-finite floats pass through as ``N
 :func:`plain_step` converts one level only, for an encoder that walks the rest itself
 (:func:`app.service.checkpoint.pack` hands it to MessagePack's encoder, and the journal
 to orjson's, whose walks are compiled). :func:`to_columns` stores many values of one
-type as a few long arrays.
+type as a few long arrays, and :func:`from_columns` reads them back: checkpoints of
+format 3 kept the evidence window's observations so (format 4 keeps fewer arrays,
+:func:`app.localization.sensor.observation_columns`), and are still read.
 """
 
 from __future__ import annotations
