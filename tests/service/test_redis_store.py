@@ -9,6 +9,8 @@ from __future__ import annotations
 import asyncio
 import time
 from collections.abc import Callable, Iterator
+from pathlib import Path
+from urllib.parse import urlsplit
 
 import pytest
 import redis
@@ -132,25 +134,102 @@ def test_journal_entries_from_many_sessions_in_one_round_trip(
     assert all(len(store.load(sid)[1]) == 3 for sid in ids)
 
 
+@pytest.fixture(params=["asyncio", "uvloop"])
+def loops(request: pytest.FixtureRequest) -> Iterator[asyncio.Runner]:
+    """One event loop for a whole test, of either kind (``bearings serve`` runs uvloop):
+    the journal's connection is a protocol on the loop's own transports."""
+    import uvloop
+
+    factory = uvloop.new_event_loop if request.param == "uvloop" else None
+    with asyncio.Runner(loop_factory=factory) as r:
+        yield r
+
+
+def journal_through(url: str, runner: asyncio.Runner) -> None:
+    """A store at ``url`` takes a lease, journals three frames and reads them back."""
+    store = RedisStore(url)
+    try:
+        assert store.acquire("s1", "w1", 5)
+        for seq in (1, 2, 3):
+            assert runner.run(store.append("s1", b"%d|{}" % seq, "w1", 60, 5))
+        assert store.load("s1")[1] == [b"1|{}", b"2|{}", b"3|{}"]
+    finally:
+        runner.run(store.aclose())
+        store.close()
+
+
+def test_the_journal_logs_in_and_picks_the_database_the_url_names(
+    loops: asyncio.Runner,
+) -> None:
+    """The journal's connection of its own authenticates (a password, or a user and a
+    password) and selects the URL's database, as the client's connections do."""
+    user = ["--user", "bearings", "on", ">pw2", "~*", "&*", "+@all"]
+    with redis_server("--requirepass", "pw1", *user) as plain:
+        port = urlsplit(plain).port
+        journal_through(f"redis://:pw1@127.0.0.1:{port}/3", loops)
+        journal_through(f"redis://bearings:pw2@127.0.0.1:{port}/5", loops)
+        sizes = [redis.Redis(port=port, password="pw1", db=db).dbsize() for db in (0, 3, 5)]
+        assert sizes == [0, 2, 2]  # a lease and a journal in each of the URLs' databases
+
+
+def test_the_journal_reaches_redis_through_a_unix_socket(
+    loops: asyncio.Runner, tmp_path: Path
+) -> None:
+    sock = tmp_path / "redis.sock"
+    with redis_server("--unixsocket", str(sock), "--unixsocketperm", "700"):
+        journal_through(f"unix://{sock}?db=2", loops)
+
+
 def test_the_journal_goes_on_after_redis_forgets_its_script_or_drops_it(
-    url: str, runner: asyncio.Runner
+    url: str, loops: asyncio.Runner
 ) -> None:
     """The journal writes through a connection of its own: a Redis that restarted (its
-    scripts gone) or that closed that connection must not lose an entry."""
+    scripts gone and the connection closed), that forgot its scripts, or that closed
+    that connection must not lose an entry."""
     r = redis.Redis.from_url(url)
     r.flushdb()
     store = RedisStore(url)
     try:
         assert store.acquire("s1", "w1", 5)
-        append = lambda seq: runner.run(store.append("s1", b"%d|{}" % seq, "w1", 60, 5))  # noqa: E731
+        append = lambda seq: loops.run(store.append("s1", b"%d|{}" % seq, "w1", 60, 5))  # noqa: E731
         assert append(1)
         r.script_flush()
         assert append(2)
         r.client_kill_filter(_type="normal", skipme=True)
         assert append(3)
-        assert store.load("s1")[1] == [b"1|{}", b"2|{}", b"3|{}"]
+        r.script_flush()  # as after a restart: both at once
+        r.client_kill_filter(_type="normal", skipme=True)
+        assert append(4)
+        assert store.load("s1")[1] == [b"%d|{}" % seq for seq in (1, 2, 3, 4)]
     finally:
-        runner.run(store.aclose())
+        loops.run(store.aclose())
+        store.close()
+
+
+def test_a_journal_write_without_a_reply_fails_in_time_and_its_connection_goes(
+    url: str, loops: asyncio.Runner
+) -> None:
+    """A Redis that does not answer: the write fails after the store's timeout (the
+    frames waiting for it are answered with an error), and its late reply is never
+    taken for the next write's."""
+    r = redis.Redis.from_url(url)
+    r.flushdb()
+    store = RedisStore(url, timeout_s=0.3)
+    try:
+        assert store.acquire("s1", "w1", 5)
+        assert loops.run(store.append("s1", b"1|{}", "w1", 60, 5))
+        r.client_pause(10_000, all=False)  # scripts wait; CLIENT UNPAUSE does not
+        start = time.monotonic()
+        with pytest.raises(StoreUnavailable, match=r"no reply from Redis in 0\.3 s"):
+            # s2 has no lease: Redis would refuse this entry, if it ever ran it
+            loops.run(store.append("s2", b"1|{}", "w1", 60, 5))
+        assert time.monotonic() - start < 2.0
+        r.client_unpause()
+        assert loops.run(store.append("s1", b"2|{}", "w1", 60, 5))
+        assert store.load("s1")[1] == [b"1|{}", b"2|{}"]
+    finally:
+        r.client_unpause()
+        loops.run(store.aclose())
         store.close()
 
 
