@@ -471,7 +471,6 @@ class _Connection(asyncio.Protocol):
             done, _ = self._waiting.popleft()
             if not done.done():
                 done.set_exception(error)
-        self.close()
 
     def close(self) -> None:
         if self._transport is not None:

@@ -183,12 +183,24 @@ def test_the_journal_reaches_redis_through_a_unix_socket(
 def test_the_journal_goes_on_after_redis_forgets_its_script_or_drops_it(
     url: str, loops: asyncio.Runner
 ) -> None:
-    """The journal writes through a connection of its own: a Redis that restarted (its
-    scripts gone and the connection closed), that forgot its scripts, or that closed
-    that connection must not lose an entry."""
+    """The journal writes through a connection of its own: a Redis that forgot its
+    scripts, that closed that connection (while it was idle, or while a write waited for
+    its reply), or both at once as after a restart, must not lose an entry."""
     r = redis.Redis.from_url(url)
     r.flushdb()
     store = RedisStore(url)
+
+    async def killed_while_it_waits(seq: int) -> bool:
+        r.client_pause(10_000, all=False)  # the script waits in Redis
+        try:
+            pending = asyncio.ensure_future(store.append("s1", b"%d|{}" % seq, "w1", 60, 5))
+            await asyncio.sleep(0.1)
+            r.client_kill_filter(_type="normal", skipme=True)
+            await asyncio.sleep(0.1)
+        finally:
+            r.client_unpause()
+        return await pending
+
     try:
         assert store.acquire("s1", "w1", 5)
         append = lambda seq: loops.run(store.append("s1", b"%d|{}" % seq, "w1", 60, 5))  # noqa: E731
@@ -197,10 +209,10 @@ def test_the_journal_goes_on_after_redis_forgets_its_script_or_drops_it(
         assert append(2)
         r.client_kill_filter(_type="normal", skipme=True)
         assert append(3)
-        r.script_flush()  # as after a restart: both at once
-        r.client_kill_filter(_type="normal", skipme=True)
-        assert append(4)
-        assert store.load("s1")[1] == [b"%d|{}" % seq for seq in (1, 2, 3, 4)]
+        assert loops.run(killed_while_it_waits(4))
+        r.script_flush()
+        assert loops.run(killed_while_it_waits(5))  # both in one write
+        assert store.load("s1")[1] == [b"%d|{}" % seq for seq in (1, 2, 3, 4, 5)]
     finally:
         loops.run(store.aclose())
         store.close()
@@ -215,17 +227,23 @@ def test_a_journal_write_without_a_reply_fails_in_time_and_its_connection_goes(
     r = redis.Redis.from_url(url)
     r.flushdb()
     store = RedisStore(url, timeout_s=0.3)
+
+    async def next_write_then_unpause() -> bool:
+        pending = asyncio.ensure_future(store.append("s1", b"2|{}", "w1", 60, 5))
+        await asyncio.sleep(0.1)  # written, behind the first one if on its connection
+        r.client_unpause()
+        return await pending
+
     try:
         assert store.acquire("s1", "w1", 5)
         assert loops.run(store.append("s1", b"1|{}", "w1", 60, 5))
         r.client_pause(10_000, all=False)  # scripts wait; CLIENT UNPAUSE does not
         start = time.monotonic()
         with pytest.raises(StoreUnavailable, match=r"no reply from Redis in 0\.3 s"):
-            # s2 has no lease: Redis would refuse this entry, if it ever ran it
+            # s2 has no lease: Redis refuses this entry, when it runs it
             loops.run(store.append("s2", b"1|{}", "w1", 60, 5))
         assert time.monotonic() - start < 2.0
-        r.client_unpause()
-        assert loops.run(store.append("s1", b"2|{}", "w1", 60, 5))
+        assert loops.run(next_write_then_unpause())
         assert store.load("s1")[1] == [b"1|{}", b"2|{}"]
     finally:
         r.client_unpause()
