@@ -366,11 +366,11 @@ class _Connection(asyncio.Protocol):
     resolve one future per command, in order.
 
     The journal writes once per batch of frames, so what a call costs the event loop's
-    thread counts: through a redis-py asyncio connection it was 24 us of CPU for a batch
-    of one with warm caches, and 94 us with the caches gone cold between calls as on a
-    busy worker (its stream reader and writer, the drain, a timeout context and the
-    health checks around every command); on this connection 13 and 57 us
-    (benchmarks/journal_call.py).
+    thread counts. Through a redis-py asyncio connection (its stream reader and writer,
+    the drain, a timeout context and the health checks around every command) a batch of
+    one cost about 24 us of CPU, and 87 us with the caches gone cold between calls as on
+    a busy worker; through this one about 12 and 46 us (benchmarks/journal_call.py, Redis
+    on the same core; on another, idle core every call costs 20-30 us more, both ways).
 
     It is made from the store's URL, with the client's own settings for it (host and
     port or a Unix socket, TLS, the user and password, the database). A call that times
