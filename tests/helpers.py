@@ -197,17 +197,21 @@ def wait_for_port(port: int, timeout_s: float = 20.0) -> None:
 
 
 @contextmanager
-def redis_server() -> Iterator[str]:
-    """A private redis-server on a free port, in memory only; yields its redis:// URL."""
+def redis_server(*config: str) -> Iterator[str]:
+    """A private redis-server on a free port, in memory only; yields its redis:// URL.
+
+    ``config``: more of its settings, as command-line arguments (``"--requirepass", "pw"``).
+    """
     import subprocess
 
     binary = need_binary("redis-server")
     port = free_port()
     proc = subprocess.Popen(
-        [binary, "--port", str(port), "--bind", "127.0.0.1", "--save", "", "--appendonly", "no"],
+        [binary, "--port", str(port), "--bind", "127.0.0.1", "--save", "", "--appendonly", "no",
+         *config],
         stdout=subprocess.DEVNULL,
         stderr=subprocess.DEVNULL,
-    )
+    )  # fmt: skip
     try:
         wait_for_port(port)
         yield f"redis://127.0.0.1:{port}/0"

@@ -32,9 +32,13 @@ from __future__ import annotations
 import asyncio
 import threading
 import time
+from collections import deque
 from collections.abc import Awaitable, Callable, Sequence
-from typing import Protocol
+from typing import TYPE_CHECKING, Any, Protocol, cast
 from urllib.parse import urlsplit, urlunsplit
+
+if TYPE_CHECKING:
+    from redis.asyncio.connection import ConnectionPool
 
 #: Most journal entries written in one round trip.
 MAX_BATCH = 512
@@ -356,15 +360,177 @@ class _GroupCommit:
                         done.set_result(ok)
 
 
+class _Connection(asyncio.Protocol):
+    """A bare Redis connection for the journal's script calls: the command is written
+    to the transport as it is, and the replies, parsed by hiredis as the bytes arrive,
+    resolve one future per command, in order.
+
+    The journal writes once per batch of frames, so what a call costs the event loop's
+    thread counts. Through a redis-py asyncio connection (its stream reader and writer,
+    the drain, a timeout context and the health checks around every command) a batch of
+    one cost about 24 us of CPU, and 87 us with the caches gone cold between calls as on
+    a busy worker; through this one about 12 and 46 us (benchmarks/journal_call.py, Redis
+    on the same core; on another, idle core every call costs 20-30 us more, both ways).
+
+    It is made from the store's URL, with the client's own settings for it (host and
+    port or a Unix socket, TLS, the user and password, the database). A call that times
+    out closes the connection (its reply would come late, as the next call's), and so
+    does a cancelled one. Error replies raise redis-py's exceptions (``NOSCRIPT``:
+    :class:`~redis.exceptions.NoScriptError`), and a connection Redis closed raises its
+    :class:`~redis.exceptions.ConnectionError`. Writes are not paced: the group commit
+    has one command in flight at a time, the size of one batch.
+    """
+
+    def __init__(self, loop: asyncio.AbstractEventLoop, timeout_s: float) -> None:
+        import hiredis
+
+        self._loop = loop
+        self._timeout_s = timeout_s
+        self._reader = hiredis.Reader()
+        self._reply_error = hiredis.ReplyError
+        self._transport: asyncio.Transport | None = None
+        #: The calls waiting for their replies, oldest first, each with its deadline.
+        self._waiting: deque[tuple[asyncio.Future[Any], float]] = deque()
+        #: One timer for all the calls, armed for the oldest one's deadline (a timer of
+        #: each call's own, armed and cancelled, cost a sixth of the call's CPU).
+        self._watch: asyncio.TimerHandle | None = None
+
+    @classmethod
+    async def open(cls, pool: ConnectionPool, timeout_s: float) -> _Connection:
+        """A connection to where the pool's connections go, ready for commands."""
+        from redis.asyncio.connection import Connection, SSLConnection, UnixDomainSocketConnection
+        from redis.exceptions import ConnectionError
+        from redis.exceptions import TimeoutError as RedisTimeoutError
+
+        loop = asyncio.get_running_loop()
+        # One of the pool's connections, never connected: only its settings are read.
+        like = pool.connection_class(**pool.connection_kwargs)
+        conn = cls(loop, timeout_s)
+        try:
+            async with asyncio.timeout(timeout_s):
+                if isinstance(like, UnixDomainSocketConnection):
+                    await loop.create_unix_connection(lambda: conn, like.path)
+                else:
+                    assert isinstance(like, Connection)
+                    tls = like.ssl_context.get() if isinstance(like, SSLConnection) else None
+                    await loop.create_connection(lambda: conn, like.host, like.port, ssl=tls)
+            if like.password:
+                auth = [like.username, like.password] if like.username else [like.password]
+                await conn.call(_pack("AUTH", *auth))
+            if like.db:
+                await conn.call(_pack("SELECT", like.db))
+        except TimeoutError:  # (asyncio's: an OSError too)
+            conn.close()
+            raise RedisTimeoutError(f"no connection to Redis in {timeout_s} s") from None
+        except OSError as exc:
+            conn.close()
+            raise ConnectionError(f"cannot connect to Redis: {exc}") from exc
+        except BaseException:
+            conn.close()
+            raise
+        return conn
+
+    @property
+    def closed(self) -> bool:
+        return self._transport is None or self._transport.is_closing()
+
+    async def call(self, command: bytes) -> Any:
+        """Send one packed command and wait for its reply."""
+        transport = self._transport
+        if transport is None or transport.is_closing():
+            from redis.exceptions import ConnectionError
+
+            raise ConnectionError("the journal's connection is closed")
+        done = self._loop.create_future()
+        self._waiting.append((done, self._loop.time() + self._timeout_s))
+        if self._watch is None:
+            self._watch = self._loop.call_later(self._timeout_s, self._expire)
+        transport.write(command)
+        try:
+            reply = await done
+        except BaseException:  # timed out, cancelled or lost: no reply to read later
+            self.close()
+            raise
+        if isinstance(reply, self._reply_error):
+            raise _reply_error(str(reply))
+        return reply
+
+    def _expire(self) -> None:
+        """The watch: fail every call if the oldest is past its deadline, else wait on."""
+        from redis.exceptions import TimeoutError
+
+        self._watch = None
+        if not self._waiting:
+            return
+        left = self._waiting[0][1] - self._loop.time()
+        if left > 0:
+            self._watch = self._loop.call_later(left, self._expire)
+            return
+        error = TimeoutError(f"no reply from Redis in {self._timeout_s} s")
+        while self._waiting:
+            done, _ = self._waiting.popleft()
+            if not done.done():
+                done.set_exception(error)
+
+    def close(self) -> None:
+        if self._transport is not None:
+            self._transport.close()
+
+    # asyncio.Protocol
+    def connection_made(self, transport: asyncio.BaseTransport) -> None:
+        # (uvloop's transports are not asyncio.Transport subclasses, only alike)
+        self._transport = cast(asyncio.Transport, transport)
+
+    def data_received(self, data: bytes) -> None:
+        self._reader.feed(data)
+        try:
+            while (reply := self._reader.gets()) is not False:
+                if not self._waiting:  # a reply nobody asked for: out of step
+                    self.close()
+                    return
+                done, _ = self._waiting.popleft()
+                if not done.done():
+                    done.set_result(reply)
+        except Exception:  # hiredis.ProtocolError: not Redis, or garbled
+            self.close()
+
+    def connection_lost(self, exc: Exception | None) -> None:
+        from redis.exceptions import ConnectionError
+
+        if self._watch is not None:
+            self._watch.cancel()
+            self._watch = None
+        while self._waiting:
+            done, _ = self._waiting.popleft()
+            if not done.done():
+                done.set_exception(ConnectionError(f"Redis closed the connection ({exc})"))
+
+
+def _pack(*args: bytes | str | int) -> bytes:
+    """A command in Redis's protocol, packed by hiredis (in C)."""
+    import hiredis
+
+    # (hiredis's stub types the tuple as one item long)
+    return hiredis.pack_command(args)  # type: ignore[arg-type]
+
+
+def _reply_error(message: str) -> Exception:
+    """The redis-py exception for an error reply (``NOSCRIPT ...``: NoScriptError)."""
+    from redis.exceptions import NoScriptError, ResponseError
+
+    return NoScriptError(message) if message.startswith("NOSCRIPT") else ResponseError(message)
+
+
 class _OnLoop:
     """The store's writes from one event loop (journal entries and checkpoints): asyncio
     connections of its own, which belong to that loop, and the group commit of journal
-    entries that writes through them. Writing from the loop, rather than from a thread,
-    spares the two threads handing the GIL back and forth while a checkpoint's bytes are
-    sent.
+    entries, which writes through a bare connection of its own (:class:`_Connection`).
+    Writing from the loop, rather than from a thread, spares the two threads handing the
+    GIL back and forth while a checkpoint's bytes are sent.
 
-    At most ``CONNECTIONS`` writes are in flight; more wait for a connection (up to the
-    timeout) rather than fail: a burst of new sessions writes a checkpoint each at once.
+    At most ``CONNECTIONS`` checkpoint writes are in flight; more wait for a connection
+    (up to the timeout) rather than fail: a burst of new sessions writes a checkpoint
+    each at once.
     """
 
     CONNECTIONS = 8
@@ -373,6 +539,7 @@ class _OnLoop:
         import redis.asyncio
 
         self.loop = loop
+        self.timeout_s = timeout_s
         self.pool = redis.asyncio.BlockingConnectionPool.from_url(
             url,
             max_connections=self.CONNECTIONS,
@@ -385,7 +552,7 @@ class _OnLoop:
         self.save_checkpoints = self.client.register_script(_SAVE)
         self.commit = _GroupCommit(self._write)
         #: The journal's own connection (the group commit writes one batch at a time).
-        self._journal: redis.asyncio.Connection | None = None
+        self._journal: _Connection | None = None
 
     async def _write(self, batch: list[Entry]) -> list[bool]:
         # One script call per (owner, ttl, lease): in practice one per batch.
@@ -402,40 +569,43 @@ class _OnLoop:
         return [results[i] for i in range(len(batch))]
 
     async def _append_call(self, keys: list[str], args: list[bytes | str | int]) -> list[int]:
-        """The append script run on the journal's own connection, its command packed by
-        hiredis: the client's script call (a pooled connection, the command packed in
-        Python argument by argument) cost about 117 us of CPU for a batch of one, more
-        than the rest of a frame's journalling (benchmarks/README.md)."""
-        import hiredis
+        """The append script run on the journal's own connection (:class:`_Connection`).
+
+        A Redis that lost the script (restarted, or flushed) gets it again, once. A
+        connection Redis closed (restarted, or killed it) is replaced, once, as the
+        client's own retry would: should the first call have stored the entries after
+        all, a replay skips the second copies (an entry carries its step's number). A
+        restarted Redis does both in one call. Not after a timeout or any other error:
+        Redis is slow or refuses, and the frames are better answered with an error at
+        once.
+        """
         from redis.exceptions import ConnectionError, NoScriptError
 
-        # (hiredis's stub types the tuple as one item long)
-        command = hiredis.pack_command(("EVALSHA", self._append.sha, len(keys), *keys, *args))  # type: ignore[arg-type]
-        for attempt in range(2):
+        command = _pack("EVALSHA", self._append.sha, len(keys), *keys, *args)
+        loaded = reconnected = False
+        while True:
             conn = self._journal
-            if conn is None:
-                conn = self._journal = await self.pool.get_connection()
+            if conn is None or conn.closed:
+                conn = self._journal = await _Connection.open(self.pool, self.timeout_s)
             try:
-                await conn.send_packed_command(command, check_health=False)
-                reply: list[int] = await conn.read_response()
+                reply: list[int] = await conn.call(command)
                 return reply
-            except NoScriptError:  # a restarted (or flushed) Redis: load it, once
-                if attempt:
+            except NoScriptError:
+                if loaded:
                     raise
-                await self.client.script_load(_APPEND)
-            except BaseException as exc:
-                # A reply may be left unread: never reuse this connection as it is.
-                self._journal = None
-                await conn.disconnect()
-                await self.pool.release(conn)
-                # A connection Redis closed (restarted, or killed it): once more on a new
-                # one, as the client's own retry would (should the first call have
-                # stored the entries after all, a replay skips the second copies: an
-                # entry carries its step's number). Not after a timeout: Redis is slow,
-                # and the frames are better answered with an error at once.
-                if attempt or not isinstance(exc, ConnectionError):
+                loaded = True
+                await conn.call(_pack("SCRIPT", "LOAD", _APPEND))
+            except ConnectionError:
+                if reconnected:
                     raise
-        raise AssertionError("unreachable")  # pragma: no cover
+                reconnected = True
+
+    async def aclose(self) -> None:
+        if self._journal is not None:
+            self._journal.close()
+            self._journal = None
+        await self.client.aclose()
+        await self.pool.disconnect()
 
 
 class RedisStore:
@@ -518,8 +688,7 @@ class RedisStore:
     async def aclose(self) -> None:
         writer, self._writer = self._writer, None
         if writer is not None and writer.loop is asyncio.get_running_loop():
-            await writer.client.aclose()
-            await writer.pool.disconnect()
+            await writer.aclose()
 
     def close(self) -> None:
         self._redis.close()

@@ -9,6 +9,8 @@ from __future__ import annotations
 import asyncio
 import time
 from collections.abc import Callable, Iterator
+from pathlib import Path
+from urllib.parse import urlsplit
 
 import pytest
 import redis
@@ -132,25 +134,120 @@ def test_journal_entries_from_many_sessions_in_one_round_trip(
     assert all(len(store.load(sid)[1]) == 3 for sid in ids)
 
 
-def test_the_journal_goes_on_after_redis_forgets_its_script_or_drops_it(
-    url: str, runner: asyncio.Runner
-) -> None:
-    """The journal writes through a connection of its own: a Redis that restarted (its
-    scripts gone) or that closed that connection must not lose an entry."""
-    r = redis.Redis.from_url(url)
-    r.flushdb()
+@pytest.fixture(params=["asyncio", "uvloop"])
+def loops(request: pytest.FixtureRequest) -> Iterator[asyncio.Runner]:
+    """One event loop for a whole test, of either kind (``bearings serve`` runs uvloop):
+    the journal's connection is a protocol on the loop's own transports."""
+    import uvloop
+
+    factory = uvloop.new_event_loop if request.param == "uvloop" else None
+    with asyncio.Runner(loop_factory=factory) as r:
+        yield r
+
+
+def journal_through(url: str, runner: asyncio.Runner) -> None:
+    """A store at ``url`` takes a lease, journals three frames and reads them back."""
     store = RedisStore(url)
     try:
         assert store.acquire("s1", "w1", 5)
-        append = lambda seq: runner.run(store.append("s1", b"%d|{}" % seq, "w1", 60, 5))  # noqa: E731
+        for seq in (1, 2, 3):
+            assert runner.run(store.append("s1", b"%d|{}" % seq, "w1", 60, 5))
+        assert store.load("s1")[1] == [b"1|{}", b"2|{}", b"3|{}"]
+    finally:
+        runner.run(store.aclose())
+        store.close()
+
+
+def test_the_journal_logs_in_and_picks_the_database_the_url_names(
+    loops: asyncio.Runner,
+) -> None:
+    """The journal's connection of its own authenticates (a password, or a user and a
+    password) and selects the URL's database, as the client's connections do."""
+    user = ["--user", "bearings", "on", ">pw2", "~*", "&*", "+@all"]
+    with redis_server("--requirepass", "pw1", *user) as plain:
+        port = urlsplit(plain).port
+        journal_through(f"redis://:pw1@127.0.0.1:{port}/3", loops)
+        journal_through(f"redis://bearings:pw2@127.0.0.1:{port}/5", loops)
+        sizes = [redis.Redis(port=port, password="pw1", db=db).dbsize() for db in (0, 3, 5)]
+        assert sizes == [0, 2, 2]  # a lease and a journal in each of the URLs' databases
+
+
+def test_the_journal_reaches_redis_through_a_unix_socket(
+    loops: asyncio.Runner, tmp_path: Path
+) -> None:
+    sock = tmp_path / "redis.sock"
+    with redis_server("--unixsocket", str(sock), "--unixsocketperm", "700"):
+        journal_through(f"unix://{sock}?db=2", loops)
+
+
+def test_the_journal_goes_on_after_redis_forgets_its_script_or_drops_it(
+    url: str, loops: asyncio.Runner
+) -> None:
+    """The journal writes through a connection of its own: a Redis that forgot its
+    scripts, that closed that connection (while it was idle, or while a write waited for
+    its reply), or both at once as after a restart, must not lose an entry."""
+    r = redis.Redis.from_url(url)
+    r.flushdb()
+    store = RedisStore(url)
+
+    async def killed_while_it_waits(seq: int) -> bool:
+        r.client_pause(10_000, all=False)  # the script waits in Redis
+        try:
+            pending = asyncio.ensure_future(store.append("s1", b"%d|{}" % seq, "w1", 60, 5))
+            await asyncio.sleep(0.1)
+            r.client_kill_filter(_type="normal", skipme=True)
+            await asyncio.sleep(0.1)
+        finally:
+            r.client_unpause()
+        return await pending
+
+    try:
+        assert store.acquire("s1", "w1", 5)
+        append = lambda seq: loops.run(store.append("s1", b"%d|{}" % seq, "w1", 60, 5))  # noqa: E731
         assert append(1)
         r.script_flush()
         assert append(2)
         r.client_kill_filter(_type="normal", skipme=True)
         assert append(3)
-        assert store.load("s1")[1] == [b"1|{}", b"2|{}", b"3|{}"]
+        assert loops.run(killed_while_it_waits(4))
+        r.script_flush()
+        assert loops.run(killed_while_it_waits(5))  # both in one write
+        assert store.load("s1")[1] == [b"%d|{}" % seq for seq in (1, 2, 3, 4, 5)]
     finally:
-        runner.run(store.aclose())
+        loops.run(store.aclose())
+        store.close()
+
+
+def test_a_journal_write_without_a_reply_fails_in_time_and_its_connection_goes(
+    url: str, loops: asyncio.Runner
+) -> None:
+    """A Redis that does not answer: the write fails after the store's timeout (the
+    frames waiting for it are answered with an error), and its late reply is never
+    taken for the next write's."""
+    r = redis.Redis.from_url(url)
+    r.flushdb()
+    store = RedisStore(url, timeout_s=0.3)
+
+    async def next_write_then_unpause() -> bool:
+        pending = asyncio.ensure_future(store.append("s1", b"2|{}", "w1", 60, 5))
+        await asyncio.sleep(0.1)  # written, behind the first one if on its connection
+        r.client_unpause()
+        return await pending
+
+    try:
+        assert store.acquire("s1", "w1", 5)
+        assert loops.run(store.append("s1", b"1|{}", "w1", 60, 5))
+        r.client_pause(10_000, all=False)  # scripts wait; CLIENT UNPAUSE does not
+        start = time.monotonic()
+        with pytest.raises(StoreUnavailable, match=r"no reply from Redis in 0\.3 s"):
+            # s2 has no lease: Redis refuses this entry, when it runs it
+            loops.run(store.append("s2", b"1|{}", "w1", 60, 5))
+        assert time.monotonic() - start < 2.0
+        assert loops.run(next_write_then_unpause())
+        assert store.load("s1")[1] == [b"1|{}", b"2|{}"]
+    finally:
+        r.client_unpause()
+        loops.run(store.aclose())
         store.close()
 
 
