@@ -16,7 +16,8 @@ Bytes: ``BRGC1``, a 4-byte little-endian header length, the header, then the raw
 the header points to (dtype, shape, offset). Anything numerous is an array (the
 particles, the main mode's trail, the window's observations as columns), so the header
 stays a few KB: a checkpoint of a converged session (2,000 particles, the evidence
-tracker's window of 10 observations) is 40 to 57 KB, 43 KB for the paper office's walk.
+tracker's window of 10 observations) is about 39.5 KB on the office walk of
+benchmarks/load.py (43 KB in format 3, which measured 40 to 57 KB over other walks).
 
 Formats: 4 keeps the evidence window's observations as the few arrays they are made of
 (:func:`~app.localization.sensor.observation_columns`), its odometry as rows, and the
