@@ -301,22 +301,22 @@ class EvidenceTracker:
         formats: 3 kept the odometry as records and every field of the observations
         (:func:`~app.state.to_columns`), 1 one (odometry, observation, compass) record
         a frame."""
-        if isinstance(history, Mapping) and "motion" in history:
+        if isinstance(history, Mapping) and "motion" in history:  # format 4
             rows = np.asarray(history["motion"], dtype=np.float64).reshape(-1, 3).tolist()
             moved = np.asarray(history["moved"], dtype=bool).tolist()
             odometry = [Odometry(*row) if m else None for row, m in zip(rows, moved, strict=True)]
             observations = observations_from_columns(history["observations"], self.map, self.config)
-        else:
-            if isinstance(history, Mapping):  # formats 2 and 3
-                plain_odometry = history["odometry"]
-                observations = from_columns(Observation, history["observations"])
-            else:  # format 1
-                records = zip(*history, strict=True) if history else ((), (), ())
-                plain_odometry, plain, compass_1 = records
-                observations = [from_plain(Observation, obs) for obs in plain]
-                history = {"compass": compass_1}
+            plain_compass = history["compass"]
+        elif isinstance(history, Mapping):  # formats 2 and 3
+            odometry = [from_plain(Odometry | None, odo) for odo in history["odometry"]]
+            observations = from_columns(Observation, history["observations"])
+            plain_compass = history["compass"]
+        else:  # format 1
+            records = zip(*history, strict=True) if history else ((), (), ())
+            plain_odometry, plain_observations, plain_compass = records
             odometry = [from_plain(Odometry | None, odo) for odo in plain_odometry]
-        compass = [from_plain(CompassReading | None, c) for c in history["compass"]]
+            observations = [from_plain(Observation, obs) for obs in plain_observations]
+        compass = [from_plain(CompassReading | None, c) for c in plain_compass]
         return list(zip(odometry, observations, compass, strict=True))
 
     @property

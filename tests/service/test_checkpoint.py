@@ -181,6 +181,23 @@ def test_a_checkpoint_of_an_earlier_format_is_still_read(version: int) -> None:
         assert eb == ec  # the same state, whichever format it came in
 
 
+def test_the_evidence_window_comes_back_as_it_was() -> None:
+    """Frames without odometry and with a compass reading in the window too."""
+    pf = ParticleFilter(OFFICE, FilterConfig(particles=3000), rng=np.random.default_rng(5))
+    for i in range(30):
+        odometry = None if i % 4 == 3 else WALK[i].odometry
+        heading = CompassReading(WALK[i].truth.theta_rad, 0.2) if i % 3 == 0 else None
+        pf.step(odometry, WALK[i].detections, heading)
+    twin = ParticleFilter(OFFICE, FilterConfig(particles=3000), rng=np.random.default_rng(6))
+    twin.restore(round_trip(pf.checkpoint()))
+    assert pf.evidence is not None and twin.evidence is not None
+    window, back = list(pf.evidence._history), list(twin.evidence._history)
+    assert [odo for odo, _, _ in back] == [odo for odo, _, _ in window]
+    assert [c for _, _, c in back] == [c for _, _, c in window]
+    assert None in [odo for odo, _, _ in window] and any(c for _, _, c in window)
+    _assert_same_observations([o for _, o, _ in window], [o for _, o, _ in back])
+
+
 def test_a_format_2_checkpoint_with_a_json_header_is_still_read() -> None:
     config = FilterConfig(particles=4000)
     a = ParticleFilter(OFFICE, config, rng=np.random.default_rng(3))
