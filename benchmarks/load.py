@@ -4,12 +4,18 @@ Starts a real server on a free loopback port (or uses ``--url``, e.g. a proxy in
 of several workers), creates N sessions, streams simulated paper-office frames at the
 given rate from each, and reports p50/p95/max latency (send to result), frames/s and
 errors; for a server it started, also the server's CPU seconds per 1,000 frames (from
-/proc, less sensitive to other load on the machine than latency is).
+/proc, less sensitive to other load on the machine than latency is), over the whole run
+and over the steady window (below).
 
 Two throughputs: ``frames_per_s`` over the whole run (creating the sessions, their first
 seconds of global localization at the full particle count, closing them), and
 ``steady_frames_per_s``, the frames sent after ``--warmup`` seconds of each session
-divided by the time left: what the server sustains for converged walks. The generator's
+divided by the time left: what the server sustains for converged walks. The steady
+window for the server's CPU (``steady_server_cpu_s_per_1000_frames``) runs from
+``--stagger`` + ``--warmup`` seconds after the start, when every session is past its
+warm-up, to ``--seconds`` after it, before the first one ends: the CPU spent then over
+the answers received then. It leaves out creating the sessions and their global
+localization, so it compares two stores, or two versions, best. The generator's
 own CPU share is reported too (``client_cpu_share``): near 1.0, the latencies are partly
 the generator's.
 
@@ -96,7 +102,9 @@ async def one_session(
     particles: int,
     seed: int,
     stagger: float = 0.0,
+    answered_at: list[float] | None = None,
 ) -> tuple[list[tuple[float, float]], int]:
+    """One client; ``answered_at`` collects when each answer came (``perf_counter``)."""
     # Phones start their sessions at their own moments, within ``stagger`` seconds.
     await asyncio.sleep(stagger * np.random.default_rng(seed + 1_000_003).random())
     async with httpx.AsyncClient(base_url=f"http://{url}", timeout=30) as http:
@@ -127,7 +135,10 @@ async def one_session(
             t0 = time.perf_counter()
             await ws.send(json.dumps(frame))
             reply = json.loads(await ws.recv())
-            latencies.append((t0 - start, time.perf_counter() - t0))
+            now = time.perf_counter()
+            latencies.append((t0 - start, now - t0))
+            if answered_at is not None:
+                answered_at.append(now)
             if "error" in reply:
                 errors += 1
             i += 1
@@ -137,20 +148,38 @@ async def one_session(
     return latencies, errors
 
 
-async def run(args: argparse.Namespace, url: str) -> dict[str, object]:
+async def cpu_at(pid: int, when: float) -> float:
+    """The server's CPU seconds at ``perf_counter`` time ``when``."""
+    await asyncio.sleep(max(0.0, when - time.perf_counter()))
+    return cpu_seconds(pid)
+
+
+async def run(args: argparse.Namespace, url: str, pid: int | None = None) -> dict[str, object]:
     office = load_map(bundled_maps_dir() / "paper_office.json")
     there_and_back = PAPER_PATH + PAPER_PATH[-2::-1] + PAPER_PATH[1:]
     config = replace(paper_config("nominal", 360), path=there_and_back)
     frames = [f.to_contract() for f in simulate(office, config, np.random.default_rng(0))]
     t0, cpu0 = time.perf_counter(), time.process_time()
+    window = (t0 + args.stagger + args.warmup, t0 + args.seconds)
+    answered_at: list[float] = []
+    marks = []
+    if pid is not None and window[1] - window[0] >= 1.0:
+        marks = [asyncio.ensure_future(cpu_at(pid, w)) for w in window]
     results = await asyncio.gather(
         *(
-            one_session(url, frames, args.rate, args.seconds, args.particles, s, args.stagger)
+            one_session(
+                url, frames, args.rate, args.seconds, args.particles, s, args.stagger, answered_at
+            )
             for s in range(args.sessions)
         ),
         return_exceptions=True,
     )
     wall, client_cpu = time.perf_counter() - t0, time.process_time() - cpu0
+    steady_cpu = None
+    if marks:
+        begin, end = await asyncio.gather(*marks)
+        answered = sum(1 for t in answered_at if window[0] <= t < window[1])
+        steady_cpu = round(1000 * (end - begin) / max(answered, 1), 3)
     pairs = [x for r in results if not isinstance(r, BaseException) for x in r[0]]
     lat = [latency for _, latency in pairs]
     steady = sorted(1e3 * latency for t, latency in pairs if t >= args.warmup)
@@ -179,6 +208,7 @@ async def run(args: argparse.Namespace, url: str) -> dict[str, object]:
         else None,
         "errors": errors,
         "failed_sessions": failed,
+        **({"steady_server_cpu_s_per_1000_frames": steady_cpu} if steady_cpu is not None else {}),
     }
 
 
@@ -210,7 +240,7 @@ def main() -> None:
         url, proc = start_server(args.particles, args.store)
     try:
         cpu0 = cpu_seconds(proc.pid) if proc is not None else None
-        report = asyncio.run(run(args, url))
+        report = asyncio.run(run(args, url, None if proc is None else proc.pid))
         if proc is not None and cpu0 is not None:
             cpu = cpu_seconds(proc.pid) - cpu0
             report["store"] = args.store
@@ -232,6 +262,11 @@ def main() -> None:
         + (
             f"; server CPU {r['server_cpu_s_per_1000_frames']} s per 1,000 frames"
             if "server_cpu_s_per_1000_frames" in r
+            else ""
+        )
+        + (
+            f" ({r['steady_server_cpu_s_per_1000_frames']} s steady)"
+            if "steady_server_cpu_s_per_1000_frames" in r
             else ""
         )
     )
