@@ -16,10 +16,12 @@ import pytest
 import redis
 
 from app.service.store import (
+    Entry,
     MemoryStore,
     RedisStore,
     SessionStore,
     StoreUnavailable,
+    _GroupCommit,
     open_store,
 )
 from tests.helpers import free_port, redis_server
@@ -132,6 +134,33 @@ def test_journal_entries_from_many_sessions_in_one_round_trip(
 
     assert all(runner.run(all_at_once()))
     assert all(len(store.load(sid)[1]) == 3 for sid in ids)
+
+
+def test_journal_writes_keep_a_gap_and_what_arrives_within_it_goes_together() -> None:
+    """The group commit writes an entry at once when nothing was written lately, and
+    holds later entries until ``gap_s`` after that write started, to send them in one
+    call (each call is a round trip and wakes the worker's loop)."""
+    batches: list[list[str]] = []
+
+    async def write(batch: list[Entry]) -> list[bool]:
+        batches.append([sid for sid, *_ in batch])
+        return [True] * len(batch)
+
+    async def scenario() -> None:
+        commit = _GroupCommit(write, gap_s=0.3)
+        entry = lambda sid: commit.submit((sid, b"1|x", "w1", 60_000, 5_000))  # noqa: E731
+        loop = asyncio.get_running_loop()
+        started = loop.time()
+        await asyncio.wait_for(entry("a"), 5)  # written at once
+        assert loop.time() - started < 0.3
+        b = entry("b")
+        await asyncio.sleep(0.05)  # written alone, were there no gap to keep
+        c, d = entry("c"), entry("d")
+        assert await asyncio.gather(b, c, d) == [True] * 3
+        assert loop.time() - started >= 0.3
+
+    asyncio.run(scenario())
+    assert batches == [["a"], ["b", "c", "d"]]
 
 
 @pytest.fixture(params=["asyncio", "uvloop"])
