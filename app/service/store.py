@@ -46,9 +46,10 @@ if TYPE_CHECKING:
 MAX_BATCH = 512
 #: Least time from the start of one journal write to the next (seconds): entries that
 #: arrive sooner wait and go together. A worker at 1,200 frames/s wrote about 380 times a
-#: second without it, and spent 8 % more CPU a frame than with the memory store; with
-#: 10 ms, about 1 % more, the p95 of its answers unchanged (benchmarks/README.md). A
-#: frame that finds no write in the last 10 ms is written at once.
+#: second without it, each write a round trip that woke its event loop, and spent 9-11 %
+#: more CPU a frame than with the memory store; with 10 ms, 2-4 % more, its p95 the same
+#: (benchmarks/README.md). The price is latency at light load: at 120 frames/s a median
+#: answer took 5.7 ms instead of 1.5. An entry after a quiet spell is written at once.
 JOURNAL_GAP_S = 0.01
 
 
