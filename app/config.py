@@ -48,6 +48,13 @@ class Settings(BaseSettings):
     checkpoint_interval_s: float = Field(
         1.0, gt=0, description="seconds between checkpoints of a changed session (shared store)"
     )
+    journal_gap_s: float = Field(
+        0.01,  # app.service.store.JOURNAL_GAP_S (a test holds them equal)
+        ge=0,
+        le=1.0,
+        description="least seconds between two journal writes (shared store): frames "
+        "answered meanwhile are written together; 0 writes each batch at once",
+    )
     max_message_bytes: int = Field(
         65_536, ge=1024, description="largest accepted request body or WebSocket message"
     )

@@ -85,7 +85,9 @@ def create_app(settings: Settings | None = None, *, demo: bool = False) -> FastA
         _, maps_ = await asyncio.gather(
             asyncio.to_thread(warm_up_all), asyncio.to_thread(load_maps, settings)
         )
-        store = await asyncio.to_thread(open_store, settings.store)
+        store = await asyncio.to_thread(
+            functools.partial(open_store, settings.store, journal_gap_s=settings.journal_gap_s)
+        )
         manager = SessionManager(maps_, settings, metrics_, store)
         app.state.manager = manager
         tasks = [asyncio.create_task(manager.run_sweeper())]

@@ -15,7 +15,9 @@ from urllib.parse import urlsplit
 import pytest
 import redis
 
+from app.config import Settings
 from app.service.store import (
+    JOURNAL_GAP_S,
     Entry,
     MemoryStore,
     RedisStore,
@@ -161,6 +163,25 @@ def test_journal_writes_keep_a_gap_and_what_arrives_within_it_goes_together() ->
 
     asyncio.run(scenario())
     assert batches == [["a"], ["b", "c", "d"]]
+
+
+def test_the_journal_gap_is_a_setting(url: str) -> None:
+    assert Settings().journal_gap_s == JOURNAL_GAP_S  # the default, written in two places
+    store = open_store(url, journal_gap_s=0.25)
+    try:
+        commit = asyncio.run(_commit_of(store))
+        assert commit._gap_s == 0.25
+    finally:
+        store.close()
+    with pytest.raises(ValueError, match="journal_gap_s"):
+        Settings(journal_gap_s=-0.01)
+
+
+async def _commit_of(store: SessionStore) -> _GroupCommit:
+    assert isinstance(store, RedisStore)
+    commit = store._on_loop().commit
+    await store.aclose()
+    return commit
 
 
 @pytest.fixture(params=["asyncio", "uvloop"])
