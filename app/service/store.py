@@ -398,8 +398,9 @@ class _Connection(asyncio.Protocol):
     out closes the connection (its reply would come late, as the next call's), and so
     does a cancelled one. Error replies raise redis-py's exceptions (``NOSCRIPT``:
     :class:`~redis.exceptions.NoScriptError`), and a connection Redis closed raises its
-    :class:`~redis.exceptions.ConnectionError`. Writes are not paced: the group commit
-    has one command in flight at a time, the size of one batch.
+    :class:`~redis.exceptions.ConnectionError`. Its writes need no flow control of their
+    own: the group commit has one command in flight at a time, the size of one batch, and
+    spaces them (``JOURNAL_GAP_S``).
     """
 
     def __init__(self, loop: asyncio.AbstractEventLoop, timeout_s: float) -> None:
