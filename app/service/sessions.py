@@ -45,7 +45,7 @@ from app.service.errors import (
     session_tag,
 )
 from app.service.metrics import Metrics
-from app.service.queueing import FrameQueue, merged_warning
+from app.service.queueing import FrameQueue, Waiting, merged_warning
 from app.service.scheduler import FairStepper
 from app.service.sharing import SessionSharing
 from app.service.store import MemoryStore, SessionStore
@@ -532,7 +532,14 @@ class SessionManager:
         return session.owner if session.owner is not None else session.id
 
     async def _pump(self, session: Session) -> None:
-        """Feed the session's waiting frames to the stepper, one step at a time."""
+        """Feed the session's waiting frames to the stepper, one step at a time.
+
+        Every accepted frame's future is resolved exactly once: with the step's result
+        (shared by frames merged into one), with the step's error, or, when the pump ends
+        any other way (cancelled at shutdown, its step dropped by the stepper), with
+        :class:`SessionUnavailable` for that frame and every frame still waiting.
+        """
+        item: Waiting | None = None
         try:
             while (item := session.queue.pop()) is not None:
                 live = [w for w in item.waiters if not w.done()]
@@ -566,6 +573,20 @@ class SessionManager:
                         w.set_result(result)
         finally:
             session.pump = None
+            unanswered = [item] if item is not None else []
+            while (rest := session.queue.pop()) is not None:
+                unanswered.append(rest)
+            for left in unanswered:
+                for w in left.waiters:
+                    if not w.done():
+                        w.set_exception(
+                            SessionUnavailable(
+                                "this frame was not processed (the service is stopping); "
+                                "reconnect and send it again",
+                                "restarting",
+                                1.0,
+                            )
+                        )
 
     def _step_sync(
         self, session: Session, frame: FrameInput, merged: int
