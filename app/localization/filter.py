@@ -135,6 +135,7 @@ class ParticleFilter:
         self._gate.reset()
         if self.evidence is not None:
             self.evidence.reset()
+            self.evidence.set_prior(initial_pose)
         if self.unseen is not None:
             self.unseen.reset()
         #: How well the estimate explains the detections (smoothed); None before any.
@@ -304,6 +305,8 @@ class ParticleFilter:
             raw, w, ess = self._weigh_alternatives(odometry, raw, w, ess, heading)
             share, searched_ago = self.evidence.alternative_share, self.evidence.searched_ago
             confirmed = self.evidence.confirmed_share
+            if searched_ago is None and self.evidence.prior_confines:
+                searched_ago = 0  # a tight known start rules out every other place
         self._update_fit(raw)
         moved = 1.0 if odometry is None else float(np.hypot(odometry.forward_m, odometry.left_m))
         turned = np.pi if odometry is None else odometry.turn_rad
