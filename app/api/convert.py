@@ -60,10 +60,12 @@ def session_spec(body: SessionCreate) -> SessionSpec:
             bearing_std_deg=s.bearing_std_deg,
             fov_deg=s.fov_deg,
             class_bearing_std_deg=dict(s.class_bearing_std_deg),
+            class_error=s.class_error,
         ),
         feedback=FeedbackOptions(fb.style, fb.units, fb.max_items),
         camera=camera_of(body.camera),
         share_view=body.share_view,
+        odometry_source=body.odometry.source,
     )
 
 
@@ -118,6 +120,7 @@ def frame_input(frame: Frame, camera: Camera | None = None) -> FrameInput:
         describe=frame.describe,
         truth=truth,
         heading=heading,
+        detections_age_s=frame.detections_age_s,
     )
 
 
@@ -216,6 +219,7 @@ def frame_result_data(outcome: FrameOutcome) -> dict[str, Any]:
                 }
                 for i in feedback.items
             ],
+            "suggestion": feedback.suggestion,
         },
         "warnings": list(outcome.warnings),
         "guidance": _guidance_data(outcome.guidance),

@@ -30,6 +30,7 @@ from app.localization.estimate import (
 )
 from app.localization.evidence import PATTERN, EvidenceTracker
 from app.localization.kld import kld_sample_size
+from app.localization.latency import CaptureClock, moved_forward
 from app.localization.motion import penalized, sample_motion
 from app.localization.recovery import AugmentedMCL, sample_from_observation
 from app.localization.resampling import (
@@ -111,6 +112,8 @@ class ParticleFilter:
             else None
         )
         self.last_observation: Observation | None = None
+        #: Motion between detection captures (:mod:`~app.localization.latency`).
+        self.capture = CaptureClock()
         if state is None:
             self.reset(initial_pose)
         else:  # from a checkpoint (:meth:`checkpoint`): no cloud to draw first
@@ -129,6 +132,7 @@ class ParticleFilter:
                 self.rng.normal(initial_pose.theta_rad, initial_pose.std_theta_rad, n)
             )
         self.log_w = np.zeros(n, dtype=np.float64)
+        self.capture.reset()
         # A global start with recovery on seeds its cloud from the first evidence.
         self._seed_from_observation = initial_pose is None and self.config.recovery
         self._recovery.reset()
@@ -281,15 +285,36 @@ class ParticleFilter:
         odometry: Odometry | None,
         detections: Sequence[Detection],
         heading: CompassReading | None = None,
+        *,
+        detections_age_s: float = 0.0,
+        frame_s: float | None = None,
     ) -> Estimate:
         """One full filter step: predict, correct, estimate, resample when due.
 
         ``heading``, a compass reading, weights the particles' headings too
-        (:mod:`~app.localization.compass`).
+        (:mod:`~app.localization.compass`). ``detections_age_s``: how long before the end
+        of this frame's ``odometry`` (lasting ``frame_s``, None: not known) the detections
+        were captured; the particles stand for the pose at that moment
+        (:mod:`~app.localization.latency`), and the estimate returned is moved on to the
+        frame's end (:attr:`estimate` stays at the capture).
 
         The estimate summarizes the weighted particles before resampling: resampling
         only adds noise to what they say (and to what the injected particles say).
         """
+        odometry = self.capture.step(odometry, frame_s, detections_age_s)
+        self._step(odometry, detections, heading)
+        back = self.capture.back
+        if back.forward_m == 0.0 and back.left_m == 0.0 and back.turn_rad == 0.0:
+            return self.estimate
+        return moved_forward(self.estimate, back)
+
+    def _step(
+        self,
+        odometry: Odometry | None,
+        detections: Sequence[Detection],
+        heading: CompassReading | None,
+    ) -> None:
+        """:meth:`step` in capture time: ``odometry`` is the motion between captures."""
         self.predict(odometry)
         inject, w = self._correct(detections)
         if heading is not None:
@@ -333,7 +358,6 @@ class ParticleFilter:
         self.estimate = est
         self._resample(w, ess, inject)
         self.steps += 1
-        return self.estimate
 
     def _weigh_alternatives(
         self,
@@ -412,6 +436,7 @@ class ParticleFilter:
             "restarts": self.restarts,
             "steps": self.steps,
             "estimate": self.estimate,
+            "capture": self.capture.checkpoint(),
         }
 
     def restore(self, state: Mapping[str, Any]) -> None:
@@ -437,6 +462,7 @@ class ParticleFilter:
         self.restarts = int(state["restarts"])
         self.steps = int(state["steps"])
         self.estimate = from_plain(Estimate, state["estimate"])
+        self.capture.restore(state.get("capture"))
         self.last_observation = None
 
     def _update_fit(self, raw: Estimate) -> None:

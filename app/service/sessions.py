@@ -28,7 +28,7 @@ from app.feedback import Feedback, Narrator
 from app.feedback.guidance import GuidanceSpeaker
 from app.guidance import DestinationSpec, Guidance, Plan, Target, Unreachable, guide, plan_for
 from app.localization.camera import Camera
-from app.localization.config import FilterConfig
+from app.localization.config import ODOMETRY_NOISE, FilterConfig
 from app.localization.filter import ParticleFilter
 from app.localization.types import Detection, Estimate, Pose
 from app.maps.model import SemanticMap
@@ -167,7 +167,18 @@ class Session:
                 f"{self.last_timestamp}; frames are processed in the order received"
             )
         with self.state_lock:
-            estimate = self.filter.step(frame.odometry, detections, frame.heading)
+            frame_s = (
+                frame.timestamp - self.last_timestamp
+                if frame.timestamp is not None and self.last_timestamp is not None
+                else None
+            )
+            estimate = self.filter.step(
+                frame.odometry,
+                detections,
+                frame.heading,
+                detections_age_s=frame.detections_age_s,
+                frame_s=frame_s,
+            )
             feedback = self.narrator.update(
                 estimate,
                 detections,
@@ -176,12 +187,13 @@ class Session:
                 fov_deg=self.filter.config.fov_deg,
                 fov_centre_deg=self.filter.config.fov_centre_deg,
                 observation=self.filter.last_observation,
+                odometry=frame.odometry,
             )
             now = time.monotonic() if frame.timestamp is None else frame.timestamp
             guidance, said = self._guide(estimate, now, warnings)
             if said:
                 joined = f"{feedback.text} {said}" if feedback.text else said
-                feedback = Feedback(joined, feedback.items)
+                feedback = Feedback(joined, feedback.items, feedback.suggestion)
             self.last_guidance = guidance
             self.frames += 1
             result = FrameOutcome(
@@ -403,6 +415,9 @@ class SessionManager:
             # A camera fixes the field of view (and where its middle points).
             fov_deg=sensor.fov_deg if camera is None else camera.fov_deg,
             fov_centre_deg=0.0 if camera is None else camera.fov_centre_deg,
+            class_error=sensor.class_error,
+            trans_noise_frac=ODOMETRY_NOISE[request.odometry_source][0],
+            rot_noise_frac=ODOMETRY_NOISE[request.odometry_source][1],
         )
         seed = request.seed if request.seed is not None else secrets.randbits(63)
         initial = request.initial_pose

@@ -26,6 +26,8 @@ class SensorSpec:
     bearing_std_deg: float = 2.0
     fov_deg: float = 360.0
     class_bearing_std_deg: Mapping[str, float] = field(default_factory=dict)
+    #: Probability that a detection's class is not the object's.
+    class_error: float = 0.03
 
 
 @dataclass(frozen=True)
@@ -46,6 +48,8 @@ class SessionSpec:
     #: The phone camera; its field of view replaces ``sensor.fov_deg`` when given.
     camera: Camera | None = None
     share_view: bool = False
+    #: Where the odometry comes from: "vio", "pdr" or "unknown" (tightens the motion model).
+    odometry_source: str = "unknown"
 
 
 @dataclass(frozen=True)
@@ -59,6 +63,8 @@ class FrameInput:
     truth: Pose | None = None
     #: The phone compass's heading (map frame), or None.
     heading: CompassReading | None = None
+    #: How long before the end of the odometry the detections were captured (seconds).
+    detections_age_s: float = 0.0
 
 
 @dataclass(frozen=True)
