@@ -29,6 +29,7 @@ from app.guidance import DestinationSpec, Target, plan_for
 from app.localization.config import FilterConfig
 from app.localization.filter import ParticleFilter
 from app.maps.model import SemanticMap
+from app.maps.prepare import ensure_prepared
 from app.service.access import OPEN, Principal, TokenBucket
 from app.service.errors import (
     CapacityReached,
@@ -61,7 +62,8 @@ class SessionManager:
         metrics: Metrics,
         store: SessionStore | None = None,
     ) -> None:
-        self.maps = maps
+        #: The maps served, each prepared (its grids built now if the caller had not).
+        self.maps = {name: ensure_prepared(m) for name, m in maps.items()}
         self.settings = settings
         self.metrics = metrics
         self._sessions: dict[str, Session] = {}
