@@ -28,7 +28,7 @@ from app.localization.camera import BoxError, Camera
 from app.localization.compass import CompassReading
 from app.localization.types import Detection, InitialPose, Odometry, Pose
 from app.maps.geometry import wrap_deg
-from app.service.sessions import Session
+from app.service.session import Session
 from app.service.types import FrameInput, FrameOutcome, SensorSpec, SessionSpec
 
 

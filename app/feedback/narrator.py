@@ -38,6 +38,7 @@ from app.localization.sensor import Observation
 from app.localization.types import Detection, Estimate, Odometry
 from app.maps.geometry import wrap_rad
 from app.maps.model import SemanticMap
+from app.maps.prepare import ensure_prepared
 
 #: Repeat an unchanged announcement after this long (seconds).
 REPEAT_AFTER_S = 60.0
@@ -100,7 +101,7 @@ class Narrator:
     """Per-session narrator; remembers what was said to avoid repeating it."""
 
     def __init__(self, semantic_map: SemanticMap, options: FeedbackOptions | None = None) -> None:
-        self.map = semantic_map
+        self.map = ensure_prepared(semantic_map)  # its visibility grid, built now if need be
         self.options = options or FeedbackOptions()
         self._said: dict[tuple[object, ...], _Said] = {}
         self._region: str | None = None

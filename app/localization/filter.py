@@ -45,6 +45,7 @@ from app.localization.types import Detection, Estimate, InitialPose, Odometry
 from app.localization.unseen import UnseenObjects
 from app.maps.geometry import wrap_angle
 from app.maps.model import SemanticMap
+from app.maps.prepare import ensure_prepared
 from app.state import from_plain
 
 #: Share of a global start's particles drawn from the first observation.
@@ -91,7 +92,7 @@ class ParticleFilter:
         initial_pose: InitialPose | None = None,
         state: Mapping[str, Any] | None = None,
     ) -> None:
-        self.map = semantic_map
+        self.map = ensure_prepared(semantic_map)  # its grids, built now if need be
         self.config = config or FilterConfig()
         self.rng = rng
         self._vis = semantic_map.visibility if self.config.visibility else None

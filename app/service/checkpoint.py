@@ -6,7 +6,9 @@ A checkpoint holds everything a session needs to go on elsewhere: how it was cre
 averages, the convergence gate, the alternative hypotheses' tracker, the random
 generator), the narrator's memory (:meth:`Narrator.checkpoint`), the guidance speaker's,
 the destination, the owner, the frame count and the latest result. Each part serializes
-itself; this module only assembles the parts and packs them.
+itself, the session assembles them (:meth:`~app.service.session.Session.capture`) and
+takes them back (:meth:`~app.service.session.Session.restore`); this module packs them
+into bytes and reads them back.
 
 Checkpoints are written about once a second; every frame answered since the last one is
 kept in a journal (one short entry per frame) and replayed on resume, so a session
@@ -36,21 +38,14 @@ import math
 import struct
 from collections.abc import Mapping
 from datetime import datetime
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import msgpack
 import numpy as np
 import orjson
 
-from app.feedback.guidance import GuidanceSpeaker
-from app.guidance.planner import Plan
-from app.guidance.targets import Target
-from app.localization.types import Detection, Pose
-from app.service.types import FrameInput, FrameOutcome, SessionSpec
-from app.state import from_plain, plain_step, to_plain
-
-if TYPE_CHECKING:
-    from app.service.sessions import Session
+from app.service.types import FrameInput, SessionSpec
+from app.state import from_plain, plain_step
 
 MAGIC = b"BRGC1"
 FORMAT_VERSION = 4
@@ -121,36 +116,6 @@ def unpack(data: bytes) -> dict[str, Any]:
     return state
 
 
-def capture(session: Session) -> dict[str, Any]:
-    """A session's state (call under its ``state_lock``, or when no step can run), to
-    :func:`pack` before the session steps again: frozen values (spec, outcome,
-    estimates) and some of the filter's arrays are the session's own, not copies.
-
-    Before its first frame a session is exactly what its spec (with the seed drawn at
-    creation) builds, so its filter and narrator are left out.
-    """
-    fresh = session.frames == 0
-    plan = session.destination
-    return {
-        "format": FORMAT_VERSION,
-        "id": session.id,
-        "spec": session.spec,
-        "created_at": session.created_at.isoformat(),
-        "particles": session.particles,
-        "frames": session.frames,
-        "owner": session.owner,
-        "shared": session.shared,
-        "speaker": to_plain(session.speaker),
-        "destination": None if plan is None else plan.target,
-        "last_timestamp": session.last_timestamp,
-        "last_outcome": session.last_outcome,
-        "last_detections": [[d.cls, d.bearing_rad, d.score] for d in session.last_detections],
-        "truth": session.truth,
-        "filter": None if fresh else session.filter.checkpoint(),
-        "narrator": None if fresh else session.narrator.checkpoint(),
-    }
-
-
 def spec_of(state: Mapping[str, Any]) -> SessionSpec:
     """The spec a checkpointed session was created from (to build it again)."""
     spec: SessionSpec = from_plain(SessionSpec, state["spec"])
@@ -159,27 +124,6 @@ def spec_of(state: Mapping[str, Any]) -> SessionSpec:
 
 def created_at_of(state: Mapping[str, Any]) -> datetime:
     return datetime.fromisoformat(state["created_at"])
-
-
-def apply(session: Session, state: Mapping[str, Any]) -> None:
-    """Put a checkpoint's state into a session built from the same spec (its filter
-    already restored, see :meth:`SessionManager._build`)."""
-    if state["narrator"] is not None:
-        session.narrator.restore(state["narrator"])
-    session.frames = int(state["frames"])
-    session.owner = state["owner"]
-    session.shared = bool(state["shared"])
-    session.speaker = from_plain(GuidanceSpeaker, state["speaker"])
-    if state["destination"] is not None:
-        session.destination = Plan(session.map, from_plain(Target, state["destination"]))
-    session.last_timestamp = state["last_timestamp"]
-    session.last_outcome = from_plain(FrameOutcome | None, state["last_outcome"])
-    session.last_detections = [
-        Detection(*d) if isinstance(d, list) else from_plain(Detection, d)  # rows since format 4
-        for d in state["last_detections"]
-    ]
-    session.truth = from_plain(Pose | None, state["truth"])
-    session.version += 1
 
 
 #: The fields of :class:`FrameInput` a journal entry holds, in its order (a test holds
