@@ -310,7 +310,7 @@ def run_scenario(
     )
     manager = _manager()
     assert isinstance(manager, SessionManager)
-    session = manager._build(spec)
+    session = manager.build(spec)
     fields = frame_input_fields()
     n = len(frames)
     err = np.empty(n)

@@ -21,6 +21,7 @@ from numpy.typing import NDArray
 from app.localization import sensor_kernel
 from app.localization.compass import CompassReading, compass_log_likelihood
 from app.localization.config import FilterConfig
+from app.localization.dilution import BearingGeometry
 from app.localization.estimate import (
     ConvergenceGate,
     FitQuality,
@@ -115,6 +116,8 @@ class ParticleFilter:
         self.last_observation: Observation | None = None
         #: Motion between detection captures (:mod:`~app.localization.latency`).
         self.capture = CaptureClock()
+        #: What systematic bearing errors can do to the fix (:mod:`~app.localization.dilution`).
+        self.geometry = BearingGeometry(semantic_map, self.config)
         if state is None:
             self.reset(initial_pose)
         else:  # from a checkpoint (:meth:`checkpoint`): no cloud to draw first
@@ -134,6 +137,7 @@ class ParticleFilter:
             )
         self.log_w = np.zeros(n, dtype=np.float64)
         self.capture.reset()
+        self.geometry.reset()
         # A global start with recovery on seeds its cloud from the first evidence.
         self._seed_from_observation = initial_pose is None and self.config.recovery
         self._recovery.reset()
@@ -151,6 +155,12 @@ class ParticleFilter:
         self.restarts = 0
         self.steps = 0
         self.estimate: Estimate = estimate_pose(self.x, self.y, self.theta, self.weights)
+
+    @functools.cached_property
+    def _map_span_m(self) -> float:
+        """The map's diagonal (m): the largest protection radius worth stating."""
+        x0, y0, x1, y1 = self.map.bounds
+        return float(np.hypot(x1 - x0, y1 - y0))
 
     @property
     def n(self) -> int:
@@ -187,6 +197,7 @@ class ParticleFilter:
         self._seed_from_observation = self.config.recovery
         self._recovery.reset()
         self._gate.reset()
+        self.geometry.reset()
         if self.evidence is not None:
             self.evidence.reset()
         if self.unseen is not None:
@@ -355,6 +366,10 @@ class ParticleFilter:
         if est.converged:
             reach = self.evidence.farthest_m(est.x, est.y) if self.evidence is not None else 0.0
             radius = protection_radius(self.x, self.y, w, est, self.rng, share, reach)
+            # Errors the cloud cannot know of (a box's centre, an object drawn a little off)
+            # repeat every frame; the geometry bounds what they can do (capped at the map's
+            # size: a fix no geometry pins down is still somewhere on the map).
+            radius = max(radius, min(self.geometry.radius_m(est.x, est.y), self._map_span_m))
             est = est.with_protection(radius)
         self.estimate = est
         self._resample(w, ess, inject)
@@ -387,6 +402,7 @@ class ParticleFilter:
         self.x, self.y, self.theta = self.evidence.swap(self.n)
         self.log_w = np.zeros(self.n)
         self._gate.reset()
+        self.geometry.reset()
         self.quality = None
         w = self.weights
         ess = effective_sample_size(w)
@@ -438,6 +454,7 @@ class ParticleFilter:
             "steps": self.steps,
             "estimate": self.estimate,
             "capture": self.capture.checkpoint(),
+            "geometry": self.geometry.checkpoint(),
         }
 
     def restore(self, state: Mapping[str, Any]) -> None:
@@ -464,6 +481,7 @@ class ParticleFilter:
         self.steps = int(state["steps"])
         self.estimate = from_plain(Estimate, state["estimate"])
         self.capture.restore(state.get("capture"))
+        self.geometry.restore(state.get("geometry"))
         self.last_observation = None
 
     def _update_fit(self, raw: Estimate) -> None:
@@ -495,6 +513,7 @@ class ParticleFilter:
         row = self._vis.row(raw.x, raw.y) if self._vis is not None else None
         if self.unseen is not None:
             self.unseen.update(raw.x, raw.y, raw.theta_rad, obs, row)
+        self.geometry.add(raw.x, raw.y, raw.theta_rad, obs, row)
         r = normalized_residuals(raw.x, raw.y, raw.theta_rad, obs, self.map, self._fit_config, row)
         if self.config.clutter:
             g = obs.det_group
