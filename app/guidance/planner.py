@@ -445,12 +445,10 @@ def plan_for(semantic_map: SemanticMap, spec: DestinationSpec) -> Plan:
     """
     target = resolve(semantic_map, spec)
     with _lock:
-        cache: OrderedDict[tuple[object, ...], Plan] | None = getattr(
-            semantic_map, "_guidance_plans", None
+        # The map keeps its plans (the latest CACHE_SIZE, by spec), so they go with it.
+        cache: OrderedDict[tuple[object, ...], Plan] = semantic_map.derived_value(
+            ("guidance_plans",), OrderedDict
         )
-        if cache is None:
-            cache = OrderedDict()
-            semantic_map._guidance_plans = cache  # type: ignore[attr-defined]
         plan = cache.get(spec.key)
         if plan is not None:
             cache.move_to_end(spec.key)

@@ -1,4 +1,5 @@
-"""An honest summary of the particle cloud: clusters, the best pose, and ``converged``.
+"""An honest summary of the particle cloud: clusters, the best pose, ``converged`` and
+the protection radius.
 
 A weighted mean of all particles is meaningless when the belief has several modes
 (a symmetric room gives mirror-image hypotheses; the mean between them is a place
@@ -10,8 +11,17 @@ where nobody is). So the cloud is split into clusters by greedy mode seeking:
 3. those particles form a hypothesis; remove them and repeat (up to three).
 
 The pose reported is the heaviest cluster's weighted mean (circular mean for the
-heading). ``converged`` is true only when that cluster holds at least
-``min_mass`` of the weight and is tight in position and heading.
+heading). :func:`estimate_pose` calls that pose converged when its cluster holds at
+least ``min_mass`` of the weight and is tight in position and heading; that is only the
+first condition. The ``converged`` a client is told is :class:`ConvergenceGate`'s,
+with hysteresis: gained once the tight cluster has stayed put for a few frames,
+explains the detections, a global search has run since it formed and the alternatives
+it found are improbable; held until the cluster spreads, lightens or jumps, the
+detections stop fitting, an object in clear view keeps going unreported, the odometry
+breaks off, dead reckoning lasts too long, or an alternative gains probability.
+:func:`protection_radius` is the radius around the pose that holds the truth with 99 %
+probability under the whole belief; :func:`with_alternatives` joins the alternatives
+to the hypotheses.
 """
 
 from __future__ import annotations
@@ -306,14 +316,16 @@ class ConvergenceGate:
     has stayed put (moving no more than the odometry allows plus ``tolerance_m``,
     turning no more than ``tolerance_rad``) for ``frames`` consecutive frames, explains
     what the camera sees (``fit`` at most ``gain_fit``, at most ``gain_unexplained`` of
-    the detections left to clutter), detections arrived in the last
+    the detections left to clutter, no object in clear view going unreported:
+    :mod:`~app.localization.unseen`), detections arrived in the last
     ``gain_without_evidence`` frames, a global consistency search has run since the
     cluster formed, and the alternatives it found hold at most ``gain_alternatives``
     of the probability (:mod:`~app.localization.evidence`).
 
     **Held** while the cluster stays reasonably heavy and tight (``hold_*``), does not
     jump, still explains the detections (looser ``hold_fit`` and ``hold_unexplained``,
-    no frame that most detections contradict), dead reckoning has not lasted longer
+    no frame that most detections contradict, no object in clear view going
+    unreported), dead reckoning has not lasted longer
     than ``hold_without_evidence`` frames, the odometry has not broken off (a frame
     without it after frames with it: the person may have been carried anywhere), and
     the alternatives stay below ``hold_alternatives`` (counting those that survived

@@ -55,7 +55,7 @@ def wrap_rad(angle: float) -> float:
 def wrap_scalar(angle: float) -> float:  # pragma: no cover - compiled
     """:func:`wrap_angle` of one angle, for compiled kernels (:func:`wrap_rad` is its
     Python twin: numba compiles no ``math.fmod``, so the two texts stay apart, and
-    tests/localization/test_geometry.py holds them to the same bits)."""
+    tests/maps/test_geometry.py holds them to the same bits)."""
     # np.mod's float remainder: fmod, moved into [0, 2 pi) when negative, +0.0 when zero.
     two_pi = 2.0 * np.pi
     m = np.fmod(angle + np.pi, two_pi)
