@@ -52,7 +52,7 @@ While the main belief does not explain the detections nothing is searched, weigh
 kept (converged could be neither gained nor held). The probability of the alternatives
 under the whole belief, ``e^evidence / (1 + sum e^evidence)`` summed (the main belief's
 prior counted equal to each alternative's), gates ``converged`` (see
-:class:`~app.localization.estimate.ConvergenceGate`) and enters the protection radius.
+:class:`~app.localization.convergence.ConvergenceGate`) and enters the protection radius.
 """
 
 from __future__ import annotations

@@ -21,14 +21,9 @@ from numpy.typing import NDArray
 from app.localization import sensor_kernel
 from app.localization.compass import CompassReading, compass_log_likelihood
 from app.localization.config import FilterConfig
+from app.localization.convergence import ConvergenceGate, FitQuality, protection_radius
 from app.localization.dilution import BearingGeometry
-from app.localization.estimate import (
-    ConvergenceGate,
-    FitQuality,
-    estimate_pose,
-    protection_radius,
-    with_alternatives,
-)
+from app.localization.estimate import estimate_pose, with_alternatives
 from app.localization.evidence import PATTERN, EvidenceTracker
 from app.localization.kld import kld_sample_size
 from app.localization.latency import CaptureClock, moved_forward
