@@ -55,16 +55,18 @@ class ConvergenceGate:
     what the camera sees (``fit`` at most ``gain_fit``, at most ``gain_unexplained`` of
     the detections left to clutter, no object in clear view going unreported:
     :mod:`~app.localization.unseen`), detections arrived in the last
-    ``gain_without_evidence`` frames, a global consistency search has run since the
-    cluster formed, and the alternatives it found hold at most ``gain_alternatives``
-    of the probability (:mod:`~app.localization.evidence`).
+    ``gain_without_evidence`` frames, the recent bearings' geometry pins the fix within
+    ``gain_geometry_m`` (:mod:`~app.localization.dilution`), a global consistency search
+    has run since the cluster formed, and the alternatives it found hold at most
+    ``gain_alternatives`` of the probability (:mod:`~app.localization.evidence`).
 
     **Held** while the cluster stays reasonably heavy and tight (``hold_*``), does not
     jump, still explains the detections (looser ``hold_fit`` and ``hold_unexplained``,
     no frame that most detections contradict, no object in clear view going
     unreported), dead reckoning has not lasted longer
     than ``hold_without_evidence`` frames, the odometry has not broken off (a frame
-    without it after frames with it: the person may have been carried anywhere), and
+    without it after frames with it: the person may have been carried anywhere), the
+    geometry still pins the fix within ``hold_geometry_m``, and
     the alternatives stay below ``hold_alternatives`` (counting those that survived
     their probation). Only frames with detections count towards a light cluster
     (frames without any leave freshly injected particles unweighed). A false detection
@@ -85,6 +87,11 @@ class ConvergenceGate:
     hold_std_xy_m: float = 0.5
     hold_std_theta_rad: float = float(np.radians(20.0))
     hold_jump_m: float = 0.5
+    #: The radius systematic bearing errors can reach (:mod:`~app.localization.dilution`)
+    #: at most this to gain, and this to hold (m): a fix that geometry pins no closer is no
+    #: location to tell a person, however tight the cloud.
+    gain_geometry_m: float = 2.0
+    hold_geometry_m: float = 4.0
     #: Frames in a row the cluster may stay lighter than ``hold_mass`` (a frame with a
     #: single detection can lend freshly injected particles a passing share).
     hold_light_frames: int = 3
@@ -131,6 +138,7 @@ class ConvergenceGate:
         motion_lost: bool = False,
         confirmed_alternatives: float | None = None,
         evidence_frame: bool = True,
+        geometry_m: float = 0.0,
     ) -> Estimate:
         """``raw`` with ``converged`` decided by the rules above."""
         last = self._last
@@ -158,6 +166,7 @@ class ConvergenceGate:
                 "dead reckoning": frames_without_evidence > self.hold_without_evidence,
                 "alternative": against > self.hold_alternatives,
                 "odometry lost": motion_lost,
+                "weak geometry": geometry_m > self.hold_geometry_m,
             }
             self._held = not any(reasons.values())
             if not self._held:
@@ -172,6 +181,7 @@ class ConvergenceGate:
             and not quality.bad_frame
             and not quality.contradicted
             and frames_without_evidence <= self.gain_without_evidence
+            and geometry_m <= self.gain_geometry_m
         )
         steady = (
             raw.converged

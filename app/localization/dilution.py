@@ -21,6 +21,15 @@ bias seen every frame counts once, not once a frame), and with a bearing bias of
 Gaussian along its major axis is ``sqrt(chi2_2(0.99)) = 3.03`` of the major axis' std.
 With a few objects spread around the person it is a few centimetres; with three objects
 in a narrow cone far ahead it is metres, as it should be.
+
+A good fix stays good for a while: walking on, with one object in view at a time, the
+person's position is the fix carried by the odometry. So the best geometry bound is kept
+as a *fix* (the estimate then, its radius), moved along by the odometry, and the bound
+now is the smaller of the geometry's and the carried fix's: the distance from the
+estimate to the carried fix, plus its radius then, plus the odometry's drift since (the
+motion model's share of the distance walked). A known start is such a fix from the
+first frame on (3.03 times its position std), so a person standing still at a known
+start keeps its protection however weak the view is.
 """
 
 from __future__ import annotations
@@ -34,6 +43,7 @@ from numpy.typing import NDArray
 
 from app.localization.config import FilterConfig
 from app.localization.sensor import Observation
+from app.localization.types import Odometry
 from app.maps.model import SemanticMap
 
 #: Systematic bearing error per object assumed on top of the noise (degrees): about a
@@ -45,26 +55,90 @@ WINDOW = 20
 #: A detection further than this many stds from every visible object of its class is
 #: left to clutter and gives no row.
 EXPLAINED_STDS = 4.0
-#: The estimate moving further than this between two frames with detections went to
-#: another place: the frames before say nothing about the geometry here (m).
+#: The estimate moving further than this beyond what the odometry walked between two
+#: frames with detections went to another place: the frames before say nothing about
+#: the geometry here (m).
 JUMP_M = 1.5
 #: sqrt of the 99 % quantile of chi-square with 2 degrees of freedom.
 Q99_2D = math.sqrt(-2.0 * math.log(0.01))
 
 
 class BearingGeometry:
-    """The recent frames' bearing geometry, and the radius systematic errors can reach."""
+    """The recent frames' bearing geometry, the best fix it gave, carried along by the
+    odometry, and the radius the truth lies within (module docstring)."""
 
     def __init__(self, semantic_map: SemanticMap, config: FilterConfig) -> None:
         self.map = semantic_map
         self.config = config
         self.bias_rad = math.hypot(math.radians(BIAS_DEG), config.bearing_std_rad(""))
+        #: The odometry's drift: a share of the distance walked (the motion model's).
+        self.drift = config.trans_noise_frac
         #: Per frame: (x, y) of the estimate, and its rows (K, 3): dbearing/dx, dbearing/dy
         #: and the detection's score.
         self._frames: deque[tuple[float, float, NDArray[np.float64]]] = deque(maxlen=WINDOW)
+        self.walked_m = 0.0
+        #: The fix carried along: a pose (x, y, theta) moved by the odometry since, its
+        #: radius then (m) and the distance walked then (m); None without one.
+        self._fix: tuple[float, float, float] | None = None
+        self._fix_radius_m = math.inf
+        self._fix_walked_m = 0.0
+        #: Where the last frame was added, and the distance walked then (the jump test).
+        self._last_xy = (0.0, 0.0)
+        self._last_walked_m = 0.0
 
     def reset(self) -> None:
+        """Forget everything (the belief started over)."""
         self._frames.clear()
+        self.walked_m = 0.0
+        self._fix = None
+        self._fix_radius_m = math.inf
+        self._fix_walked_m = 0.0
+
+    def clear_frames(self) -> None:
+        """Forget the frames only (the estimate moved to another place)."""
+        self._frames.clear()
+
+    def set_prior(self, pose: tuple[float, float, float], std_xy_m: float) -> None:
+        """A known start (x, y, theta) with its position std: a fix to carry along."""
+        self._fix = pose
+        self._fix_radius_m = Q99_2D * std_xy_m
+        self._fix_walked_m = self.walked_m
+
+    def moved(self, odometry: Odometry) -> None:
+        """The person moved by ``odometry``: so does the carried fix."""
+        self.walked_m += math.hypot(odometry.forward_m, odometry.left_m)
+        if self._fix is not None:
+            x, y, t = self._fix
+            c, s = math.cos(t), math.sin(t)
+            self._fix = (
+                x + c * odometry.forward_m - s * odometry.left_m,
+                y + s * odometry.forward_m + c * odometry.left_m,
+                t + odometry.turn_rad,
+            )
+
+    def radius_m(self, x: float, y: float, theta: float) -> float:
+        """The 99 % radius around the estimate (x, y, theta) within which the truth lies
+        (m): the smaller of the recent geometry's bound and the carried fix's (the
+        distance to it, its radius then, and the odometry's drift since: either holds on
+        its own). A geometry bound better than the carried one becomes the new fix.
+        inf while nothing fixes a position."""
+        geometry = self._geometry_radius_m(x, y)
+        carried = math.inf
+        if self._fix is not None:
+            fx, fy, _ = self._fix
+            carried = (
+                math.hypot(x - fx, y - fy)
+                + self._fix_radius_m
+                + self.drift * (self.walked_m - self._fix_walked_m)
+            )
+        if geometry < carried:
+            self._fix, self._fix_radius_m, self._fix_walked_m = (
+                (x, y, theta),
+                geometry,
+                self.walked_m,
+            )
+            return geometry
+        return carried
 
     def add(
         self,
@@ -77,10 +151,11 @@ class BearingGeometry:
         """Add one frame's explained detections, seen from the estimate (x, y, theta)."""
         if obs.empty:
             return
-        if self._frames:
-            px, py, _ = self._frames[-1]
-            if math.hypot(x - px, y - py) > JUMP_M:
-                self.reset()  # the estimate moved to another place: its frames were not here
+        if self._frames and math.hypot(x - self._last_xy[0], y - self._last_xy[1]) > (
+            self.walked_m - self._last_walked_m + JUMP_M
+        ):
+            self.clear_frames()  # the estimate went to another place: not seen here
+        self._last_xy, self._last_walked_m = (x, y), self.walked_m
         xy = self.map.object_xy
         rows = []
         for k in range(obs.det_bearing.size):
@@ -105,9 +180,8 @@ class BearingGeometry:
         if rows:
             self._frames.append((x, y, np.array(rows, dtype=np.float64)))
 
-    def radius_m(self, x: float, y: float) -> float:
-        """The 99 % radius systematic bearing errors can move the fix at (x, y) by (m);
-        inf while the recent geometry does not fix a position."""
+    def _geometry_radius_m(self, x: float, y: float) -> float:
+        """The bound of the bearings' geometry alone (module docstring)."""
         if not self._frames:
             return math.inf
         info = np.zeros((3, 3))
@@ -128,13 +202,29 @@ class BearingGeometry:
             return math.inf
         return Q99_2D * self.bias_rad / math.sqrt(low)
 
-    def checkpoint(self) -> list[tuple[float, float, NDArray[np.float64]]]:
-        return list(self._frames)
+    def checkpoint(self) -> dict[str, Any]:
+        return {
+            "frames": list(self._frames),
+            "walked": self.walked_m,
+            "fix": self._fix,
+            "fix_radius": self._fix_radius_m,
+            "fix_walked": self._fix_walked_m,
+            "last": (*self._last_xy, self._last_walked_m),
+        }
 
     def restore(self, state: Any) -> None:
         """From :meth:`checkpoint` (None: a checkpoint from before it existed)."""
         self.reset()
-        for fx, fy, rows in state or ():
+        if state is None:
+            return
+        self.walked_m = float(state["walked"])
+        lx, ly, lw = state["last"]
+        self._last_xy, self._last_walked_m = (float(lx), float(ly)), float(lw)
+        fix = state["fix"]
+        self._fix = None if fix is None else (float(fix[0]), float(fix[1]), float(fix[2]))
+        self._fix_radius_m = float(state["fix_radius"])
+        self._fix_walked_m = float(state["fix_walked"])
+        for fx, fy, rows in state["frames"]:
             self._frames.append(
                 (float(fx), float(fy), np.asarray(rows, dtype=np.float64).reshape(-1, 3))
             )

@@ -61,8 +61,10 @@ FIT_FOV_MARGIN_STDS = 3.0
 FIT_MAX_SPREAD_M = 0.7
 #: Without a clutter floor, residuals beyond this many stds count as unexplained.
 PAPER_RESIDUAL_CUTOFF = 3.0
-#: Score-weighted mean of the clipped squared residuals that makes one frame veto.
+#: Score-weighted mean of the clipped squared residuals that makes one frame bad ...
 BAD_FRAME_FIT = 8.0
+#: ... and bad frames with detections in a row that veto converged.
+BAD_FRAMES_IN_A_ROW = 2
 #: Alternatives are searched for while the heaviest cluster is at most this wide (m).
 SEARCH_MAX_SPREAD_M = 0.5
 
@@ -133,6 +135,9 @@ class ParticleFilter:
         self.log_w = np.zeros(n, dtype=np.float64)
         self.capture.reset()
         self.geometry.reset()
+        if initial_pose is not None:
+            start = (initial_pose.x, initial_pose.y, initial_pose.theta_rad)
+            self.geometry.set_prior(start, initial_pose.std_xy_m)
         # A global start with recovery on seeds its cloud from the first evidence.
         self._seed_from_observation = initial_pose is None and self.config.recovery
         self._recovery.reset()
@@ -145,6 +150,8 @@ class ParticleFilter:
         #: How well the estimate explains the detections (smoothed); None before any.
         self.quality: FitQuality | None = None
         self._had_odometry = False
+        #: Frames with detections in a row that were bad on their own (see _update_fit).
+        self._bad_run = 0
         self.frames_without_evidence = 0
         #: How often every particle became impossible and the filter started again.
         self.restarts = 0
@@ -323,6 +330,8 @@ class ParticleFilter:
     ) -> None:
         """:meth:`step` in capture time: ``odometry`` is the motion between captures."""
         self.predict(odometry)
+        if odometry is not None:
+            self.geometry.moved(odometry)
         inject, w = self._correct(detections)
         if heading is not None:
             self.log_w = self.log_w + compass_log_likelihood(self.theta, heading)
@@ -355,6 +364,7 @@ class ParticleFilter:
             motion_lost=lost,
             confirmed_alternatives=confirmed,
             evidence_frame=self.frames_without_evidence == 0,
+            geometry_m=(fix_m := self.geometry.radius_m(raw.x, raw.y, raw.theta_rad)),
         )
         if self.evidence is not None:
             est = with_alternatives(est, self.evidence.hypotheses(), share)
@@ -364,7 +374,7 @@ class ParticleFilter:
             # Errors the cloud cannot know of (a box's centre, an object drawn a little off)
             # repeat every frame; the geometry bounds what they can do (capped at the map's
             # size: a fix no geometry pins down is still somewhere on the map).
-            radius = max(radius, min(self.geometry.radius_m(est.x, est.y), self._map_span_m))
+            radius = max(radius, min(fix_m, self._map_span_m))
             est = est.with_protection(radius)
         self.estimate = est
         self._resample(w, ess, inject)
@@ -397,7 +407,7 @@ class ParticleFilter:
         self.x, self.y, self.theta = self.evidence.swap(self.n)
         self.log_w = np.zeros(self.n)
         self._gate.reset()
-        self.geometry.reset()
+        self.geometry.clear_frames()
         self.quality = None
         w = self.weights
         ess = effective_sample_size(w)
@@ -442,6 +452,7 @@ class ParticleFilter:
             "seed_from_observation": self._seed_from_observation,
             "quality": self.quality,
             "had_odometry": self._had_odometry,
+            "bad_run": self._bad_run,
             "evidence": None if self.evidence is None else self.evidence.checkpoint(),
             "unseen": None if self.unseen is None else self.unseen.checkpoint(),
             "frames_without_evidence": self.frames_without_evidence,
@@ -467,6 +478,7 @@ class ParticleFilter:
         self._seed_from_observation = bool(state["seed_from_observation"])
         self.quality = from_plain(FitQuality | None, state["quality"])
         self._had_odometry = bool(state["had_odometry"])
+        self._bad_run = int(state.get("bad_run", 0))
         if self.evidence is not None and state["evidence"] is not None:
             self.evidence.restore(state["evidence"])
         if self.unseen is not None and state.get("unseen") is not None:
@@ -526,7 +538,11 @@ class ParticleFilter:
         # A burst of false detections where the camera still reports what the pose
         # has in clear view is clutter, not a contradiction.
         missing = self.unseen is None or self.unseen.frame_contradicts
-        bad = total >= 3.0 and clipped >= BAD_FRAME_FIT and missing
+        bad_now = total >= 3.0 and clipped >= BAD_FRAME_FIT and missing
+        # One bad frame is a glitch a phone makes now and then (a burst of boxes while
+        # turning, a person walking past); a kidnap stays bad.
+        self._bad_run = self._bad_run + 1 if bad_now else 0
+        bad = self._bad_run >= BAD_FRAMES_IN_A_ROW
         a_share = FIT_SMOOTHING * min(1.0, total / FIT_FULL_SCORE)
         if self.unseen is not None:
             if self.unseen.frame_expected == 0 and good == 0.0:

@@ -39,7 +39,7 @@ def radius(objects: list[dict], x: float, y: float, frames: int = 5) -> float:
     for _ in range(frames):
         obs = prepare_observation(seen_from(m, x, y, 0.0), m, cfg)
         geo.add(x, y, 0.0, obs, None)
-    return geo.radius_m(x, y)
+    return geo.radius_m(x, y, 0.0)
 
 
 def test_objects_all_around_pin_the_fix_and_a_narrow_far_cone_does_not() -> None:
