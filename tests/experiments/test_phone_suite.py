@@ -73,6 +73,7 @@ def test_scenarios_cover_the_issue() -> None:
     assert ("door_corridor", "vio-missed30-270") in names
     assert ("paper_office", "known-start-pinhole66") in names
     assert sum(c.startswith("only-") for _, c in names) == 12
+    assert sum("-without-" in c for _, c in names) == 9
     assert len(todo) == len(names)
     assert scenarios(select="door_corridor") == [s for s in todo if s.map_name == "door_corridor"]
     with pytest.raises(ValueError, match="unknown map"):
