@@ -348,7 +348,7 @@ class ParticleFilter:
             radius = protection_radius(self.x, self.y, w, est, self.rng, share, reach)
             est = est.with_protection(radius)
         if self.floors is not None:
-            self.floors.level_share(self.x, w, est.x)
+            self.floors.after_estimate(self.x, w, est.x, est.converged)
         self.estimate = est
         self._resample(w, ess, inject)
         self.steps += 1

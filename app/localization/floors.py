@@ -38,13 +38,16 @@ from __future__ import annotations
 from collections import deque
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from app.maps.geometry import first_polygon, polygon_edges
 from app.maps.model import SemanticMap
+
+if TYPE_CHECKING:
+    from app.localization.filter import ParticleFilter
 
 #: Readings averaged for the level-change test (at 5 frames/s: one second).
 SMOOTH_FRAMES = 5
@@ -83,7 +86,7 @@ class FloorTracker:
 
     Attributes:
         level_probability: the share of the weight on the estimate's level after the
-            last :meth:`level_share`; None before.
+            last :meth:`after_estimate`; None before.
         changes: how many level changes the barometer has shown.
     """
 
@@ -126,6 +129,10 @@ class FloorTracker:
         #: Whether the barometer says the person is between floors (the smoothed
         #: altitude more than ``DRIFT_SHARE`` of a storey from the anchor).
         self.in_transit = False
+        #: The level of the last converged estimate, and whether this step confirmed
+        #: a level other than the one before (the first fix included).
+        self.confirmed_level: int | None = None
+        self.newly_confirmed = False
 
     # ------------------------------------------------------------ the particles
     def stop_of(self, x: NDArray[np.float64], y: NDArray[np.float64]) -> NDArray[np.int64]:
@@ -223,15 +230,18 @@ class FloorTracker:
         go = to >= 0
         return self._move(x, y, which[go], to[go])[0]
 
-    def level_share(
-        self, x: NDArray[np.float64], w: NDArray[np.float64], estimate_x: float
-    ) -> float:
-        """The share of the weight on the level of ``estimate_x`` (kept as
-        :attr:`level_probability`)."""
+    def after_estimate(
+        self, x: NDArray[np.float64], w: NDArray[np.float64], estimate_x: float, converged: bool
+    ) -> None:
+        """Keep the share of the weight on the estimate's level
+        (:attr:`level_probability`) and, when the estimate is converged, its level as
+        :attr:`confirmed_level` (:attr:`newly_confirmed` when that changed)."""
         level = self.layout.level_of_plane_x(x)
         mine = int(self.layout.level_of_plane_x(np.array(estimate_x)))
         self.level_probability = float(np.sum(w[level == mine]))
-        return self.level_probability
+        self.newly_confirmed = converged and mine != self.confirmed_level
+        if converged:
+            self.confirmed_level = mine
 
     # ------------------------------------------------------------ checkpoints
     def checkpoint(self) -> dict[str, Any]:
@@ -241,6 +251,7 @@ class FloorTracker:
             "changes": self.changes,
             "level_probability": self.level_probability,
             "in_transit": self.in_transit,
+            "confirmed_level": self.confirmed_level,
         }
 
     def restore(self, state: Mapping[str, Any]) -> None:
@@ -251,3 +262,14 @@ class FloorTracker:
         p = state["level_probability"]
         self.level_probability = None if p is None else float(p)
         self.in_transit = bool(state["in_transit"])
+        confirmed = state["confirmed_level"]
+        self.confirmed_level = None if confirmed is None else int(confirmed)
+        self.newly_confirmed = False
+
+
+def spread_over_levels(pf: ParticleFilter, levels: tuple[int, ...]) -> None:
+    """Deal a known start's particles (drawn on ``levels[0]``) evenly over ``levels``:
+    a position known on the floor plan, its floor not (the same x and y on each)."""
+    layout = pf.map.layout
+    pick = np.asarray(levels, dtype=np.int64)[pf.rng.integers(len(levels), size=pf.n)]
+    pf.x = pf.x + layout.offsets(pick) - layout.offsets(levels[0])
