@@ -30,7 +30,8 @@ barometer, not the view, says where a ride ends), so every particle the change m
 descends from the ones that entered the connector.
 
 Without altitude, a particle in a stop moves to a level its connector reaches with a
-small probability per frame (``BLIND_RATE``), and what is seen on each level decides.
+small probability per frame (``BLIND_RATE``), and what is seen on each level decides;
+an estimate inside a stop is then between floors too (nothing tells the floor there).
 """
 
 from __future__ import annotations
@@ -133,6 +134,8 @@ class FloorTracker:
         #: a level other than the one before (the first fix included).
         self.confirmed_level: int | None = None
         self.newly_confirmed = False
+        #: Whether the last frame came without altitude.
+        self.blind = False
 
     # ------------------------------------------------------------ the particles
     def stop_of(self, x: NDArray[np.float64], y: NDArray[np.float64]) -> NDArray[np.int64]:
@@ -168,6 +171,7 @@ class FloorTracker:
         """The particles' x and log-weights after this frame's level changes, and
         whether the barometer contradicts the whole belief (a level change, and less
         than ``CONTRADICTED_SHARE`` of the weight could make it)."""
+        self.blind = altitude is None
         if altitude is None:
             self.in_transit = False
             return self._blind(x, y, rng), log_w, False
@@ -229,6 +233,16 @@ class FloorTracker:
         )
         go = to >= 0
         return self._move(x, y, which[go], to[go])[0]
+
+    def between_floors(self, x: float, y: float) -> bool:
+        """Whether a person at plane point (x, y) may be between floors: the barometer
+        says so, or without one the point lies in a connector's stop (a lift car looks
+        the same on every floor: only leaving it tells which)."""
+        if self.in_transit:
+            return True
+        if not self.blind:
+            return False
+        return bool(self.stop_of(np.array([x]), np.array([y]))[0] >= 0)
 
     def after_estimate(
         self, x: NDArray[np.float64], w: NDArray[np.float64], estimate_x: float, converged: bool
