@@ -25,6 +25,7 @@ from app.localization.convergence import ConvergenceGate, FitQuality, protection
 from app.localization.dilution import BearingGeometry
 from app.localization.estimate import estimate_pose, with_alternatives
 from app.localization.evidence import PATTERN, EvidenceTracker
+from app.localization.floors import AltitudeReading, FloorTracker
 from app.localization.kld import kld_sample_size
 from app.localization.latency import CaptureClock, moved_forward
 from app.localization.motion import penalized, sample_motion
@@ -110,6 +111,10 @@ class ParticleFilter:
             if self.config.evidence and self.config.visibility
             else None
         )
+        #: Level changes (maps with several levels only, app.localization.floors).
+        self.floors = FloorTracker(semantic_map) if len(semantic_map.layout.levels) > 1 else None
+        if self.floors is not None and self.evidence is not None:
+            self.evidence.place_allowed = self.floors.place_allowed
         self.last_observation: Observation | None = None
         #: Motion between detection captures (:mod:`~app.localization.latency`).
         self.capture = CaptureClock()
@@ -147,6 +152,8 @@ class ParticleFilter:
             self.evidence.set_prior(initial_pose)
         if self.unseen is not None:
             self.unseen.reset()
+        if self.floors is not None:
+            self.floors.reset()
         #: How well the estimate explains the detections (smoothed); None before any.
         self.quality: FitQuality | None = None
         self._had_odometry = False
@@ -302,21 +309,23 @@ class ParticleFilter:
         *,
         detections_age_s: float = 0.0,
         frame_s: float | None = None,
+        altitude: AltitudeReading | None = None,
     ) -> Estimate:
         """One full filter step: predict, correct, estimate, resample when due.
 
         ``heading``, a compass reading, weights the particles' headings too
-        (:mod:`~app.localization.compass`). ``detections_age_s``: how long before the end
-        of this frame's ``odometry`` (lasting ``frame_s``, None: not known) the detections
-        were captured; the particles stand for the pose at that moment
-        (:mod:`~app.localization.latency`), and the estimate returned is moved on to the
-        frame's end (:attr:`estimate` stays at the capture).
+        (:mod:`~app.localization.compass`); ``altitude``, the barometer's, moves
+        particles between levels (:mod:`~app.localization.floors`). ``detections_age_s``:
+        how long before the end of this frame's ``odometry`` (lasting ``frame_s``, None:
+        not known) the detections were captured; the particles stand for the pose at that
+        moment (:mod:`~app.localization.latency`), and the estimate returned is moved on
+        to the frame's end (:attr:`estimate` stays at the capture).
 
         The estimate summarizes the weighted particles before resampling: resampling
         only adds noise to what they say (and to what the injected particles say).
         """
         odometry = self.capture.step(odometry, frame_s, detections_age_s)
-        self._step(odometry, detections, heading)
+        self._step(odometry, detections, heading, altitude)
         back = self.capture.back
         if back.forward_m == 0.0 and back.left_m == 0.0 and back.turn_rad == 0.0:
             return self.estimate
@@ -327,11 +336,22 @@ class ParticleFilter:
         odometry: Odometry | None,
         detections: Sequence[Detection],
         heading: CompassReading | None,
+        altitude: AltitudeReading | None,
     ) -> None:
         """:meth:`step` in capture time: ``odometry`` is the motion between captures."""
         self.predict(odometry)
         if odometry is not None:
             self.geometry.moved(odometry)
+        if self.floors is not None:
+            self.x, self.log_w, contradicted = self.floors.apply(
+                self.x, self.y, self.log_w, altitude, self.rng
+            )
+            if contradicted:
+                self._restart_global()
+            elif self.floors.changed and self.evidence is not None:
+                # The alternatives were carried by the walk's odometry, not the ride:
+                # none of them rode along. The next search looks afresh.
+                self.evidence.reset()
         inject, w = self._correct(detections)
         if heading is not None:
             self.log_w = self.log_w + compass_log_likelihood(self.theta, heading)
@@ -342,7 +362,11 @@ class ParticleFilter:
         raw = estimate_pose(self.x, self.y, self.theta, w, ess=ess, rng=self.rng)
         share, confirmed = 0.0, 0.0
         searched_ago: int | None = 0
-        if self.evidence is not None:
+        transit = self.floors is not None and self.floors.between_floors(raw.x, raw.y)
+        if transit:
+            self._gate.reset()  # between floors: nobody is located
+            inject = 0.0  # the barometer, not the view, moves the cloud then
+        if self.evidence is not None and not transit:
             raw, w, ess = self._weigh_alternatives(odometry, raw, w, ess, heading)
             share, searched_ago = self.evidence.alternative_share, self.evidence.searched_ago
             confirmed = self.evidence.confirmed_share
@@ -366,6 +390,8 @@ class ParticleFilter:
             evidence_frame=self.frames_without_evidence == 0,
             geometry_m=(fix_m := self.geometry.radius_m(raw.x, raw.y, raw.theta_rad)),
         )
+        if est.converged and transit:
+            est = est.with_converged(False)
         if self.evidence is not None:
             est = with_alternatives(est, self.evidence.hypotheses(), share)
         if est.converged:
@@ -376,6 +402,8 @@ class ParticleFilter:
             # size: a fix no geometry pins down is still somewhere on the map).
             radius = max(radius, min(fix_m, self._map_span_m))
             est = est.with_protection(radius)
+        if self.floors is not None:
+            self.floors.after_estimate(self.x, w, est.x, est.converged)
         self.estimate = est
         self._resample(w, ess, inject)
         self.steps += 1
@@ -441,7 +469,7 @@ class ParticleFilter:
                 log_w = (self.log_w - top).astype(np.float32)
             self.x, self.y, self.theta = (v.astype(np.float64) for v in (x, y, theta))
             self.log_w = np.zeros(self.n) if log_w is None else log_w.astype(np.float64)
-        return {
+        state = {
             "x": x,
             "y": y,
             "theta": theta,
@@ -462,6 +490,9 @@ class ParticleFilter:
             "capture": self.capture.checkpoint(),
             "geometry": self.geometry.checkpoint(),
         }
+        if self.floors is not None:  # maps with several levels only
+            state["floors"] = self.floors.checkpoint()
+        return state
 
     def restore(self, state: Mapping[str, Any]) -> None:
         """Continue from a :meth:`checkpoint` (taken of a filter with this map and config)."""
@@ -483,6 +514,8 @@ class ParticleFilter:
             self.evidence.restore(state["evidence"])
         if self.unseen is not None and state.get("unseen") is not None:
             self.unseen.restore(state["unseen"])
+        if self.floors is not None and state.get("floors") is not None:
+            self.floors.restore(state["floors"])
         self.frames_without_evidence = int(state["frames_without_evidence"])
         self.restarts = int(state["restarts"])
         self.steps = int(state["steps"])

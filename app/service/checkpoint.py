@@ -136,14 +136,17 @@ ENTRY_FIELDS = (
     "truth",
     "heading",
     "detections_age_s",
+    "altitude",
 )
 
 
 def encode_frame(seq: int, frame: FrameInput, merged: int = 1) -> bytes:
     """One journal entry: the step's sequence number, then the frame (``merged`` frames
     merged into one) as a JSON array: ``[merged, timestamp, odometry, detections,
-    describe, truth, heading, detections_age_s]``, each detection a row ``[class,
-    bearing, score]`` and the other values as :func:`~app.state.to_plain` writes them.
+    describe, truth, heading, detections_age_s]`` and, when the frame has one,
+    ``altitude`` (a venue's barometer: frames without one are written as before it),
+    each detection a row ``[class, bearing, score]`` and the other values as
+    :func:`~app.state.to_plain` writes them.
 
     Every frame a shared store journals is encoded here, on the event loop. The
     detections as rows, rather than one object each, take orjson 1 us instead of 5 for
@@ -153,8 +156,10 @@ def encode_frame(seq: int, frame: FrameInput, merged: int = 1) -> bytes:
     through :func:`~app.state.plain_step`."""
     rows = [[d.cls, d.bearing_rad, d.score] for d in frame.detections]
     f = frame
-    body = [merged, f.timestamp, f.odometry, rows, f.describe, f.truth, f.heading]
+    body: list[object] = [merged, f.timestamp, f.odometry, rows, f.describe, f.truth, f.heading]
     body.append(f.detections_age_s)
+    if f.altitude is not None:
+        body.append(f.altitude)
     return b"%d|" % seq + orjson.dumps(body, default=plain_step)
 
 
@@ -167,7 +172,10 @@ def decode_frame(entry: bytes) -> tuple[int, FrameInput, int]:
     if isinstance(body, dict):
         return int(seq), from_plain(FrameInput, body["frame"]), int(body["merged"])
     merged, *values = body
-    # (entries written before detections had an age hold one value less: its default)
+    # Entries written before detections had an age hold the first six values only;
+    # the altitude is there only when the frame had one.
+    if len(values) not in (len(ENTRY_FIELDS) - 2, len(ENTRY_FIELDS) - 1, len(ENTRY_FIELDS)):
+        raise ValueError(f"a journal entry of {len(values)} values is no frame")
     plain = dict(zip(ENTRY_FIELDS[: len(values)], values, strict=True))
     plain["detections"] = [
         {"cls": c, "bearing_rad": b, "score": s} for c, b, s in plain["detections"]

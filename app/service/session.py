@@ -24,6 +24,7 @@ import numpy as np
 import app.service.checkpoint as checkpoint
 from app.feedback import Feedback, Narrator
 from app.feedback.guidance import GuidanceSpeaker
+from app.feedback.levels import level_sentence
 from app.guidance import Guidance, Plan, Target, Unreachable, guide
 from app.localization.camera import Camera
 from app.localization.filter import ParticleFilter
@@ -31,7 +32,7 @@ from app.localization.types import Detection, Estimate, Pose
 from app.maps.model import SemanticMap
 from app.service.errors import session_tag
 from app.service.queueing import FrameQueue, merged_warning
-from app.service.types import FrameInput, FrameOutcome, SessionSpec
+from app.service.types import FrameInput, FrameOutcome, LevelRef, SessionSpec
 from app.state import from_plain, to_plain
 
 
@@ -93,6 +94,23 @@ class Session:
     destination: Plan | None = None
     speaker: GuidanceSpeaker = field(default_factory=GuidanceSpeaker)
     last_guidance: Guidance | None = None
+
+    def _levels_of(self, estimate: Estimate) -> dict[str, Any]:
+        """The estimate's level, each hypothesis's and the level's probability (a map
+        with levels only: empty otherwise)."""
+        floors = self.filter.floors
+        if floors is None:
+            return {}
+        refs = level_refs(self.map)
+        layout = self.map.layout
+        xs = np.array([estimate.x, *(h.x for h in estimate.hypotheses)])
+        levels = layout.level_of_plane_x(xs)
+        return {
+            "level": refs[int(levels[0])],
+            "hypothesis_levels": tuple(refs[int(k)] for k in levels[1:]),
+            "level_probability": floors.level_probability,
+        }
+
     queue: FrameQueue = field(init=False)
     #: The task feeding queued frames to the filter (None: idle).
     pump: asyncio.Task[None] | None = None
@@ -159,6 +177,7 @@ class Session:
                 frame.heading,
                 detections_age_s=frame.detections_age_s,
                 frame_s=frame_s,
+                altitude=frame.altitude,
             )
             feedback = self.narrator.update(
                 estimate,
@@ -172,6 +191,11 @@ class Session:
             )
             now = time.monotonic() if frame.timestamp is None else frame.timestamp
             guidance, said = self._guide(estimate, now, warnings)
+            floors = self.filter.floors
+            if floors is not None and floors.newly_confirmed and floors.confirmed_level is not None:
+                where = level_sentence(self.map.layout.levels[floors.confirmed_level].name)
+                text = f"{where} {feedback.text}".strip()
+                feedback = Feedback(text, feedback.items, feedback.suggestion)
             if said:
                 joined = f"{feedback.text} {said}" if feedback.text else said
                 feedback = Feedback(joined, feedback.items, feedback.suggestion)
@@ -184,6 +208,7 @@ class Session:
                 warnings=tuple(warnings),
                 regions=tuple(self.map.region_at(h.x, h.y) for h in estimate.hypotheses),
                 guidance=guidance,
+                **self._levels_of(estimate),
             )
             self.last_outcome = result
             self.last_detections = detections
@@ -263,3 +288,13 @@ class Session:
         ]
         self.truth = from_plain(Pose | None, state["truth"])
         self.version += 1
+
+
+def level_refs(semantic_map: SemanticMap) -> tuple[LevelRef, ...]:
+    """The map's levels as results name them (kept with the map)."""
+    return semantic_map.derived_value(
+        ("level_refs",),
+        lambda: tuple(
+            LevelRef(lv.id, lv.name, lv.ordinal, lv.offset_x) for lv in semantic_map.layout.levels
+        ),
+    )

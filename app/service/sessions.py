@@ -28,6 +28,8 @@ from app.feedback.guidance import GuidanceSpeaker
 from app.guidance import DestinationSpec, Target, plan_for
 from app.localization.config import ODOMETRY_NOISE, FilterConfig
 from app.localization.filter import ParticleFilter
+from app.localization.floors import spread_over_levels
+from app.localization.types import InitialPose
 from app.maps.model import SemanticMap
 from app.maps.prepare import ensure_prepared
 from app.service.access import OPEN, Principal, TokenBucket
@@ -51,6 +53,54 @@ from app.service.store import MemoryStore, SessionStore
 from app.service.types import FrameInput, FrameOutcome, SessionSpec
 
 log = logging.getLogger("bearings.sessions")
+
+
+def initial_on_levels(
+    semantic_map: SemanticMap, request: SessionSpec
+) -> tuple[InitialPose | None, tuple[int, ...]]:
+    """The initial pose in the filter's plane and the levels it may be on.
+
+    On a map with levels, ``initial_level`` names the level (unknown: a level the map
+    lacks, or a level on a map without levels, is refused); without it the pose may be
+    on any level where it is in the free space.
+
+    Raises:
+        InvalidSessionSpec: saying what is wrong.
+    """
+    initial = request.initial_pose
+    layout = semantic_map.layout
+    name = semantic_map.name
+    if request.initial_level is not None and not layout.has_levels:
+        raise InvalidSessionSpec(f"initial_pose.level: map {name!r} has no levels; leave level out")
+    if initial is None:
+        return None, ()
+    if not layout.has_levels:
+        candidates: tuple[int, ...] = (0,)
+    elif request.initial_level is not None:
+        try:
+            candidates = (layout.level_index(request.initial_level),)
+        except KeyError as exc:
+            raise InvalidSessionSpec(f"initial_pose.level: {exc.args[0]}") from None
+    else:
+        candidates = tuple(lv.index for lv in layout.levels)
+    free = [
+        k
+        for k in candidates
+        if bool(semantic_map.free_space.is_free(initial.x + layout.offsets(k), initial.y))
+    ]
+    if not free:
+        where = (
+            ""
+            if len(candidates) != 1 or not layout.has_levels
+            else (f" on level {layout.levels[candidates[0]].id!r}")
+        )
+        raise InvalidSessionSpec(
+            f"initial_pose: ({initial.x:g}, {initial.y:g}) is not in the free space of map "
+            f"{name!r}{where} (inside a wall, outside the building or off the map); "
+            "give a pose where a person can stand, or null for a global start"
+        )
+    first = free[0]
+    return replace(initial, x=initial.x + float(layout.offsets(first))), tuple(free)
 
 
 class SessionManager:
@@ -250,13 +300,7 @@ class SessionManager:
             rot_noise_frac=ODOMETRY_NOISE[request.odometry_source][1],
         )
         seed = request.seed if request.seed is not None else secrets.randbits(63)
-        initial = request.initial_pose
-        if initial is not None and not bool(semantic_map.free_space.is_free(initial.x, initial.y)):
-            raise InvalidSessionSpec(
-                f"initial_pose: ({initial.x:g}, {initial.y:g}) is not in the free space of map "
-                f"{semantic_map.name!r} (inside a wall, outside the building or off the map); "
-                "give a pose where a person can stand, or null for a global start"
-            )
+        initial, levels = initial_on_levels(semantic_map, request)
         pf = ParticleFilter(
             semantic_map,
             config,
@@ -264,6 +308,8 @@ class SessionManager:
             initial_pose=initial,
             state=filter_state,
         )
+        if filter_state is None and len(levels) > 1:
+            spread_over_levels(pf, levels)
         narrator = Narrator(semantic_map, request.feedback)
         return Session(
             id=session_id or secrets.token_urlsafe(24),  # 192 random bits
