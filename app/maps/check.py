@@ -23,6 +23,7 @@ from typing import Literal
 
 import numpy as np
 
+from app.maps.freespace import FreeSpaceGrid
 from app.maps.geometry import segments_cross_walls
 from app.maps.model import (
     MOUNT_TOLERANCE_M,
@@ -42,6 +43,8 @@ MAX_WALLS = 10_000
 MAX_OBJECTS = 2_000
 MAX_REGIONS = 1_000
 MAX_REGION_VERTICES = 5_000
+MAX_LEVELS = 100
+MAX_CONNECTORS = 2_000
 #: Largest absolute coordinate, metres.
 MAX_COORDINATE_M = 100_000.0
 #: Largest side of the map's bounding box, metres.
@@ -92,7 +95,13 @@ def _count_problems(source: str, data: object) -> list[Problem]:
     if not isinstance(data, dict):
         return [Problem(source, "(file)", "must be a JSON object with walls and objects")]
     out = []
-    for key, limit in (("walls", MAX_WALLS), ("objects", MAX_OBJECTS), ("regions", MAX_REGIONS)):
+    for key, limit in (
+        ("walls", MAX_WALLS),
+        ("objects", MAX_OBJECTS),
+        ("regions", MAX_REGIONS),
+        ("levels", MAX_LEVELS),
+        ("connectors", MAX_CONNECTORS),
+    ):
         items = data.get(key)
         if isinstance(items, list) and len(items) > limit:
             out.append(
@@ -136,13 +145,18 @@ def _coordinate_problems(source: str, spec: MapFile) -> list[Problem]:
     for i, r in enumerate(spec.regions):
         for j, (x, y) in enumerate(r.polygon):
             far(((f"regions[{i}].polygon[{j}]", x), (f"regions[{i}].polygon[{j}]", y)))
+    for i, c in enumerate(spec.connectors):
+        for s, stop in enumerate(c.stops):
+            where = f"connectors[{i}].stops[{s}].polygon"
+            far((where, v) for point in stop.polygon for v in point)
     return out
 
 
 def _extent_problems(source: str, m: SemanticMap) -> list[Problem]:
     """A bounding box wider than ``MAX_EXTENT_M`` (a grid over it would be useless)."""
     out = []
-    x0, y0, x1, y1 = m.bounds
+    # Several levels lie side by side in the plane (app.maps.levels): the file's extent.
+    x0, y0, x1, y1 = m.layout.file_bounds if m.layout.has_levels else m.bounds
     if max(x1 - x0, y1 - y0) > MAX_EXTENT_M:
         out.append(
             Problem(
@@ -259,6 +273,9 @@ def _object_fixes(source: str, m: SemanticMap) -> tuple[Fixes, list[Problem]]:
     fixes: Fixes = {}
     out: list[Problem] = []
     xy = m.object_xy
+    # The plane's x offset of each object's level (0 without levels): messages and
+    # fixes are in the file's frame.
+    shift = m.layout.offsets(m.layout.object_level)
     near, nearest, _ = nearest_walls(xy, walls)
     mounted = near < MOUNT_TOLERANCE_M
     candidates = np.flatnonzero(~mounted)
@@ -271,14 +288,15 @@ def _object_fixes(source: str, m: SemanticMap) -> tuple[Fixes, list[Problem]]:
             w = walls[nearest[i]]
             d = w[2:4] - w[0:2]
             t = float(np.clip(np.dot(xy[i] - w[0:2], d) / max(float(d @ d), 1e-12), 0.0, 1.0))
-            p = w[0:2] + t * d
+            p = w[0:2] + t * d - (shift[i], 0.0)
             fixes[i] = (float(p[0]), float(p[1]))
             out.append(
                 Problem(
                     source,
                     f"objects[{i}]",
-                    f"{what} at ({xy[i, 0]:.2f}, {xy[i, 1]:.2f}) lies {near[i] * 100:.0f} cm "
-                    f"outside walls[{int(nearest[i])}]; moved onto it at ({p[0]:.2f}, {p[1]:.2f})",
+                    f"{what} at ({xy[i, 0] - shift[i]:.2f}, {xy[i, 1]:.2f}) lies "
+                    f"{near[i] * 100:.0f} cm outside walls[{int(nearest[i])}]; moved onto it "
+                    f"at ({p[0]:.2f}, {p[1]:.2f})",
                     "warning",
                 )
             )
@@ -287,7 +305,7 @@ def _object_fixes(source: str, m: SemanticMap) -> tuple[Fixes, list[Problem]]:
                 Problem(
                     source,
                     f"objects[{i}]",
-                    f"{what} at ({xy[i, 0]:.2f}, {xy[i, 1]:.2f}) is outside the walls "
+                    f"{what} at ({xy[i, 0] - shift[i]:.2f}, {xy[i, 1]:.2f}) is outside the walls "
                     f"({near[i]:.2f} m from the nearest); nobody inside can stand near it",
                     "warning",
                 )
@@ -297,10 +315,9 @@ def _object_fixes(source: str, m: SemanticMap) -> tuple[Fixes, list[Problem]]:
 
 def _free_space_problem(
     source: str, m: SemanticMap, prepare_grids: bool, cache_dir: Path | None
-) -> Problem | None:
+) -> tuple[FreeSpaceGrid, Problem | None]:
     """No free space at all. With ``prepare_grids`` the map's grids are prepared here
     (read from ``cache_dir`` when there), else only the free space is built."""
-    from app.maps.model import WALL_CLEARANCE_M
     from app.maps.prepare import build_free_space, prepare
 
     if prepare_grids:
@@ -308,13 +325,61 @@ def _free_space_problem(
     else:
         fs = build_free_space(m, m.grid_resolution_m)
     if fs.free_cells.size:
-        return None
+        return fs, None
+    return fs, _no_free_space(source)
+
+
+def _no_free_space(source: str, where: str = "") -> Problem:
+    from app.maps.model import WALL_CLEARANCE_M
+
     return Problem(
         source,
         "walls",
-        "the map has no free space: no place is enclosed by walls on all four sides and "
-        f"at least {WALL_CLEARANCE_M} m from every wall",
+        f"the map has no free space{where}: no place is enclosed by walls on all four sides "
+        f"and at least {WALL_CLEARANCE_M} m from every wall",
     )
+
+
+def _level_problems(source: str, m: SemanticMap, fs: FreeSpaceGrid) -> list[Problem]:
+    """Levels with no free space, and connector stops outside their level's free space
+    (a stop must hold room to stand: its polygon's centre, or failing that a point of
+    a 10 cm raster inside it, is free)."""
+    from app.maps.geometry import first_polygon, polygon_edges
+
+    layout = m.layout
+    if not layout.has_levels:
+        return []
+    out: list[Problem] = []
+    cols = fs.mask.shape[1]
+    free_x = fs.origin_x + (fs.free_cells % cols + 0.5) * fs.resolution_m
+    free_level = layout.level_of_plane_x(free_x)
+    for lv in layout.levels:
+        if not np.any(free_level == lv.index):
+            out.append(_no_free_space(source, f" on level {lv.id!r}"))
+    for c, conn in enumerate(m.spec.connectors):
+        for s, stop in enumerate(conn.stops):
+            k = layout.level_index(stop.level)
+            poly = layout.to_plane(np.array(stop.polygon, dtype=np.float64), k)
+            lo, hi = poly.min(axis=0), poly.max(axis=0)
+            gx, gy = np.meshgrid(
+                np.arange(lo[0], hi[0] + 0.1, 0.1), np.arange(lo[1], hi[1] + 0.1, 0.1)
+            )
+            raster = np.vstack(
+                [poly.mean(axis=0)[None, :], np.column_stack([gx.ravel(), gy.ravel()])]
+            )
+            within = first_polygon(raster, *polygon_edges([poly])) >= 0
+            if not np.any(fs.is_free(raster[within, 0], raster[within, 1])):
+                label = f" ({conn.label})" if conn.label else ""
+                out.append(
+                    Problem(
+                        source,
+                        f"connectors[{c}].stops[{s}].polygon",
+                        f"{conn.kind} {conn.id!r}{label}: its stop on level {stop.level!r} "
+                        "holds no free space (it lies outside the level's walls or within "
+                        f"the walls' clearance)",
+                    )
+                )
+    return out
 
 
 # --------------------------------------------------------------------- entry points
@@ -356,9 +421,12 @@ def check_data(
         for i, (x, y) in fixes.items():
             fixed["objects"][i]["x"], fixed["objects"][i]["y"] = x, y  # type: ignore[index]
         m = parse_map(fixed, source=source, expected_name=expected_name)
-    empty = _free_space_problem(source, m, prepare_grids, cache_dir)
+    fs, empty = _free_space_problem(source, m, prepare_grids, cache_dir)
     if empty is not None:
         return CheckResult(source, None, [*problems, empty])
+    level_errors = _level_problems(source, m, fs)
+    if level_errors:
+        return CheckResult(source, None, [*problems, *level_errors])
     return CheckResult(source, m, problems)
 
 

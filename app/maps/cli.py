@@ -92,9 +92,13 @@ def run_check(files: list[Path]) -> int:
         else:
             m = result.map
             assert m is not None
+            levels = m.layout.levels
+            venue = (
+                f", {len(levels)} levels, {len(m.layout.connectors)} connectors" if levels else ""
+            )
             print(
-                f"{path}: no problems ({m.walls.shape[0]} walls, {m.object_count} objects, "
-                f"{len(m.region_names)} regions)"
+                f"{path}: no problems ({len(m.layout.wall_level)} walls, {m.object_count} "
+                f"objects, {len(m.region_names)} regions{venue})"
             )
     return 1 if bad else 0
 

@@ -29,6 +29,7 @@ from app.maps.geometry import (
     polygon_edges,
     segments_cross_walls,
 )
+from app.maps.levels import ConnectorSpec, LevelLayout, LevelSpec, reference_problems
 from app.maps.prepare import nearest_walls
 from app.resources import bundled_maps_dir as bundled_maps_dir  # re-exported for old imports
 from app.validation import Finite, StrictInput, problem_text
@@ -57,6 +58,7 @@ class WallSpec(StrictInput):
     y1: Finite
     x2: Finite
     y2: Finite
+    level: str | None = None
 
     @model_validator(mode="after")
     def _has_length(self) -> WallSpec:
@@ -72,6 +74,7 @@ class ObjectSpec(StrictInput):
     x: Finite
     y: Finite
     label: str | None = Field(default=None, max_length=200)
+    level: str | None = None
 
     @field_validator("cls")
     @classmethod
@@ -88,6 +91,7 @@ class RegionSpec(StrictInput):
 
     name: str = Field(min_length=1, max_length=200)
     polygon: list[tuple[Finite, Finite]] = Field(min_length=3)
+    level: str | None = None
 
 
 class MapFile(StrictInput):
@@ -98,6 +102,9 @@ class MapFile(StrictInput):
     walls: list[WallSpec] = Field(default_factory=list)
     objects: list[ObjectSpec] = Field(min_length=1)
     regions: list[RegionSpec] = Field(default_factory=list)
+    #: Venues with several floors (:mod:`app.maps.levels`); None: one level, as before.
+    levels: list[LevelSpec] | None = None
+    connectors: list[ConnectorSpec] = Field(default_factory=list)
 
     @field_validator("name")
     @classmethod
@@ -130,6 +137,9 @@ def validate_spec(
         spec = MapFile.model_validate(data)
     except ValidationError as exc:
         raise _validation_error(source, exc) from None
+    problems = reference_problems(spec)
+    if problems:
+        raise MapError(f"{source}: " + "; ".join(f"{f}: {m}" for f, m in problems), problems)
     if expected_name is not None and spec.name != expected_name:
         reason = f"{spec.name!r} must equal the file name without .json ({expected_name!r})"
         raise MapError(f"{source}: name: {reason}", [("name", reason)])
@@ -167,10 +177,17 @@ class SemanticMap:
         self.derived: dict[tuple[object, ...], Any] = {}
         self.name = spec.name
         self.description = spec.description
-        self.walls = np.array(
-            [[w.x1, w.y1, w.x2, w.y2] for w in spec.walls], dtype=np.float64
-        ).reshape(-1, 4)
-        self.object_xy = np.array([[o.x, o.y] for o in spec.objects], dtype=np.float64)
+        #: The levels and connectors, each element's level, and the plane every array
+        #: below is in (the file's frame for a map without levels; see app.maps.levels).
+        self.layout = layout = LevelLayout(spec)
+        self.walls = layout.plane_walls(
+            np.array([[w.x1, w.y1, w.x2, w.y2] for w in spec.walls], dtype=np.float64).reshape(
+                -1, 4
+            )
+        )
+        self.object_xy = layout.plane_points(
+            np.array([[o.x, o.y] for o in spec.objects], dtype=np.float64), layout.object_level
+        )
         self.classes: tuple[str, ...] = tuple(sorted({o.cls for o in spec.objects}))
         index = {c: i for i, c in enumerate(self.classes)}
         self.object_class = np.array([index[o.cls] for o in spec.objects], dtype=np.int64)
@@ -179,7 +196,9 @@ class SemanticMap:
             c: np.flatnonzero(self.object_class == i) for i, c in enumerate(self.classes)
         }
         self.region_names: tuple[str, ...] = tuple(r.name for r in spec.regions)
-        self.region_polygons = [np.array(r.polygon, dtype=np.float64) for r in spec.regions]
+        self.region_polygons = layout.plane_polygons(
+            [np.array(r.polygon, dtype=np.float64) for r in spec.regions], layout.region_level
+        )
         #: Object n is mounted in wall w: within MOUNT_TOLERANCE_M of it.
         self.mounted_walls = nearest_walls(self.object_xy, self.walls, MOUNT_TOLERANCE_M)[2]
         self._grid_resolution_m = grid_resolution_m
@@ -314,5 +333,12 @@ class SemanticMap:
         return prepared_of(self)
 
     def to_json(self) -> dict[str, object]:
-        """The map file's JSON (with ``class`` spelled as in the file)."""
-        return self.spec.model_dump(by_alias=True, exclude_none=False)
+        """The map file's JSON (with ``class`` spelled as in the file); a file without
+        levels has no ``levels``, ``connectors`` or ``level`` keys, as before them."""
+        data = self.spec.model_dump(by_alias=True, exclude_none=False)
+        if self.spec.levels is None:
+            del data["levels"], data["connectors"]
+            for key in ("walls", "objects", "regions"):
+                for item in data[key]:
+                    del item["level"]
+        return data
