@@ -26,7 +26,7 @@ import numpy as np
 from app.config import Settings
 from app.feedback import Feedback, Narrator
 from app.feedback.guidance import GuidanceSpeaker
-from app.guidance import DestinationSpec, Guidance, Plan, Target, Unreachable, guide, plan_for
+from app.guidance import DestinationSpec, Guidance, Plan, Unreachable, guide, plan_for
 from app.localization.camera import Camera
 from app.localization.config import FilterConfig
 from app.localization.filter import ParticleFilter
@@ -502,8 +502,9 @@ class SessionManager:
 
     async def set_destination(
         self, session_id: str, spec: DestinationSpec, owner: Principal | None = None
-    ) -> Target:
-        """Guide the session to ``spec`` (the plan is built off the event loop).
+    ) -> Plan:
+        """Guide the session to ``spec`` (the plan is built off the event loop); the plan
+        (its target, and the map it was resolved on).
 
         Raises:
             SessionNotFound, UnknownDestination (nothing by that name: says what the
@@ -513,7 +514,7 @@ class SessionManager:
         plan = await asyncio.to_thread(plan_for, session.map, spec)
         session.set_destination(plan)
         log_event("destination_set", tag=session.tag, kind=spec.kind)
-        return plan.target
+        return plan
 
     async def clear_destination(self, session_id: str, owner: Principal | None = None) -> None:
         """Stop guiding the session."""
