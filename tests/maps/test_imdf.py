@@ -21,9 +21,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from app.cli import main
+from app.maps.check import check_data, load_map
 from app.maps.geometry import segments_cross_walls
 from app.maps.importers.common import MapImportError
 from app.maps.importers.imdf import import_imdf
+from app.resources import bundled_maps_dir
+from tools.make_imdf_venue import venue, write
 
 VENUE = Path(__file__).parent / "data" / "riverside_imdf"
 
@@ -226,3 +230,47 @@ def test_refusals_name_the_file_the_feature_and_the_reason(tmp_path: Path) -> No
         import_imdf(_broken(tmp_path / "e", "unit.geojson", far_away), "x")
     with pytest.raises(MapImportError, match="storey"):
         import_imdf(VENUE, "x", storey_m=0.0)
+
+
+def test_the_command_writes_a_map_that_passes_its_check(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / "riverside.json"
+    assert main(["map", "import", "--imdf", str(VENUE), "--out", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert "3 levels from 3 IMDF levels" in printed and f"wrote {out}" in printed
+    assert main(["map", "check", str(out)]) == 0
+    assert "3 levels, 4 connectors" in capsys.readouterr().out
+    m = load_map(out)
+    assert [lv.name for lv in m.layout.levels] == ["Ground Floor", "First Floor", "Second Floor"]
+    for extra in (["--objects", "x.csv"], ["--origin", "47,8"]):
+        assert main(["map", "import", "--imdf", str(VENUE), *extra, "--out", str(out)]) == 1
+        assert "does not go with --imdf" in capsys.readouterr().out
+    assert main(["map", "import", "--imdf", str(tmp_path), "--out", str(out)]) == 1
+    assert "no level.geojson" in capsys.readouterr().out
+
+
+def test_the_bundled_example_is_the_importer_s_output() -> None:
+    bundled = json.loads((bundled_maps_dir() / "riverside_station.json").read_text())
+    data, _ = import_imdf(VENUE, "riverside_station")
+    data["description"] = bundled["description"]
+    result = check_data(data, source="riverside_station", expected_name="riverside_station")
+    assert result.problems == [] and result.map is not None
+    assert json.loads(json.dumps(result.map.to_json())) == bundled
+
+
+def test_a_station_sized_venue_imports_and_passes_its_check(tmp_path: Path) -> None:
+    """The synthetic venue of tools/make_imdf_venue.py on two levels (timed on four by
+    benchmarks/imdf_import.py)."""
+    features = venue(2, np.random.default_rng(0))
+    write(features, tmp_path / "venue.zip")
+    data, summary = import_imdf(tmp_path / "venue.zip", "station")
+    assert summary.units == 368 and summary.fixtures == 1890
+    kinds: dict[str, int] = {}
+    for c in data["connectors"]:
+        kinds[c["kind"]] = kinds.get(c["kind"], 0) + 1
+    # Per band a lift and stairs joined by overlap and an escalator by its relationship.
+    assert kinds == {"elevator": 3, "stairs": 3, "escalator": 3}
+    result = check_data(data, source="station", expected_name="station")
+    assert result.map is not None, result.problems
+    assert len(result.map.layout.levels) == 2
