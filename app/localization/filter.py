@@ -29,6 +29,7 @@ from app.localization.estimate import (
     with_alternatives,
 )
 from app.localization.evidence import PATTERN, EvidenceTracker
+from app.localization.floors import AltitudeReading, FloorTracker
 from app.localization.kld import kld_sample_size
 from app.localization.motion import penalized, sample_motion
 from app.localization.recovery import AugmentedMCL, sample_from_observation
@@ -110,6 +111,8 @@ class ParticleFilter:
             if self.config.evidence and self.config.visibility
             else None
         )
+        #: Level changes (maps with several levels only, app.localization.floors).
+        self.floors = FloorTracker(semantic_map) if len(semantic_map.layout.levels) > 1 else None
         self.last_observation: Observation | None = None
         if state is None:
             self.reset(initial_pose)
@@ -137,6 +140,8 @@ class ParticleFilter:
             self.evidence.reset()
         if self.unseen is not None:
             self.unseen.reset()
+        if self.floors is not None:
+            self.floors.reset()
         #: How well the estimate explains the detections (smoothed); None before any.
         self.quality: FitQuality | None = None
         self._had_odometry = False
@@ -280,16 +285,26 @@ class ParticleFilter:
         odometry: Odometry | None,
         detections: Sequence[Detection],
         heading: CompassReading | None = None,
+        altitude: AltitudeReading | None = None,
     ) -> Estimate:
         """One full filter step: predict, correct, estimate, resample when due.
 
         ``heading``, a compass reading, weights the particles' headings too
-        (:mod:`~app.localization.compass`).
+        (:mod:`~app.localization.compass`); ``altitude``, the barometer's, moves
+        particles between levels (:mod:`~app.localization.floors`).
 
         The estimate summarizes the weighted particles before resampling: resampling
         only adds noise to what they say (and to what the injected particles say).
         """
         self.predict(odometry)
+        if self.floors is not None:
+            self.x, self.log_w, contradicted = self.floors.apply(
+                self.x, self.y, self.log_w, altitude, self.rng
+            )
+            if contradicted:
+                self._restart_global()
+            elif self.floors.in_transit:
+                self._gate.reset()  # between floors: nobody is located
         inject, w = self._correct(detections)
         if heading is not None:
             self.log_w = self.log_w + compass_log_likelihood(self.theta, heading)
@@ -300,7 +315,10 @@ class ParticleFilter:
         raw = estimate_pose(self.x, self.y, self.theta, w, ess=ess, rng=self.rng)
         share, confirmed = 0.0, 0.0
         searched_ago: int | None = 0
-        if self.evidence is not None:
+        transit = self.floors is not None and self.floors.in_transit
+        if transit:
+            inject = 0.0  # between floors the barometer, not the view, moves the cloud
+        if self.evidence is not None and not transit:
             raw, w, ess = self._weigh_alternatives(odometry, raw, w, ess, heading)
             share, searched_ago = self.evidence.alternative_share, self.evidence.searched_ago
             confirmed = self.evidence.confirmed_share
@@ -321,12 +339,16 @@ class ParticleFilter:
             confirmed_alternatives=confirmed,
             evidence_frame=self.frames_without_evidence == 0,
         )
+        if est.converged and transit:
+            est = est.with_converged(False)
         if self.evidence is not None:
             est = with_alternatives(est, self.evidence.hypotheses(), share)
         if est.converged:
             reach = self.evidence.farthest_m(est.x, est.y) if self.evidence is not None else 0.0
             radius = protection_radius(self.x, self.y, w, est, self.rng, share, reach)
             est = est.with_protection(radius)
+        if self.floors is not None:
+            self.floors.level_share(self.x, w, est.x)
         self.estimate = est
         self._resample(w, ess, inject)
         self.steps += 1
@@ -392,7 +414,7 @@ class ParticleFilter:
                 log_w = (self.log_w - top).astype(np.float32)
             self.x, self.y, self.theta = (v.astype(np.float64) for v in (x, y, theta))
             self.log_w = np.zeros(self.n) if log_w is None else log_w.astype(np.float64)
-        return {
+        state = {
             "x": x,
             "y": y,
             "theta": theta,
@@ -410,6 +432,9 @@ class ParticleFilter:
             "steps": self.steps,
             "estimate": self.estimate,
         }
+        if self.floors is not None:  # maps with several levels only
+            state["floors"] = self.floors.checkpoint()
+        return state
 
     def restore(self, state: Mapping[str, Any]) -> None:
         """Continue from a :meth:`checkpoint` (taken of a filter with this map and config)."""
@@ -430,6 +455,8 @@ class ParticleFilter:
             self.evidence.restore(state["evidence"])
         if self.unseen is not None and state.get("unseen") is not None:
             self.unseen.restore(state["unseen"])
+        if self.floors is not None and state.get("floors") is not None:
+            self.floors.restore(state["floors"])
         self.frames_without_evidence = int(state["frames_without_evidence"])
         self.restarts = int(state["restarts"])
         self.steps = int(state["steps"])

@@ -3,7 +3,8 @@
 Each floor is a 24 m x 14 m hall with the same shell: an elevator car in the south-west
 corner (3 m x 3 m, its door on the north side), a stairwell in the south-east corner
 and two escalators in the middle (one up from the Ground to the First Floor, one down
-back again). The floors differ by their furniture and fittings, as real floors do,
+back again, each 6 m long; a stop is the escalator's footprint, the same on both
+floors). The floors differ by their furniture and fittings, as real floors do,
 but share the doors and windows of the shell, so what is seen right after a ride
 does not settle the floor at once.
 """
@@ -76,16 +77,16 @@ FITTINGS: dict[str, tuple[tuple[str, float, float, str | None], ...]] = {
         ("desk", 6.0, 6.0, "Information"),
         ("bench", 4.0, 11.0, None),
         ("plant", 12.5, 12.5, None),
-        ("escalator", 9.0, 5.5, "Escalator up"),
-        ("escalator", 9.0, 8.5, "Escalator down"),
+        ("escalator", 9.0, 5.75, "Escalator up"),
+        ("escalator", 9.0, 8.25, "Escalator down"),
         ("table", 19.0, 11.5, None),
     ),
     "L1": (
         ("sign", 0.0, 8.0, "Platforms"),
         ("bench", 5.0, 6.0, None),
         ("vending_machine", 3.5, 13.5, None),
-        ("escalator", 9.0, 5.5, "Escalator up"),
-        ("escalator", 9.0, 8.5, "Escalator down"),
+        ("escalator", 16.0, 5.75, "Escalator up"),
+        ("escalator", 16.0, 8.25, "Escalator down"),
         ("table", 18.0, 11.0, None),
         ("table", 21.0, 11.0, None),
     ),
@@ -97,6 +98,16 @@ FITTINGS: dict[str, tuple[tuple[str, float, float, str | None], ...]] = {
         ("desk", 12.0, 4.0, "Ticket office"),
     ),
 }
+
+
+#: The escalators' footprints (the same on both floors they join): 6 m long, running
+#: east (up, its foot at x = 9.5 on the Ground Floor) and west (down, its foot at x = 9.5
+#: on the Ground Floor too, its head at x = 15.5 on the First Floor).
+ESCALATOR_UP = _square(9.5, 5.0, 15.5, 6.5)
+ESCALATOR_DOWN = _square(9.5, 7.5, 15.5, 9.0)
+#: The lift car's floor and the stairwell.
+LIFT_STOP = _square(0.4, 0.4, 2.6, 2.6)
+STAIRS_STOP = _square(20.5, 0.5, 23.5, 3.5)
 
 
 def venue_spec(name: str = VENUE_NAME) -> dict[str, object]:
@@ -117,8 +128,8 @@ def venue_spec(name: str = VENUE_NAME) -> dict[str, object]:
                 "level": level,
             },
         ]
-    lift_stop = _square(0.4, 0.4, 2.6, 2.6)
-    stairs_stop = _square(20.5, 0.5, 23.5, 3.5)
+    lift_stop = LIFT_STOP
+    stairs_stop = STAIRS_STOP
     connectors = [
         {
             "id": "lift-a",
@@ -138,8 +149,8 @@ def venue_spec(name: str = VENUE_NAME) -> dict[str, object]:
             "label": "Escalator up",
             "direction": "up",
             "stops": [
-                {"level": "L0", "polygon": _square(10.0, 5.0, 13.0, 6.5)},
-                {"level": "L1", "polygon": _square(10.0, 5.0, 13.0, 6.5)},
+                {"level": "L0", "polygon": ESCALATOR_UP},
+                {"level": "L1", "polygon": ESCALATOR_UP},
             ],
         },
         {
@@ -148,8 +159,8 @@ def venue_spec(name: str = VENUE_NAME) -> dict[str, object]:
             "label": "Escalator down",
             "direction": "down",
             "stops": [
-                {"level": "L1", "polygon": _square(10.0, 7.5, 13.0, 9.0)},
-                {"level": "L0", "polygon": _square(10.0, 7.5, 13.0, 9.0)},
+                {"level": "L1", "polygon": ESCALATOR_DOWN},
+                {"level": "L0", "polygon": ESCALATOR_DOWN},
             ],
         },
     ]
@@ -168,3 +179,26 @@ def venue_spec(name: str = VENUE_NAME) -> dict[str, object]:
 def venue_map() -> SemanticMap:
     """The venue as a :class:`SemanticMap`."""
     return parse_map(venue_spec())
+
+
+def venue_legs() -> tuple[str, list[object]]:
+    """The venue suite's walk: its start level and legs (about 4 minutes).
+
+    The Ground Floor's hall, the lift up two floors, the Second Floor, the stairs down
+    to the First Floor, the First Floor, the escalator down, the Ground Floor, the
+    escalator up, the First Floor's office.
+    """
+    from app.simulation.venue_walk import Ride, Walk
+
+    legs: list[object] = [
+        Walk(((6.0, 11.0), (12.0, 11.5), (12.0, 4.0), (5.0, 4.0), (1.5, 5.0), (1.5, 1.5))),
+        Ride("elevator", "L2", climb_mps=1.0, wait_s=3.0),
+        Walk(((1.5, 5.0), (8.0, 7.0), (14.0, 11.0), (10.0, 12.0), (18.0, 4.0), (21.0, 3.0))),
+        Ride("stairs", "L1", ((21.0, 1.0), (23.0, 1.0), (23.0, 3.0)), speed_mps=0.35),
+        Walk(((20.0, 6.0), (6.0, 7.0), (6.0, 11.0), (16.0, 7.0), (15.4, 8.25))),
+        Ride("escalator", "L0", ((9.5, 8.25),), speed_mps=0.5),
+        Walk(((6.0, 8.0), (5.0, 12.0), (12.0, 12.0), (9.6, 6.8), (9.6, 5.75))),
+        Ride("escalator", "L1", ((15.5, 5.75),), speed_mps=0.5),
+        Walk(((17.0, 6.0), (15.5, 8.0), (15.5, 10.5), (20.0, 11.5))),
+    ]
+    return "L0", legs

@@ -1,0 +1,253 @@
+"""Which floor: the particles' level, changed only at connectors, driven by the barometer.
+
+On a map with several levels (:mod:`app.maps.levels`) the filter runs in the plane
+where level k lies ``k * pitch`` metres east of level 0, so a particle's level is
+where its x lies and objects, walls and visibility are per level with no change to any
+kernel. What this module adds is the only way from one level to another: a particle
+inside a connector's stop may move to another stop of that connector (an elevator or
+a ramp: any level it serves, one at a time; stairs and escalators: the neighbouring
+level; an escalator only its way), its x shifted by the two levels' offsets.
+
+When frames carry the phone's barometric altitude (relative to a reference of the
+phone's own, and wandering slowly: weather, ventilation), a :class:`FloorTracker`
+follows it. The readings are smoothed over the last ``SMOOTH_FRAMES``; an *anchor* holds
+the altitude of the floor the person is on and follows slow drift while the altitude
+stays near it. When the smoothed altitude leaves the anchor by ``CHANGE_SHARE`` of a
+storey (up or down), a level change is under way: every particle in a stop whose
+connector goes that way moves one level that way, every other particle is judged to be
+on a floor the barometer has left (its weight times ``STAY_LIKELIHOOD``), and the anchor
+moves by the change the moved particles made. A ride of several floors is several such
+steps. This is HULOP/NavCog's idea (detect *that* the person changes level from the
+barometer, move particles only through the map's transitions), with the level a part of
+each particle, so a belief on the wrong floor is a wrong position: tens of metres from
+the truth in the plane, never "converged" there.
+
+While the smoothed altitude is more than ``DRIFT_SHARE`` of a storey from the anchor
+the person is between floors (:attr:`FloorTracker.in_transit`): the filter then calls
+nobody located, starts its convergence test afresh, and neither injects particles nor
+lets the evidence search move the cloud (a lift car looks the same on every floor; the
+barometer, not the view, says where a ride ends), so every particle the change meets
+descends from the ones that entered the connector.
+
+Without altitude, a particle in a stop moves to a level its connector reaches with a
+small probability per frame (``BLIND_RATE``), and what is seen on each level decides.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from app.maps.geometry import first_polygon, polygon_edges
+from app.maps.model import SemanticMap
+
+#: Readings averaged for the level-change test (at 5 frames/s: one second).
+SMOOTH_FRAMES = 5
+#: A level change is under way when the smoothed altitude leaves the anchor by this
+#: share of the storey height towards the next level (more than half: after the
+#: anchor moves a storey, the way back needs a fifth of a storey more).
+CHANGE_SHARE = 0.6
+#: While the smoothed altitude is within this share of a storey of the anchor, the
+#: anchor follows it by ``DRIFT_GAIN`` of the difference a frame (drift tolerance: a
+#: time constant of about 50 frames, 10 s at 5 frames/s; a ride crosses the band in a
+#: few seconds and moves the anchor by a few centimetres).
+DRIFT_SHARE = 0.25
+DRIFT_GAIN = 0.02
+#: Likelihood of the barometer's level change for a particle that could not change level.
+STAY_LIKELIHOOD = 1e-4
+#: A level change that less than this share of the weight could make contradicts the
+#: belief: the filter starts again (over every level).
+CONTRADICTED_SHARE = 0.01
+#: Without altitude: per frame, the probability that a particle in a stop moves.
+BLIND_RATE = 0.02
+#: The smallest storey height believed, metres (levels closer than this are one storey).
+MIN_STOREY_M = 1.0
+
+
+@dataclass(frozen=True, slots=True)
+class AltitudeReading:
+    """The phone's barometric altitude relative to a reference it keeps fixed, and its
+    standard deviation, metres."""
+
+    relative_m: float
+    std_m: float = 0.5
+
+
+class FloorTracker:
+    """Level changes of one filter's particles (maps with two or more levels only).
+
+    Attributes:
+        level_probability: the share of the weight on the estimate's level after the
+            last :meth:`level_share`; None before.
+        changes: how many level changes the barometer has shown.
+    """
+
+    def __init__(self, semantic_map: SemanticMap) -> None:
+        layout = semantic_map.layout
+        if len(layout.levels) < 2:
+            raise ValueError("a FloorTracker needs a map with two or more levels")
+        self.layout = layout
+        self.free = semantic_map.free_space
+        polygons = []
+        stop_level = []
+        # Per stop: the next level its connector reaches down / up (-1: none).
+        targets: list[tuple[int, int]] = []
+        reach: list[tuple[int, ...]] = []
+        for conn in layout.connectors:
+            for stop in conn.stops:
+                polygons.append(stop.plane_polygon)
+                stop_level.append(stop.level)
+                options = conn.reachable(stop.level)
+                below = [lv for lv in options if lv < stop.level]
+                above = [lv for lv in options if lv > stop.level]
+                targets.append((max(below) if below else -1, min(above) if above else -1))
+                reach.append(options)
+        self._edges, self._starts = polygon_edges(polygons)
+        self._stop_level = np.array(stop_level, dtype=np.int64)
+        self._target = np.array(targets, dtype=np.int64).reshape(-1, 2)
+        self._reach = reach
+        elevations = np.array([lv.elevation_m for lv in layout.levels])
+        self._elevation = elevations
+        steps = np.abs(np.diff(np.sort(elevations)))
+        self.storey_m = float(max(steps.min() if steps.size else MIN_STOREY_M, MIN_STOREY_M))
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the barometer (a new start)."""
+        self._readings: deque[float] = deque(maxlen=SMOOTH_FRAMES)
+        self.anchor_m: float | None = None
+        self.changes = 0
+        self.level_probability: float | None = None
+        #: Whether the barometer says the person is between floors (the smoothed
+        #: altitude more than ``DRIFT_SHARE`` of a storey from the anchor).
+        self.in_transit = False
+
+    # ------------------------------------------------------------ the particles
+    def stop_of(self, x: NDArray[np.float64], y: NDArray[np.float64]) -> NDArray[np.int64]:
+        """The stop each particle stands in (index over every connector's stops), or -1."""
+        if not self._starts.size:
+            return np.full(x.shape, -1, dtype=np.int64)
+        return first_polygon(np.column_stack([x, y]), self._edges, self._starts)
+
+    def _move(
+        self,
+        x: NDArray[np.float64],
+        y: NDArray[np.float64],
+        which: NDArray[np.int64],
+        to: NDArray[np.int64],
+    ) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
+        """x of the particles ``which`` moved to levels ``to``, and whether each landed
+        in free space (one that did not stays where it was)."""
+        new_x = x.copy()
+        frm = self.layout.level_of_plane_x(x[which])
+        moved_x = x[which] + self.layout.offsets(to) - self.layout.offsets(frm)
+        ok = self.free.is_free(moved_x, y[which])
+        new_x[which[ok]] = moved_x[ok]
+        return new_x, ok
+
+    def apply(
+        self,
+        x: NDArray[np.float64],
+        y: NDArray[np.float64],
+        log_w: NDArray[np.float64],
+        altitude: AltitudeReading | None,
+        rng: np.random.Generator,
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64], bool]:
+        """The particles' x and log-weights after this frame's level changes, and
+        whether the barometer contradicts the whole belief (a level change, and less
+        than ``CONTRADICTED_SHARE`` of the weight could make it)."""
+        if altitude is None:
+            self.in_transit = False
+            return self._blind(x, y, rng), log_w, False
+        self._readings.append(float(altitude.relative_m))
+        smoothed = float(np.mean(self._readings))
+        if self.anchor_m is None:
+            self.anchor_m = smoothed
+            return x, log_w, False
+        delta = smoothed - self.anchor_m
+        threshold = CHANGE_SHARE * self.storey_m
+        band = DRIFT_SHARE * self.storey_m
+        if abs(delta) < threshold:
+            self.in_transit = abs(delta) >= band
+            if not self.in_transit:
+                self.anchor_m += DRIFT_GAIN * delta
+            return x, log_w, False
+        self.in_transit = True
+        up = delta > 0
+        stop = self.stop_of(x, y)
+        inside = np.flatnonzero(stop >= 0)
+        to = self._target[stop[inside], 1 if up else 0]
+        go = to >= 0
+        which, to = inside[go], to[go]
+        new_x, landed = self._move(x, y, which, to)
+        moved = which[landed]
+        prior = np.exp(log_w - log_w.max()) if np.isfinite(log_w).any() else np.ones(x.shape)
+        moved_share = float(prior[moved].sum() / prior.sum())
+        stayed = np.ones(x.shape, dtype=bool)
+        stayed[moved] = False
+        log_w = log_w + np.where(stayed, np.log(STAY_LIKELIHOOD), 0.0)
+        if moved.size:
+            frm = self.layout.level_of_plane_x(x[moved])
+            rise = self._elevation[to[landed]] - self._elevation[frm]
+            w = prior[moved]
+            self.anchor_m += float(np.sum(w * rise) / max(float(np.sum(w)), 1e-300))
+        else:
+            self.anchor_m += threshold * 2.0 if up else -threshold * 2.0
+        self.changes += 1
+        return new_x, log_w, moved_share < CONTRADICTED_SHARE
+
+    def _blind(
+        self, x: NDArray[np.float64], y: NDArray[np.float64], rng: np.random.Generator
+    ) -> NDArray[np.float64]:
+        """No altitude: a few particles in stops move to a level their connector reaches."""
+        pick = np.flatnonzero(rng.random(x.shape[0]) < BLIND_RATE)
+        if not pick.size:
+            return x
+        stop = self.stop_of(x[pick], y[pick])
+        keep = stop >= 0
+        which, stop = pick[keep], stop[keep]
+        if not which.size:
+            return x
+        to = np.array(
+            [
+                self._reach[s][int(rng.integers(len(self._reach[s])))] if self._reach[s] else -1
+                for s in stop
+            ],
+            dtype=np.int64,
+        )
+        go = to >= 0
+        return self._move(x, y, which[go], to[go])[0]
+
+    def level_share(
+        self, x: NDArray[np.float64], w: NDArray[np.float64], estimate_x: float
+    ) -> float:
+        """The share of the weight on the level of ``estimate_x`` (kept as
+        :attr:`level_probability`)."""
+        level = self.layout.level_of_plane_x(x)
+        mine = int(self.layout.level_of_plane_x(np.array(estimate_x)))
+        self.level_probability = float(np.sum(w[level == mine]))
+        return self.level_probability
+
+    # ------------------------------------------------------------ checkpoints
+    def checkpoint(self) -> dict[str, Any]:
+        return {
+            "readings": list(self._readings),
+            "anchor_m": self.anchor_m,
+            "changes": self.changes,
+            "level_probability": self.level_probability,
+            "in_transit": self.in_transit,
+        }
+
+    def restore(self, state: Mapping[str, Any]) -> None:
+        self._readings = deque((float(v) for v in state["readings"]), maxlen=SMOOTH_FRAMES)
+        anchor = state["anchor_m"]
+        self.anchor_m = None if anchor is None else float(anchor)
+        self.changes = int(state["changes"])
+        p = state["level_probability"]
+        self.level_probability = None if p is None else float(p)
+        self.in_transit = bool(state["in_transit"])

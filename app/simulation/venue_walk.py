@@ -1,0 +1,205 @@
+"""Walks through a venue of several floors: lift, stairs and escalator rides, a barometer.
+
+A walk is a list of legs. :class:`Walk` goes through waypoints on one level;
+:class:`Ride` takes a connector to another level: through waypoints inside the
+connector's stops (none for a lift: the person stands), at its own pace, the true
+altitude moving from the level's elevation to the other's over the ride (a lift
+after a door wait, and a door wait at the end). The true level is the one whose
+elevation is nearest the altitude. The frames are what a phone sends: odometry in the
+body frame (the
+ride's horizontal motion, as visual-inertial tracking measures it; nothing while the
+lift moves), detections of what is in view on the true level, and the barometer's
+altitude: the truth plus a drift (a random offset, a random rate and a random walk)
+plus noise.
+
+Poses are kept in the map file's frame with a level and given to the camera in the
+plane (:mod:`app.maps.levels`), so the odometry never sees a level's offset.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from app.localization.floors import AltitudeReading
+from app.localization.types import Pose
+from app.maps.geometry import wrap_angle
+from app.maps.model import SemanticMap
+from app.simulation.camera import CameraModel
+from app.simulation.simulator import SimFrame, SimulationConfig, _detections, _odometry
+
+
+@dataclass(frozen=True)
+class Walk:
+    """Walk through ``points`` (file frame, metres) on the current level."""
+
+    points: tuple[tuple[float, float], ...]
+
+
+@dataclass(frozen=True)
+class Ride:
+    """Take connector ``kind`` to level ``to_level`` (an id), through ``points`` at
+    ``speed_mps`` (none for a lift: standing), rising or falling at ``climb_mps``."""
+
+    kind: str
+    to_level: str
+    points: tuple[tuple[float, float], ...] = ()
+    speed_mps: float = 0.4
+    climb_mps: float = 1.0
+    #: Standing before and after (a lift's doors), seconds.
+    wait_s: float = 0.0
+
+
+Leg = Walk | Ride
+
+
+@dataclass(frozen=True)
+class Barometer:
+    """Barometric altitude noise and drift, metres and seconds."""
+
+    noise_m: float = 0.25
+    #: Drift: a constant rate drawn from +-``drift_rate_mps``, and a random walk.
+    drift_rate_mps: float = 0.01
+    walk_m_per_sqrt_s: float = 0.03
+    #: The std the phone reports with each reading.
+    reported_std_m: float = 0.5
+
+
+@dataclass(frozen=True)
+class VenueFrame:
+    """A simulated frame with its level and altitudes."""
+
+    frame: SimFrame
+    #: The true pose in the file's frame and the true level's index.
+    file_pose: Pose
+    level: int
+    true_altitude_m: float
+    altitude: AltitudeReading | None
+    #: Which leg the frame belongs to, and whether that leg is a ride.
+    leg: int
+    riding: bool
+
+
+def _truth(
+    semantic_map: SemanticMap, start_level: str, legs: list[Leg], cfg: SimulationConfig
+) -> list[tuple[float, float, float, int, float, int, bool]]:
+    """(x, y, theta, level, altitude, leg, riding) per frame, file frame."""
+    layout = semantic_map.layout
+    dt = 1.0 / cfg.rate_hz
+    step_turn = np.radians(cfg.turn_rate_deg_s) * dt
+    level = layout.level_index(start_level)
+    first = next(leg for leg in legs if leg.points)
+    pos = np.array(first.points[0], dtype=np.float64)
+    heading = 0.0
+    alt = layout.levels[level].elevation_m
+    elevations = np.array([lv.elevation_m for lv in layout.levels])
+    out: list[tuple[float, float, float, int, float, int, bool]] = []
+
+    def emit(k: int, riding: bool) -> None:
+        out.append((float(pos[0]), float(pos[1]), heading, level, alt, k, riding))
+
+    def go(points: tuple[tuple[float, float], ...], speed: float, k: int, riding: bool) -> None:
+        nonlocal pos, heading
+        for p in points:
+            goal_pt = np.array(p, dtype=np.float64)
+            while True:
+                goal = goal_pt - pos
+                dist = float(np.hypot(*goal))
+                if dist < 1e-9:
+                    break
+                want = float(np.arctan2(goal[1], goal[0]))
+                diff = float(wrap_angle(want - heading))
+                if abs(diff) > step_turn:
+                    heading = float(wrap_angle(heading + np.sign(diff) * step_turn))
+                else:
+                    heading = want
+                    pos = pos + goal / dist * min(speed * dt, dist)
+                step(k, riding)
+
+    ride_state: dict[str, float] = {}
+
+    def step(k: int, riding: bool) -> None:
+        nonlocal alt, level
+        if riding and ride_state:
+            alt = float(
+                np.clip(
+                    alt + ride_state["rate"] * dt,
+                    min(ride_state["a0"], ride_state["a1"]),
+                    max(ride_state["a0"], ride_state["a1"]),
+                )
+            )
+            # The true level: the one whose elevation is nearest the altitude.
+            level = int(np.argmin(np.abs(elevations - alt)))
+        emit(k, riding)
+
+    emit(0, False)
+    for k, leg in enumerate(legs):
+        if isinstance(leg, Walk):
+            ride_state.clear()
+            go(leg.points, cfg.speed_mps, k, False)
+            continue
+        to = layout.level_index(leg.to_level)
+        a0, a1 = alt, layout.levels[to].elevation_m
+        for _ in range(round(leg.wait_s * cfg.rate_hz)):
+            emit(k, True)
+        if leg.points:
+            length = sum(
+                float(np.hypot(b[0] - a[0], b[1] - a[1]))
+                for a, b in zip(((pos[0], pos[1]), *leg.points[:-1]), leg.points, strict=True)
+            )
+            rate = (a1 - a0) * leg.speed_mps / max(length, 1e-6)
+        else:
+            rate = float(np.sign(a1 - a0)) * leg.climb_mps
+        ride_state.update(a0=a0, a1=a1, rate=rate, to=float(to))
+        if leg.points:
+            go(leg.points, leg.speed_mps, k, True)
+        while abs(alt - a1) > 1e-9:
+            step(k, True)
+        level = to
+        ride_state.clear()
+        for _ in range(round(leg.wait_s * cfg.rate_hz)):
+            emit(k, True)
+    return out
+
+
+def simulate_venue(
+    semantic_map: SemanticMap,
+    start_level: str,
+    legs: list[Leg],
+    config: SimulationConfig,
+    rng: np.random.Generator,
+    barometer: Barometer | None = Barometer(),
+) -> list[VenueFrame]:
+    """Frames of one walk through the venue (``config.path`` is not used: the legs are)."""
+    layout = semantic_map.layout
+    camera = CameraModel(config.fov_deg, config.max_range_m)
+    truth = _truth(semantic_map, start_level, legs, config)
+    baro_rng = rng.spawn(1)[0]
+    dt = 1.0 / config.rate_hz
+    drift = 0.0
+    rate = 0.0
+    offset = 0.0
+    if barometer is not None:
+        offset = float(baro_rng.uniform(-50.0, 50.0))
+        rate = float(baro_rng.uniform(-1.0, 1.0) * barometer.drift_rate_mps)
+    frames: list[VenueFrame] = []
+    prev: Pose | None = None
+    for i, (x, y, th, level, alt, k, riding) in enumerate(truth):
+        t = i * dt
+        file_pose = Pose(x, y, th)
+        px = x + float(layout.offsets(level))
+        plane_pose = Pose(px, y, th)
+        odo = None if prev is None else _odometry(prev, file_pose, config, rng)
+        prev = file_pose
+        dets, widths = _detections(semantic_map, plane_pose, False, config, camera, rng)
+        reading = None
+        if barometer is not None:
+            if i:
+                step_m = barometer.walk_m_per_sqrt_s * dt**0.5
+                drift += rate * dt + float(baro_rng.normal(0.0, step_m))
+            value = alt + offset + drift + float(baro_rng.normal(0.0, barometer.noise_m))
+            reading = AltitudeReading(value, barometer.reported_std_m)
+        frame = SimFrame(round(t, 6), plane_pose, odo, dets, False, tuple(widths))
+        frames.append(VenueFrame(frame, file_pose, level, alt, reading, k, riding))
+    return frames

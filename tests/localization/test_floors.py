@@ -1,0 +1,155 @@
+"""Level changes: only at connectors, only their way, driven by a drifting barometer."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from app.localization.config import FilterConfig
+from app.localization.filter import ParticleFilter
+from app.localization.floors import (
+    BLIND_RATE,
+    AltitudeReading,
+    FloorTracker,
+)
+from app.maps.model import SemanticMap
+from app.simulation.simulator import SimulationConfig
+from app.simulation.venue import venue_legs, venue_map
+from app.simulation.venue_walk import Barometer, Ride, Walk, simulate_venue
+
+VENUE = venue_map()
+PITCH = VENUE.layout.pitch_m
+
+
+def particles(x: float, y: float, level: int, n: int = 200) -> tuple[np.ndarray, np.ndarray]:
+    return np.full(n, x + level * PITCH), np.full(n, y)
+
+
+def feed(
+    tracker: FloorTracker, x: np.ndarray, y: np.ndarray, readings: list[float]
+) -> tuple[np.ndarray, np.ndarray, bool]:
+    rng = np.random.default_rng(0)
+    log_w = np.zeros(x.shape)
+    contradicted = False
+    for r in readings:
+        x, log_w, c = tracker.apply(x, y, log_w, AltitudeReading(r, 0.5), rng)
+        contradicted |= c
+    return x, log_w, contradicted
+
+
+def test_a_lift_ride_of_two_floors_moves_the_particles_in_the_car_two_levels() -> None:
+    tracker = FloorTracker(VENUE)
+    x, y = particles(1.5, 1.5, 0)
+    rise = list(np.linspace(100.0, 109.0, 46))  # 9 m at 1 m/s, 5 frames/s
+    x, _, contradicted = feed(tracker, x, y, [100.0] * 5 + rise + [109.0] * 10)
+    assert not contradicted
+    assert VENUE.layout.level_of_plane_x(x).tolist() == [2] * x.size
+    np.testing.assert_allclose(x, 1.5 + 2 * PITCH)
+    assert tracker.changes == 2 and not tracker.in_transit
+
+
+def test_particles_outside_every_connector_lose_their_weight_when_the_floor_changes() -> None:
+    tracker = FloorTracker(VENUE)
+    xa, ya = particles(1.5, 1.5, 0, 100)  # in the lift
+    xb, yb = particles(6.0, 11.0, 0, 100)  # in the hall
+    x, y = np.concatenate([xa, xb]), np.concatenate([ya, yb])
+    x, log_w, contradicted = feed(tracker, x, y, [0.0] * 5 + list(np.linspace(0, 4.5, 25)))
+    assert not contradicted
+    assert (log_w[:100] == 0).all() and (log_w[100:] < -9).all()
+    assert (VENUE.layout.level_of_plane_x(x[100:]) == 0).all()
+
+
+def test_an_escalator_is_taken_only_its_way() -> None:
+    tracker = FloorTracker(VENUE)
+    # On the up escalator's footprint on the First Floor, the barometer goes down.
+    x, y = particles(12.0, 5.75, 1)
+    x2, _, contradicted = feed(tracker, x, y, [10.0] * 5 + list(np.linspace(10, 5.5, 25)))
+    assert contradicted  # nothing could make that change: the belief is wrong
+    np.testing.assert_array_equal(x2, x)
+    # The down escalator from the First Floor goes to the Ground Floor.
+    tracker = FloorTracker(VENUE)
+    x, y = particles(12.0, 8.25, 1)
+    x2, _, contradicted = feed(tracker, x, y, [10.0] * 5 + list(np.linspace(10, 5.5, 25)))
+    assert not contradicted
+    assert (VENUE.layout.level_of_plane_x(x2) == 0).all()
+
+
+def test_stairs_go_to_the_neighbouring_level_only() -> None:
+    tracker = FloorTracker(VENUE)
+    x, y = particles(22.0, 2.0, 0)
+    x, _, _ = feed(tracker, x, y, [0.0] * 5 + list(np.linspace(0.0, 4.5, 40)) + [4.5] * 10)
+    assert (VENUE.layout.level_of_plane_x(x) == 1).all()
+
+
+def test_slow_drift_and_noise_change_no_level() -> None:
+    tracker = FloorTracker(VENUE)
+    rng = np.random.default_rng(3)
+    # Ten minutes at 5 frames/s drifting 0.6 m a minute (6 m in all), noise 0.3 m.
+    t = np.arange(3000) / 5.0
+    readings = list(20.0 + 0.01 * t + rng.normal(0.0, 0.3, t.size))
+    x, y = particles(1.5, 1.5, 0)
+    x, log_w, _ = feed(tracker, x, y, readings)
+    assert tracker.changes == 0
+    assert (log_w == 0).all() and (VENUE.layout.level_of_plane_x(x) == 0).all()
+
+
+def test_without_altitude_a_few_particles_in_a_stop_try_another_level() -> None:
+    tracker = FloorTracker(VENUE)
+    x, y = particles(1.5, 1.5, 0, 5000)
+    new_x, _, _ = tracker.apply(x, y, np.zeros(x.size), None, np.random.default_rng(1))
+    moved = VENUE.layout.level_of_plane_x(new_x) != 0
+    assert 0.5 * BLIND_RATE < moved.mean() < 2 * BLIND_RATE
+    # Outside every stop nobody moves.
+    x, y = particles(6.0, 11.0, 0, 5000)
+    same, _, _ = tracker.apply(x, y, np.zeros(x.size), None, np.random.default_rng(1))
+    np.testing.assert_array_equal(same, x)
+
+
+def test_a_one_level_map_has_no_tracker_and_the_venue_checkpoint_keeps_it(
+    paper_office: SemanticMap,
+) -> None:
+    one = ParticleFilter(paper_office, FilterConfig(particles=500), rng=np.random.default_rng(0))
+    assert one.floors is None and "floors" not in one.checkpoint()
+    venue = ParticleFilter(VENUE, FilterConfig(particles=500), rng=np.random.default_rng(0))
+    assert venue.floors is not None
+    venue.step(None, [], None, AltitudeReading(12.0))
+    state = venue.checkpoint()
+    assert state["floors"]["anchor_m"] == pytest.approx(12.0)
+    again = ParticleFilter(
+        VENUE, FilterConfig(particles=500), rng=np.random.default_rng(0), state=state
+    )
+    assert again.floors is not None and again.floors.anchor_m == pytest.approx(12.0)
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_the_venue_walk_is_never_confidently_on_a_wrong_level(seed: int) -> None:
+    m = VENUE
+    start, legs = venue_legs()
+    cfg = SimulationConfig(path=((0.0, 0.0),), miss_prob=0.1, false_rate=0.2)
+    frames = simulate_venue(m, start, legs, cfg, np.random.default_rng(seed))
+    pf = ParticleFilter(m, FilterConfig(), rng=np.random.default_rng(seed + 100))
+    converged = wrong = 0
+    for vf in frames:
+        f = vf.frame
+        est = pf.step(f.odometry, f.detections, None, vf.altitude)
+        if est.converged:
+            converged += 1
+            wrong += int(m.layout.level_of_plane_x(np.array(est.x))) != vf.level
+    assert converged > len(frames) // 2
+    assert wrong == 0
+    assert pf.floors is not None and pf.floors.changes == 5
+
+
+def test_the_simulated_barometer_drifts_and_rides_change_the_true_level() -> None:
+    legs = [Walk(((1.5, 5.0), (1.5, 1.5))), Ride("elevator", "L1", wait_s=1.0)]
+    cfg = SimulationConfig(path=((0.0, 0.0),))
+    baro = Barometer(noise_m=0.0, drift_rate_mps=0.05, walk_m_per_sqrt_s=0.0)
+    frames = simulate_venue(VENUE, "L0", legs, cfg, np.random.default_rng(2), baro)
+    assert frames[0].level == 0 and frames[-1].level == 1
+    assert frames[-1].true_altitude_m == pytest.approx(VENUE.layout.levels[1].elevation_m)
+    first, last = frames[0].altitude, frames[-1].altitude
+    assert first is not None and last is not None
+    change = last.relative_m - first.relative_m
+    assert change != pytest.approx(frames[-1].true_altitude_m, abs=1e-6)  # drift added
+    # The odometry never sees the level's offset in the plane.
+    assert max(abs(f.frame.odometry.forward_m) for f in frames[1:] if f.frame.odometry) < 1.0
