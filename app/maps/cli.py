@@ -167,7 +167,11 @@ def _import_imdf(args: argparse.Namespace) -> dict[str, object]:
         raise MapImportError("--origin does not go with --imdf (the venue places itself)")
     storey_m = DEFAULT_STOREY_M if args.storey_m is None else args.storey_m
     data, summary = import_imdf(
-        args.imdf, args.out.stem, storey_m=storey_m, description=args.description
+        args.imdf,
+        args.out.stem,
+        storey_m=storey_m,
+        description=args.description,
+        snap_m=args.snap_m,
     )
     for line in summary.lines():
         print(line)

@@ -274,3 +274,21 @@ def test_a_station_sized_venue_imports_and_passes_its_check(tmp_path: Path) -> N
     result = check_data(data, source="station", expected_name="station")
     assert result.map is not None, result.problems
     assert len(result.map.layout.levels) == 2
+
+
+def test_an_escalator_without_its_way_is_no_connector(tmp_path: Path) -> None:
+    def undirected(d: dict) -> None:
+        d["features"][0]["properties"]["direction"] = "undirected"
+
+    data, summary = import_imdf(_broken(tmp_path, "relationship.geojson", undirected), "x")
+    kinds = sorted(c["kind"] for c in data["connectors"])
+    # The up escalator's relationship lost its way, and its units (found by overlap
+    # then) have none either: only the down escalator is left of the two.
+    assert kinds == ["elevator", "escalator", "stairs"]
+    assert [c["direction"] for c in data["connectors"] if c["kind"] == "escalator"] == ["down"]
+    text = "\n".join(summary.lines())
+    assert "escalator relationship without a direction between two levels 1" in text
+    assert "escalator units with no directed relationship (way unknown) 1" in text
+    # The escalators are still seen: objects of their kind.
+    assert sum(o["class"] == "escalator" for o in data["objects"]) == 4
+    assert check_data(data, source="x", expected_name="x").map is not None

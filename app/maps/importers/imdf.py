@@ -130,7 +130,7 @@ class ImdfSummary:
             f"  connectors: {counts(self.connectors)} ({r.from_relationships} from "
             f"{self.relationships} relationships, {r.by_overlap} by overlapping units); "
             f"not used: {counts(r.not_used)}",
-            f"  {self.snapped} objects moved onto a wall within {SNAP_M} m",
+            f"  {self.snapped} objects moved onto a wall of their level",
         ]
 
 
@@ -248,7 +248,12 @@ def _opening_objects(level: _Level, places: dict[str, Place], summary: ImdfSumma
 
 
 def import_imdf(
-    path: str | Path, name: str, *, storey_m: float = DEFAULT_STOREY_M, description: str = ""
+    path: str | Path,
+    name: str,
+    *,
+    storey_m: float = DEFAULT_STOREY_M,
+    description: str = "",
+    snap_m: float = SNAP_M,
 ) -> tuple[dict[str, object], ImdfSummary]:
     """The map file's JSON made from an IMDF folder or .zip, and what was made of what.
 
@@ -331,7 +336,7 @@ def import_imdf(
     summary.walls = len(walls)
     _amenities(features["amenity"], unit_level, places, language, summary)
     for level in levels:
-        summary.snapped += snap_objects(level.objects, level.walls, SNAP_M)
+        summary.snapped += snap_objects(level.objects, level.walls, snap_m)
     made_connectors = connectors(
         [f.props for f in features["relationship"]], places, summary.report
     )

@@ -11,7 +11,9 @@ Two sources, in this order:
   units of one kind whose footprints overlap on different levels are one connector (a
   lift shaft seen on every floor it serves, a stairwell floor after floor). Stairs,
   escalators and ramps join only neighbouring levels (a chain of them joins several).
-  Their direction is unknown, so ``both``.
+  Their direction is unknown, so ``both``; an escalator's is needed (guiding someone
+  onto one the wrong way is no guidance), so escalators joined only by overlap are
+  left out, and said so.
 
 A stop's polygon is the unit's outline; an opening or an amenity stands for the metre
 and a half around it.
@@ -116,7 +118,6 @@ def connectors(
         if len({p.level for p in found}) < 2:
             report.skip(f"relationship {category} on fewer than two levels")
             continue
-        used.update(i for i in ids if isinstance(i, str))
         direction = "both"
         origin, destination = (
             places.get(_ref_id(props.get("origin"))),
@@ -125,6 +126,11 @@ def connectors(
         directed = props.get("direction") == "directed"
         if directed and origin and destination and origin.ordinal != destination.ordinal:
             direction = "up" if destination.ordinal > origin.ordinal else "down"
+        if category == "escalator" and (direction == "both" or len({p.level for p in found}) != 2):
+            # Guiding someone onto an escalator the wrong way is no guidance.
+            report.skip("escalator relationship without a direction between two levels")
+            continue
+        used.update(i for i in ids if isinstance(i, str))
         out.append(
             {
                 "kind": category,
@@ -139,6 +145,9 @@ def connectors(
         for group in _overlapping(members, adjacent_only=kind != "elevator"):
             if len({p.level for p in group}) < 2:
                 report.skip(f"{kind} unit on one level only")
+                continue
+            if kind == "escalator":
+                report.skip("escalator units with no directed relationship (way unknown)")
                 continue
             out.append(
                 {
