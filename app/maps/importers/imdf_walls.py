@@ -93,6 +93,60 @@ def _side_keys(
     return unit, kind
 
 
+def _tidy(lines: shapely.Geometry) -> shapely.Geometry:
+    """Merged into polylines, simplified within ``SIMPLIFY_M``, and dissolved again:
+    simplifying collapses slivers thinner than that (surveyed outlines have them) into
+    lines that would lie twice over one another."""
+    if lines.is_empty:
+        return lines
+    simplified = shapely.simplify(shapely.line_merge(lines), SIMPLIFY_M, preserve_topology=False)
+    return shapely.line_merge(shapely.union_all(shapely.get_parts(simplified)))
+
+
+def dissolve(seg: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Collinear segments that overlap, as one (rows x1, y1, x2, y2).
+
+    Segments are grouped by direction (to 1 mrad) and by the offset of their line (to
+    1 mm), as ``map check`` groups them when it looks for duplicated walls; within a
+    group, overlapping spans become one segment along the group's longest member. A
+    segment that overlaps none is kept as it was.
+    """
+    if seg.shape[0] < 2:
+        return seg
+    a, b = seg[:, 0:2], seg[:, 2:4]
+    d = b - a
+    ang = np.mod(np.arctan2(d[:, 1], d[:, 0]), np.pi)
+    normal = np.column_stack([-np.sin(ang), np.cos(ang)])
+    offset = np.sum(a * normal, axis=1)
+    key = np.column_stack([np.round(ang / 1e-3), np.round(offset / 1e-3)]).astype(np.int64)
+    order = np.lexsort((key[:, 1], key[:, 0]))
+    starts = np.flatnonzero(np.r_[True, np.any(np.diff(key[order], axis=0) != 0, axis=1)])
+    out = []
+    for group in np.split(order, starts[1:]):
+        if group.size == 1:
+            out.append(seg[group])
+            continue
+        ref = group[np.argmax(np.hypot(d[group, 0], d[group, 1]))]
+        u = d[ref] / np.hypot(*d[ref])
+        lo = np.minimum(a[group] @ u, b[group] @ u)
+        hi = np.maximum(a[group] @ u, b[group] @ u)
+        base = a[ref] - (a[ref] @ u) * u
+        spans = sorted(zip(lo.tolist(), hi.tolist(), group.tolist(), strict=True))
+        run = [spans[0]]
+        for span in spans[1:]:
+            if span[0] < run[-1][1] - MIN_SEGMENT_M:  # overlaps the run: extend it
+                last = run[-1]
+                run[-1] = (last[0], max(last[1], span[1]), -1)
+            else:
+                run.append(span)
+        for s0, s1, member in run:
+            if member >= 0:
+                out.append(seg[member : member + 1])
+            else:
+                out.append(np.r_[base + s0 * u, base + s1 * u][None])
+    return np.vstack(out)
+
+
 def level_walls(
     units: list[shapely.Polygon],
     categories: list[str],
@@ -151,9 +205,9 @@ def level_walls(
             holes.append(hole)
         if holes:
             walls_geom = shapely.difference(walls_geom, shapely.union_all(holes))
-    merged = shapely.line_merge(walls_geom) if not walls_geom.is_empty else walls_geom
-    simplified = shapely.simplify(merged, SIMPLIFY_M, preserve_topology=False)
-    out = _segments(simplified)
+    # Rounded to the 0.1 mm the map file keeps first: two ends a few hundredths of a
+    # millimetre apart (left by simplifying) would make two walls the file has twice.
+    out = dissolve(np.round(_segments(_tidy(walls_geom)), 4))
     if solids:
         out = np.vstack([out, _segments(shapely.union_all(shapely.boundary(np.array(solids))))])
     return LevelWalls(out, cut, at_edge)
