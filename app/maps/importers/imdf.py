@@ -45,7 +45,7 @@ from app.maps.importers.imdf_read import (
     read_archive,
     text_of,
 )
-from app.maps.importers.imdf_walls import level_walls, open_kind
+from app.maps.importers.imdf_walls import SIMPLIFY_M, level_walls, open_kind
 
 #: Storey height when none is given, metres (IMDF has ordinals, not heights).
 DEFAULT_STOREY_M = 4.0
@@ -282,11 +282,13 @@ def import_imdf(
         places[f.id] = Place(level.id, level.ordinal, geom, uname, CONNECTOR_UNITS.get(category))
         if uname:
             outline = geom if geom.geom_type == "Polygon" else max(geom.geoms, key=lambda p: p.area)
-            ring = shapely.get_coordinates(outline.exterior)[:-1]
+            # Surveyed outlines carry a vertex every few centimetres on curves; 2 cm is
+            # far below what tells one room from another.
+            ring = shapely.get_coordinates(shapely.simplify(outline.exterior, SIMPLIFY_M))[:-1]
             regions.append(
                 {
                     "name": uname,
-                    "polygon": [[_round(x), _round(y)] for x, y in ring],
+                    "polygon": np.round(ring, 4).tolist(),
                     "level": level.id,
                 }
             )
@@ -330,8 +332,8 @@ def import_imdf(
                 summary.unit_objects[cls] += 1
         level.walls = made.walls
         walls += [
-            {"x1": _round(a), "y1": _round(b), "x2": _round(c), "y2": _round(d), "level": level.id}
-            for a, b, c, d in made.walls
+            {"x1": a, "y1": b, "x2": c, "y2": d, "level": level.id}
+            for a, b, c, d in np.round(made.walls, 4).tolist()
         ]
     summary.walls = len(walls)
     _amenities(features["amenity"], unit_level, places, language, summary)

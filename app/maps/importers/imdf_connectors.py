@@ -24,6 +24,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 
+import numpy as np
 import shapely
 
 #: IMDF unit categories that are a way between levels, and the connector kind of each.
@@ -69,8 +70,7 @@ def _outline(poly: shapely.Geometry) -> list[list[float]]:
     """The exterior ring of the largest part, without the closing point, 0.1 mm."""
     if poly.geom_type != "Polygon":
         poly = max(shapely.get_parts(poly), key=lambda p: p.area)
-    ring = shapely.get_coordinates(poly.exterior)[:-1]
-    return [[round(float(x), 4), round(float(y), 4)] for x, y in ring]
+    return np.round(shapely.get_coordinates(poly.exterior)[:-1], 4).tolist()
 
 
 def _stops(places: list[Place]) -> list[dict[str, object]]:

@@ -63,15 +63,11 @@ def open_kind(category: str) -> int:
 
 def _segments(lines: shapely.Geometry) -> NDArray[np.float64]:
     """Every straight piece of (multi)line work as rows (x1, y1, x2, y2)."""
-    parts = shapely.get_parts(lines)
-    rows = []
-    for part in parts:
-        xy = shapely.get_coordinates(part)
-        if xy.shape[0] >= 2:
-            rows.append(np.column_stack([xy[:-1], xy[1:]]))
-    if not rows:
+    xy, part = shapely.get_coordinates(shapely.get_parts(lines), return_index=True)
+    if xy.shape[0] < 2:
         return np.zeros((0, 4))
-    seg = np.vstack(rows)
+    same = part[1:] == part[:-1]
+    seg = np.column_stack([xy[:-1][same], xy[1:][same]])
     keep = np.hypot(seg[:, 2] - seg[:, 0], seg[:, 3] - seg[:, 1]) >= MIN_SEGMENT_M
     return seg[keep]
 
@@ -194,16 +190,12 @@ def level_walls(
             if len(outer_lines)
             else shapely.from_wkt("LINESTRING EMPTY")
         )
-        holes = []
-        for line in openings:
-            if outer_geom.distance(line) < PROBE_M and outer_geom.buffer(PROBE_M).covers(line):
-                at_edge += 1
-                continue
-            hole = line.buffer(PROBE_M, cap_style="flat")
-            if walls_geom.intersects(hole):
-                cut += 1
-            holes.append(hole)
-        if holes:
+        lines = np.array(openings, dtype=object)
+        at_outer = shapely.covers(shapely.buffer(outer_geom, PROBE_M), lines)
+        at_edge = int(at_outer.sum())
+        holes = shapely.buffer(lines[~at_outer], PROBE_M, cap_style="flat")
+        cut = int(shapely.intersects(walls_geom, holes).sum())
+        if holes.size:
             walls_geom = shapely.difference(walls_geom, shapely.union_all(holes))
     # Rounded to the 0.1 mm the map file keeps first: two ends a few hundredths of a
     # millimetre apart (left by simplifying) would make two walls the file has twice.
