@@ -26,11 +26,12 @@ from app.feedback import FeedbackOptions, clock_from_bearing_deg
 from app.guidance import DestinationSpec, Guidance, Target
 from app.localization.camera import BoxError, Camera
 from app.localization.compass import CompassReading
+from app.localization.floors import AltitudeReading
 from app.localization.types import Detection, InitialPose, Odometry, Pose
 from app.maps.geometry import wrap_deg
 from app.maps.levels import LevelLayout
 from app.service.sessions import Session
-from app.service.types import FrameInput, FrameOutcome, SensorSpec, SessionSpec
+from app.service.types import FrameInput, FrameOutcome, LevelRef, SensorSpec, SessionSpec
 
 
 def camera_of(body: CameraIn | None) -> Camera | None:
@@ -52,6 +53,7 @@ def session_spec(body: SessionCreate) -> SessionSpec:
         )
     s = body.sensor
     fb = body.feedback
+    level = None if body.initial_pose is None else body.initial_pose.level
     return SessionSpec(
         map_name=body.map,
         particles=body.particles,
@@ -65,6 +67,7 @@ def session_spec(body: SessionCreate) -> SessionSpec:
         feedback=FeedbackOptions(fb.style, fb.units, fb.max_items),
         camera=camera_of(body.camera),
         share_view=body.share_view,
+        initial_level=level,
     )
 
 
@@ -112,6 +115,9 @@ def frame_input(frame: Frame, camera: Camera | None = None) -> FrameInput:
         heading = CompassReading(
             math.radians(wrap_deg(frame.heading.heading_deg)), math.radians(frame.heading.std_deg)
         )
+    altitude = None
+    if frame.altitude is not None:
+        altitude = AltitudeReading(frame.altitude.relative_m, frame.altitude.std_m)
     return FrameInput(
         timestamp=frame.timestamp,
         odometry=odometry,
@@ -119,6 +125,7 @@ def frame_input(frame: Frame, camera: Camera | None = None) -> FrameInput:
         describe=frame.describe,
         truth=truth,
         heading=heading,
+        altitude=altitude,
     )
 
 
@@ -199,6 +206,12 @@ def _guidance_data(g: Guidance | None) -> dict[str, Any] | None:
     }
 
 
+def _level_data(level: LevelRef | None) -> dict[str, Any] | None:
+    if level is None:
+        return None
+    return {"id": level.id, "name": level.name, "ordinal": int(level.ordinal)}
+
+
 def frame_result_data(outcome: FrameOutcome) -> dict[str, Any]:
     """One step's outcome as the plain data of a ``FrameResult`` (docs/API.md): its
     fields in the model's order, under their wire names, every number a plain float
@@ -207,29 +220,39 @@ def frame_result_data(outcome: FrameOutcome) -> dict[str, Any]:
     validates it into the model, :func:`frame_result_json` writes it for a stream."""
     estimate = outcome.estimate
     feedback = outcome.feedback
+    level = outcome.level
+    # On a map with levels the filter's x is in its plane (app.maps.levels): the
+    # level's offset comes off. Without levels there is none.
+    shift = 0.0 if level is None else level.offset_x
+    levels = outcome.hypothesis_levels or (None,) * len(estimate.hypotheses)
     return {
         "seq": int(outcome.seq),
         "pose": {
-            "x": _round(estimate.x, 4),
+            "x": _round(estimate.x - shift, 4),
             "y": _round(estimate.y, 4),
             "theta_deg": _deg(estimate.theta_rad),
+            "level": _level_data(level),
         },
         "uncertainty": {
             "std_x_m": _round(min(estimate.std_x_m, 1e6), 4),
             "std_y_m": _round(min(estimate.std_y_m, 1e6), 4),
             "std_theta_deg": _round(math.degrees(estimate.std_theta_rad), 3),
+            "level_probability": None
+            if outcome.level_probability is None
+            else _round(outcome.level_probability, 4),
         },
         "converged": bool(estimate.converged),
         "protection_m": None if estimate.protection_m is None else _round(estimate.protection_m, 3),
         "hypotheses": [
             {
-                "x": _round(h.x, 4),
+                "x": _round(h.x - (0.0 if lv is None else lv.offset_x), 4),
                 "y": _round(h.y, 4),
                 "theta_deg": _deg(h.theta_rad),
                 "weight": _round(h.weight, 4),
                 "region": region,
+                "level": _level_data(lv),
             }
-            for h, region in zip(estimate.hypotheses[:3], outcome.regions, strict=False)
+            for h, region, lv in zip(estimate.hypotheses[:3], outcome.regions, levels, strict=False)
         ],
         "feedback": {
             "text": feedback.text,

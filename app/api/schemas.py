@@ -102,6 +102,15 @@ class HeadingIn(StrictInput):
     )
 
 
+class AltitudeIn(StrictInput):
+    """The phone barometer's altitude, relative to a reference the phone keeps fixed."""
+
+    relative_m: Finite = Field(
+        ge=-10_000, le=10_000, description="relative altitude, metres (up positive)"
+    )
+    std_m: Finite = Field(0.5, gt=0.0, le=100.0, description="its standard deviation, metres")
+
+
 class TruthIn(StrictInput):
     """Ground truth sent by simulations (an addition to the contract; never used by the filter)."""
 
@@ -126,6 +135,9 @@ class Frame(StrictInput):
     )
     heading: HeadingIn | None = Field(
         None, description="the phone compass's heading, or null (heavy-tailed: may be off)"
+    )
+    altitude: AltitudeIn | None = Field(
+        None, description="the phone barometer's relative altitude, or null (maps with levels)"
     )
 
 
@@ -155,6 +167,11 @@ class InitialPoseIn(StrictInput):
     theta_deg: Finite = Field(description="heading, degrees CCW from +x")
     std_xy_m: Finite = Field(0.3, gt=0.0, le=100.0, description="position std, metres")
     std_theta_deg: Finite = Field(10.0, gt=0.0, le=360.0, description="heading std, degrees")
+    level: str | None = Field(
+        None,
+        max_length=64,
+        description="the level id on a map with levels; null: any level where the pose is free",
+    )
 
 
 class EquirectangularCameraIn(StrictInput):
@@ -262,16 +279,26 @@ class DestinationIn(StrictInput):
 
 
 # ----------------------------------------------------------------------------- output
+class LevelOut(_Out):
+    id: str = Field(description="the level's id in the map file")
+    name: str = Field(description="its spoken name")
+    ordinal: int = Field(description="0 the ground floor, negative below it")
+
+
 class PoseOut(_Out):
     x: float = Field(description="metres")
     y: float = Field(description="metres")
     theta_deg: float = Field(description="heading, degrees CCW from +x, (-180, 180]")
+    level: LevelOut | None = Field(None, description="the level; null on a map without levels")
 
 
 class Uncertainty(_Out):
     std_x_m: float = Field(description="standard deviation of x in the best cluster, metres")
     std_y_m: float = Field(description="standard deviation of y in the best cluster, metres")
     std_theta_deg: float = Field(description="circular standard deviation of heading, degrees")
+    level_probability: float | None = Field(
+        None, description="probability of the pose's level; null on a map without levels"
+    )
 
 
 class HypothesisOut(_Out):
@@ -280,6 +307,7 @@ class HypothesisOut(_Out):
     theta_deg: float = Field(description="heading, degrees CCW from +x")
     weight: float = Field(description="share of the belief's weight, 0..1")
     region: str | None = Field(description="named region containing it, or null")
+    level: LevelOut | None = Field(None, description="its level; null on a map without levels")
 
 
 class FeedbackItemOut(_Out):
@@ -305,18 +333,12 @@ class NextTurnOut(_Out):
     )
 
 
-class LevelRefOut(_Out):
-    id: str = Field(description="the level's id in the map file")
-    name: str = Field(description="the level's name, as spoken")
-    ordinal: int = Field(description="0 the ground floor, 1 the next up, -1 the first below")
-
-
-class ConnectorOut(_Out):
+class GuidanceConnectorOut(_Out):
     id: str = Field(description="the connector's id in the map file")
     kind: Literal["elevator", "stairs", "escalator", "ramp"]
     label: str | None = Field(description="the connector's label in the map file, or null")
     direction: Literal["up", "down"] = Field(description="the way the ride goes")
-    to_level: LevelRefOut = Field(description="the level the ride ends on")
+    to_level: LevelOut = Field(description="the level the ride ends on")
     at_stop: bool = Field(description="the person is at the connector: time to take it")
 
 
@@ -330,7 +352,7 @@ class GuidanceOut(_Out):
         description="the next turn of the path; null when the target is in a straight line"
     )
     arrived: bool = Field(description="within 1 m of the target (walking distance)")
-    connector: ConnectorOut | None = Field(
+    connector: GuidanceConnectorOut | None = Field(
         None,
         description="while the way changes level next: the connector it takes (the "
         "directions above then lead to it); null otherwise",
@@ -384,12 +406,35 @@ class Bounds(_Out):
     max_y: float = Field(description="metres")
 
 
+class ConnectorStopOut(_Out):
+    level: str = Field(description="level id")
+    polygon: list[tuple[float, float]] = Field(description="where it is entered and left, metres")
+
+
+class ConnectorOut(_Out):
+    id: str
+    kind: Literal["elevator", "stairs", "escalator", "ramp"]
+    label: str | None
+    direction: Literal["both", "up", "down"]
+    stops: list[ConnectorStopOut]
+
+
+class MapLevelOut(LevelOut):
+    elevation_m: float = Field(description="metres")
+
+
 class MapSummary(_Out):
     name: str = Field(description="map name, also its file name without .json")
     description: str = Field(description="free text")
     classes: list[str] = Field(description="object classes on the map")
     object_count: int = Field(description="number of objects")
     bounds: Bounds = Field(description="extent of walls and objects, metres")
+    levels: list[MapLevelOut] = Field(
+        default_factory=list, description="the venue's levels by ordinal; empty: one level"
+    )
+    connectors: list[ConnectorOut] = Field(
+        default_factory=list, description="where a person changes level"
+    )
 
 
 class ValidationIssue(_Out):

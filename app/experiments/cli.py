@@ -33,11 +33,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--suite",
-        choices=("tables", "integrity", "building"),
+        choices=("tables", "integrity", "building", "venue"),
         default="tables",
         help="tables: the paper's Tables I-IV (default); integrity: the hard-cases suite "
         "(--quick: five scenarios, 2 seeds); building: a walk through the bundled two-wing "
-        "floor (global start, 180 deg camera, clutter, kidnap between wings)",
+        "floor (global start, 180 deg camera, clutter, kidnap between wings); venue: three "
+        "floors by lift, stairs and escalators, with and without a drifting barometer",
     )
     parser.add_argument(
         "--scenarios",
@@ -52,6 +53,8 @@ def run(args: argparse.Namespace) -> int:
         return _run_integrity(args)
     if args.suite == "building":
         return _run_building(args)
+    if args.suite == "venue":
+        return _run_venue(args)
     tables = tuple(t.strip().upper() for t in args.tables.split(",") if t.strip())
     seeds, seeds4, particles = args.seeds, args.table4_seeds, args.particles
     if args.quick:
@@ -119,4 +122,16 @@ def _run_building(args: argparse.Namespace) -> int:
     )  # fmt: skip
     print(building.markdown_table(rows))
     print(f"wrote {args.out / 'building.md'}, building.json and building.png")
+    return 0
+
+
+def _run_venue(args: argparse.Namespace) -> int:
+    from app.experiments import venue
+
+    seeds = min(args.seeds, 2) if args.quick else args.seeds
+    if seeds < 1 or args.particles < 100:
+        raise SystemExit("bearings experiments: need --seeds >= 1 and --particles >= 100")
+    rows = venue.run(args.out, seeds=seeds, particles=args.particles, workers=max(1, args.workers))
+    print(venue.markdown_table(rows))
+    print(f"wrote {args.out / 'venue.md'} and venue.json")
     return 0

@@ -303,8 +303,6 @@ class ParticleFilter:
             )
             if contradicted:
                 self._restart_global()
-            elif self.floors.in_transit:
-                self._gate.reset()  # between floors: nobody is located
         inject, w = self._correct(detections)
         if heading is not None:
             self.log_w = self.log_w + compass_log_likelihood(self.theta, heading)
@@ -315,9 +313,10 @@ class ParticleFilter:
         raw = estimate_pose(self.x, self.y, self.theta, w, ess=ess, rng=self.rng)
         share, confirmed = 0.0, 0.0
         searched_ago: int | None = 0
-        transit = self.floors is not None and self.floors.in_transit
+        transit = self.floors is not None and self.floors.between_floors(raw.x, raw.y)
         if transit:
-            inject = 0.0  # between floors the barometer, not the view, moves the cloud
+            self._gate.reset()  # between floors: nobody is located
+            inject = 0.0  # the barometer, not the view, moves the cloud then
         if self.evidence is not None and not transit:
             raw, w, ess = self._weigh_alternatives(odometry, raw, w, ess, heading)
             share, searched_ago = self.evidence.alternative_share, self.evidence.searched_ago
@@ -348,7 +347,7 @@ class ParticleFilter:
             radius = protection_radius(self.x, self.y, w, est, self.rng, share, reach)
             est = est.with_protection(radius)
         if self.floors is not None:
-            self.floors.level_share(self.x, w, est.x)
+            self.floors.after_estimate(self.x, w, est.x, est.converged)
         self.estimate = est
         self._resample(w, ess, inject)
         self.steps += 1

@@ -30,7 +30,8 @@ barometer, not the view, says where a ride ends), so every particle the change m
 descends from the ones that entered the connector.
 
 Without altitude, a particle in a stop moves to a level its connector reaches with a
-small probability per frame (``BLIND_RATE``), and what is seen on each level decides.
+small probability per frame (``BLIND_RATE``), and what is seen on each level decides;
+an estimate inside a stop is then between floors too (nothing tells the floor there).
 """
 
 from __future__ import annotations
@@ -38,13 +39,16 @@ from __future__ import annotations
 from collections import deque
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from app.maps.geometry import first_polygon, polygon_edges
 from app.maps.model import SemanticMap
+
+if TYPE_CHECKING:
+    from app.localization.filter import ParticleFilter
 
 #: Readings averaged for the level-change test (at 5 frames/s: one second).
 SMOOTH_FRAMES = 5
@@ -83,7 +87,7 @@ class FloorTracker:
 
     Attributes:
         level_probability: the share of the weight on the estimate's level after the
-            last :meth:`level_share`; None before.
+            last :meth:`after_estimate`; None before.
         changes: how many level changes the barometer has shown.
     """
 
@@ -126,6 +130,12 @@ class FloorTracker:
         #: Whether the barometer says the person is between floors (the smoothed
         #: altitude more than ``DRIFT_SHARE`` of a storey from the anchor).
         self.in_transit = False
+        #: The level of the last converged estimate, and whether this step confirmed
+        #: a level other than the one before (the first fix included).
+        self.confirmed_level: int | None = None
+        self.newly_confirmed = False
+        #: Whether the last frame came without altitude.
+        self.blind = False
 
     # ------------------------------------------------------------ the particles
     def stop_of(self, x: NDArray[np.float64], y: NDArray[np.float64]) -> NDArray[np.int64]:
@@ -161,6 +171,7 @@ class FloorTracker:
         """The particles' x and log-weights after this frame's level changes, and
         whether the barometer contradicts the whole belief (a level change, and less
         than ``CONTRADICTED_SHARE`` of the weight could make it)."""
+        self.blind = altitude is None
         if altitude is None:
             self.in_transit = False
             return self._blind(x, y, rng), log_w, False
@@ -223,15 +234,28 @@ class FloorTracker:
         go = to >= 0
         return self._move(x, y, which[go], to[go])[0]
 
-    def level_share(
-        self, x: NDArray[np.float64], w: NDArray[np.float64], estimate_x: float
-    ) -> float:
-        """The share of the weight on the level of ``estimate_x`` (kept as
-        :attr:`level_probability`)."""
+    def between_floors(self, x: float, y: float) -> bool:
+        """Whether a person at plane point (x, y) may be between floors: the barometer
+        says so, or without one the point lies in a connector's stop (a lift car looks
+        the same on every floor: only leaving it tells which)."""
+        if self.in_transit:
+            return True
+        if not self.blind:
+            return False
+        return bool(self.stop_of(np.array([x]), np.array([y]))[0] >= 0)
+
+    def after_estimate(
+        self, x: NDArray[np.float64], w: NDArray[np.float64], estimate_x: float, converged: bool
+    ) -> None:
+        """Keep the share of the weight on the estimate's level
+        (:attr:`level_probability`) and, when the estimate is converged, its level as
+        :attr:`confirmed_level` (:attr:`newly_confirmed` when that changed)."""
         level = self.layout.level_of_plane_x(x)
         mine = int(self.layout.level_of_plane_x(np.array(estimate_x)))
         self.level_probability = float(np.sum(w[level == mine]))
-        return self.level_probability
+        self.newly_confirmed = converged and mine != self.confirmed_level
+        if converged:
+            self.confirmed_level = mine
 
     # ------------------------------------------------------------ checkpoints
     def checkpoint(self) -> dict[str, Any]:
@@ -241,6 +265,7 @@ class FloorTracker:
             "changes": self.changes,
             "level_probability": self.level_probability,
             "in_transit": self.in_transit,
+            "confirmed_level": self.confirmed_level,
         }
 
     def restore(self, state: Mapping[str, Any]) -> None:
@@ -251,3 +276,14 @@ class FloorTracker:
         p = state["level_probability"]
         self.level_probability = None if p is None else float(p)
         self.in_transit = bool(state["in_transit"])
+        confirmed = state["confirmed_level"]
+        self.confirmed_level = None if confirmed is None else int(confirmed)
+        self.newly_confirmed = False
+
+
+def spread_over_levels(pf: ParticleFilter, levels: tuple[int, ...]) -> None:
+    """Deal a known start's particles (drawn on ``levels[0]``) evenly over ``levels``:
+    a position known on the floor plan, its floor not (the same x and y on each)."""
+    layout = pf.map.layout
+    pick = np.asarray(levels, dtype=np.int64)[pf.rng.integers(len(levels), size=pf.n)]
+    pf.x = pf.x + layout.offsets(pick) - layout.offsets(levels[0])

@@ -184,14 +184,24 @@ def apply(session: Session, state: Mapping[str, Any]) -> None:
 
 #: The fields of :class:`FrameInput` a journal entry holds, in its order (a test holds
 #: this to the dataclass, so a field added there cannot be left out here unnoticed).
-ENTRY_FIELDS = ("timestamp", "odometry", "detections", "describe", "truth", "heading")
+ENTRY_FIELDS = (
+    "timestamp",
+    "odometry",
+    "detections",
+    "describe",
+    "truth",
+    "heading",
+    "altitude",
+)
 
 
 def encode_frame(seq: int, frame: FrameInput, merged: int = 1) -> bytes:
     """One journal entry: the step's sequence number, then the frame (``merged`` frames
     merged into one) as a JSON array: ``[merged, timestamp, odometry, detections,
-    describe, truth, heading]``, each detection a row ``[class, bearing, score]`` and
-    the other values as :func:`~app.state.to_plain` writes them.
+    describe, truth, heading]`` and, when the frame has one, ``altitude`` (a venue's
+    barometer: frames without one are written as before it), each detection a row
+    ``[class, bearing, score]`` and the other values as :func:`~app.state.to_plain`
+    writes them.
 
     Every frame a shared store journals is encoded here, on the event loop. The
     detections as rows, rather than one object each, take orjson 1 us instead of 5 for
@@ -201,7 +211,9 @@ def encode_frame(seq: int, frame: FrameInput, merged: int = 1) -> bytes:
     through :func:`~app.state.plain_step`."""
     rows = [[d.cls, d.bearing_rad, d.score] for d in frame.detections]
     f = frame
-    body = [merged, f.timestamp, f.odometry, rows, f.describe, f.truth, f.heading]
+    body: list[object] = [merged, f.timestamp, f.odometry, rows, f.describe, f.truth, f.heading]
+    if f.altitude is not None:
+        body.append(f.altitude)
     return b"%d|" % seq + orjson.dumps(body, default=plain_step)
 
 
@@ -214,7 +226,9 @@ def decode_frame(entry: bytes) -> tuple[int, FrameInput, int]:
     if isinstance(body, dict):
         return int(seq), from_plain(FrameInput, body["frame"]), int(body["merged"])
     merged, *values = body
-    plain = dict(zip(ENTRY_FIELDS, values, strict=True))
+    if len(values) not in (len(ENTRY_FIELDS) - 1, len(ENTRY_FIELDS)):
+        raise ValueError(f"a journal entry of {len(values)} values is no frame")
+    plain = dict(zip(ENTRY_FIELDS, values, strict=False))  # altitude only when there
     plain["detections"] = [
         {"cls": c, "bearing_rad": b, "score": s} for c, b, s in plain["detections"]
     ]

@@ -26,11 +26,13 @@ import numpy as np
 from app.config import Settings
 from app.feedback import Feedback, Narrator
 from app.feedback.guidance import GuidanceSpeaker
+from app.feedback.levels import level_sentence
 from app.guidance import DestinationSpec, Guidance, Plan, Unreachable, guide, plan_for
 from app.localization.camera import Camera
 from app.localization.config import FilterConfig
 from app.localization.filter import ParticleFilter
-from app.localization.types import Detection, Estimate, Pose
+from app.localization.floors import spread_over_levels
+from app.localization.types import Detection, Estimate, InitialPose, Pose
 from app.maps.model import SemanticMap
 from app.service.access import OPEN, Principal, TokenBucket
 from app.service.errors import (
@@ -49,7 +51,7 @@ from app.service.queueing import FrameQueue, merged_warning
 from app.service.scheduler import FairStepper
 from app.service.sharing import SessionSharing
 from app.service.store import MemoryStore, SessionStore
-from app.service.types import FrameInput, FrameOutcome, SessionSpec
+from app.service.types import FrameInput, FrameOutcome, LevelRef, SessionSpec
 
 log = logging.getLogger("bearings.sessions")
 
@@ -136,6 +138,22 @@ class Session:
             return None, self.speaker.no_way(self.destination.target.name, now)
         return guidance, self.speaker.update(guidance, True, now, estimate.x, estimate.y)
 
+    def _levels_of(self, estimate: Estimate) -> dict[str, Any]:
+        """The estimate's level, each hypothesis's and the level's probability (a map
+        with levels only: empty otherwise)."""
+        floors = self.filter.floors
+        if floors is None:
+            return {}
+        refs = level_refs(self.map)
+        layout = self.map.layout
+        xs = np.array([estimate.x, *(h.x for h in estimate.hypotheses)])
+        levels = layout.level_of_plane_x(xs)
+        return {
+            "level": refs[int(levels[0])],
+            "hypothesis_levels": tuple(refs[int(k)] for k in levels[1:]),
+            "level_probability": floors.level_probability,
+        }
+
     queue: FrameQueue = field(init=False)
     pump: asyncio.Task[None] | None = None
 
@@ -167,7 +185,7 @@ class Session:
                 f"{self.last_timestamp}; frames are processed in the order received"
             )
         with self.state_lock:
-            estimate = self.filter.step(frame.odometry, detections, frame.heading)
+            estimate = self.filter.step(frame.odometry, detections, frame.heading, frame.altitude)
             feedback = self.narrator.update(
                 estimate,
                 detections,
@@ -179,6 +197,10 @@ class Session:
             )
             now = time.monotonic() if frame.timestamp is None else frame.timestamp
             guidance, said = self._guide(estimate, now, warnings)
+            floors = self.filter.floors
+            if floors is not None and floors.newly_confirmed and floors.confirmed_level is not None:
+                where = level_sentence(self.map.layout.levels[floors.confirmed_level].name)
+                feedback = Feedback(f"{where} {feedback.text}".strip(), feedback.items)
             if said:
                 joined = f"{feedback.text} {said}" if feedback.text else said
                 feedback = Feedback(joined, feedback.items)
@@ -191,6 +213,7 @@ class Session:
                 warnings=tuple(warnings),
                 regions=tuple(self.map.region_at(h.x, h.y) for h in estimate.hypotheses),
                 guidance=guidance,
+                **self._levels_of(estimate),
             )
             self.last_outcome = result
             self.last_detections = detections
@@ -218,6 +241,64 @@ class Session:
                 truth=self.truth,
                 route=None if self.last_guidance is None else self.last_guidance.path.copy(),
             )
+
+
+def initial_on_levels(
+    semantic_map: SemanticMap, request: SessionSpec
+) -> tuple[InitialPose | None, tuple[int, ...]]:
+    """The initial pose in the filter's plane and the levels it may be on.
+
+    On a map with levels, ``initial_level`` names the level (unknown: a level the map
+    lacks, or a level on a map without levels, is refused); without it the pose may be
+    on any level where it is in the free space.
+
+    Raises:
+        InvalidSessionSpec: saying what is wrong.
+    """
+    initial = request.initial_pose
+    layout = semantic_map.layout
+    name = semantic_map.name
+    if request.initial_level is not None and not layout.has_levels:
+        raise InvalidSessionSpec(f"initial_pose.level: map {name!r} has no levels; leave level out")
+    if initial is None:
+        return None, ()
+    if not layout.has_levels:
+        candidates: tuple[int, ...] = (0,)
+    elif request.initial_level is not None:
+        try:
+            candidates = (layout.level_index(request.initial_level),)
+        except KeyError as exc:
+            raise InvalidSessionSpec(f"initial_pose.level: {exc.args[0]}") from None
+    else:
+        candidates = tuple(lv.index for lv in layout.levels)
+    free = [
+        k
+        for k in candidates
+        if bool(semantic_map.free_space.is_free(initial.x + layout.offsets(k), initial.y))
+    ]
+    if not free:
+        where = (
+            ""
+            if len(candidates) != 1 or not layout.has_levels
+            else (f" on level {layout.levels[candidates[0]].id!r}")
+        )
+        raise InvalidSessionSpec(
+            f"initial_pose: ({initial.x:g}, {initial.y:g}) is not in the free space of map "
+            f"{name!r}{where} (inside a wall, outside the building or off the map); "
+            "give a pose where a person can stand, or null for a global start"
+        )
+    first = free[0]
+    return replace(initial, x=initial.x + float(layout.offsets(first))), tuple(free)
+
+
+def level_refs(semantic_map: SemanticMap) -> tuple[LevelRef, ...]:
+    """The map's levels as results name them (kept with the map)."""
+    return semantic_map.derived_value(
+        ("level_refs",),
+        lambda: tuple(
+            LevelRef(lv.id, lv.name, lv.ordinal, lv.offset_x) for lv in semantic_map.layout.levels
+        ),
+    )
 
 
 class SessionManager:
@@ -405,13 +486,7 @@ class SessionManager:
             fov_centre_deg=0.0 if camera is None else camera.fov_centre_deg,
         )
         seed = request.seed if request.seed is not None else secrets.randbits(63)
-        initial = request.initial_pose
-        if initial is not None and not bool(semantic_map.free_space.is_free(initial.x, initial.y)):
-            raise InvalidSessionSpec(
-                f"initial_pose: ({initial.x:g}, {initial.y:g}) is not in the free space of map "
-                f"{semantic_map.name!r} (inside a wall, outside the building or off the map); "
-                "give a pose where a person can stand, or null for a global start"
-            )
+        initial, levels = initial_on_levels(semantic_map, request)
         pf = ParticleFilter(
             semantic_map,
             config,
@@ -419,6 +494,8 @@ class SessionManager:
             initial_pose=initial,
             state=filter_state,
         )
+        if filter_state is None and len(levels) > 1:
+            spread_over_levels(pf, levels)
         narrator = Narrator(semantic_map, request.feedback)
         return Session(
             id=session_id or secrets.token_urlsafe(24),  # 192 random bits

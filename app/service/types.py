@@ -16,6 +16,7 @@ from app.feedback import Feedback, FeedbackOptions
 from app.guidance import Guidance
 from app.localization.camera import Camera
 from app.localization.compass import CompassReading
+from app.localization.floors import AltitudeReading
 from app.localization.types import Detection, Estimate, InitialPose, Odometry, Pose
 
 
@@ -46,6 +47,8 @@ class SessionSpec:
     #: The phone camera; its field of view replaces ``sensor.fov_deg`` when given.
     camera: Camera | None = None
     share_view: bool = False
+    #: The level id of ``initial_pose`` on a map with levels (None: any of them).
+    initial_level: str | None = None
 
 
 @dataclass(frozen=True)
@@ -59,6 +62,18 @@ class FrameInput:
     truth: Pose | None = None
     #: The phone compass's heading (map frame), or None.
     heading: CompassReading | None = None
+    #: The phone barometer's relative altitude, or None.
+    altitude: AltitudeReading | None = None
+
+
+@dataclass(frozen=True)
+class LevelRef:
+    """A level as results name it, and its x offset in the filter's plane (metres)."""
+
+    id: str
+    name: str
+    ordinal: int
+    offset_x: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -76,3 +91,8 @@ class FrameOutcome:
     regions: tuple[str | None, ...]
     #: Directions to the destination; None without one or while not converged.
     guidance: Guidance | None = None
+    #: On a map with levels: the estimate's level, each hypothesis's, and the
+    #: probability of the estimate's level (None on a map without levels).
+    level: LevelRef | None = None
+    hypothesis_levels: tuple[LevelRef | None, ...] = ()
+    level_probability: float | None = None

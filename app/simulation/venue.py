@@ -12,6 +12,7 @@ does not settle the floor at once.
 from __future__ import annotations
 
 from app.maps.model import SemanticMap, parse_map
+from app.simulation.venue_walk import Leg, Ride, Walk
 
 #: The venue's name (a usable map file name).
 VENUE_NAME = "three_floor_venue"
@@ -181,16 +182,14 @@ def venue_map() -> SemanticMap:
     return parse_map(venue_spec())
 
 
-def venue_legs() -> tuple[str, list[object]]:
+def venue_legs() -> tuple[str, list[Leg]]:
     """The venue suite's walk: its start level and legs (about 4 minutes).
 
     The Ground Floor's hall, the lift up two floors, the Second Floor, the stairs down
     to the First Floor, the First Floor, the escalator down, the Ground Floor, the
     escalator up, the First Floor's office.
     """
-    from app.simulation.venue_walk import Ride, Walk
-
-    legs: list[object] = [
+    legs: list[Leg] = [
         Walk(((6.0, 11.0), (12.0, 11.5), (12.0, 4.0), (5.0, 4.0), (1.5, 5.0), (1.5, 1.5))),
         Ride("elevator", "L2", climb_mps=1.0, wait_s=3.0),
         Walk(((1.5, 5.0), (8.0, 7.0), (14.0, 11.0), (10.0, 12.0), (18.0, 4.0), (21.0, 3.0))),

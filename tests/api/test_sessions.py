@@ -53,11 +53,13 @@ def test_frame_result_matches_the_contract(client: TestClient, session_id: str) 
     }
     assert res["guidance"] is None  # no destination set
     assert res["seq"] == 1
-    assert set(res["pose"]) == {"x", "y", "theta_deg"}
-    assert set(res["uncertainty"]) == {"std_x_m", "std_y_m", "std_theta_deg"}
+    # A map without levels: the level fields of the third round are null.
+    assert set(res["pose"]) == {"x", "y", "theta_deg", "level"} and res["pose"]["level"] is None
+    assert set(res["uncertainty"]) == {"std_x_m", "std_y_m", "std_theta_deg", "level_probability"}
+    assert res["uncertainty"]["level_probability"] is None
     assert res["converged"] is False  # one detection cannot localize anyone
     assert 1 <= len(res["hypotheses"]) <= 3
-    assert set(res["hypotheses"][0]) == {"x", "y", "theta_deg", "weight", "region"}
+    assert set(res["hypotheses"][0]) == {"x", "y", "theta_deg", "weight", "region", "level"}
     assert set(res["feedback"]) == {"text", "items"}
     assert "not certain" in res["feedback"]["text"]
     got = client.get(f"/sessions/{session_id}").json()

@@ -22,6 +22,7 @@ from app.guidance.targets import DestinationSpec
 from app.localization.compass import CompassReading
 from app.localization.config import FilterConfig
 from app.localization.filter import CHECKPOINT_PARTICLES, ParticleFilter
+from app.localization.floors import AltitudeReading
 from app.localization.sensor import (
     Observation,
     observation_columns,
@@ -84,6 +85,7 @@ def test_plain_data_round_trip_of_a_full_spec_and_an_outcome() -> None:
         FrameInput(heading=CompassReading(1.0, 0.2), truth=Pose(1.0, 2.0, -0.5)),
         FrameInput(timestamp=np.float64(0.1) + 0.2, detections=(Detection("door", 0.1, 0.9),)),
         FrameInput(detections=(Detection("door", np.float64(0.25), 1),), describe=True),
+        FrameInput(altitude=AltitudeReading(12.5, 0.4)),
     )
     for f in frames:
         entry = checkpoint.encode_frame(7, f, 2)

@@ -6,7 +6,7 @@ from fastapi import APIRouter
 
 from app.api.deps import ManagerDep
 from app.api.errors import error_responses
-from app.api.schemas import Bounds, MapSummary
+from app.api.schemas import Bounds, ConnectorOut, MapLevelOut, MapSummary
 from app.service.errors import UnknownMap
 
 router = APIRouter(prefix="/maps", tags=["maps"])
@@ -16,7 +16,10 @@ router = APIRouter(prefix="/maps", tags=["maps"])
 async def list_maps(manager: ManagerDep) -> list[MapSummary]:
     out = []
     for m in manager.maps.values():
-        x0, y0, x1, y1 = m.bounds
+        layout = m.layout
+        # Several levels lie side by side in the filter's plane: the file's extent.
+        x0, y0, x1, y1 = layout.file_bounds if layout.has_levels else m.bounds
+        spec = m.spec
         out.append(
             MapSummary(
                 name=m.name,
@@ -24,6 +27,13 @@ async def list_maps(manager: ManagerDep) -> list[MapSummary]:
                 classes=list(m.classes),
                 object_count=m.object_count,
                 bounds=Bounds(min_x=x0, min_y=y0, max_x=x1, max_y=y1),
+                levels=[
+                    MapLevelOut(
+                        id=lv.id, name=lv.name, ordinal=lv.ordinal, elevation_m=lv.elevation_m
+                    )
+                    for lv in layout.levels
+                ],
+                connectors=[ConnectorOut.model_validate(c.model_dump()) for c in spec.connectors],
             )
         )
     return out

@@ -1,0 +1,284 @@
+"""`bearings experiments --suite venue`: a walk through three floors by lift, stairs and escalator.
+
+The venue (:mod:`app.simulation.venue`, 24 m x 14 m floors joined by a lift, stairs and
+two escalators) is walked from a global start on the Ground Floor: the hall, the lift
+up two floors, the Second Floor, the stairs down, the First Floor, the escalator down,
+the Ground Floor, the escalator up, the First Floor's office (about 6 minutes at
+0.5 m/s, 5 frames/s). The camera sees 360 deg, misses 10 % of what is in view and
+reports 0.2 false detections a frame; the barometer drifts (a random offset, a rate
+of up to 0.6 m a minute and a random walk) with 0.25 m of noise a reading.
+
+Conditions: with the barometer (``Frame.altitude``), and without it.
+
+Figures, pooled over the seeds:
+
+* **level right**: share of converged frames whose level is the true one;
+* **confidently wrong**: converged frames more than 1 m from the truth or on another
+  level (a wrong level is a wrong position);
+* **confirm after ride**: for each ride, the time from leaving the connector (the end
+  of the ride, door wait included) to the first converged frame on the new level (0
+  when it was confirmed before the person left); the share within 5 s;
+* **availability per level**: share of a level's walking frames that are converged
+  and right (within 1 m, on the level), against the same frames given to a filter on
+  that level alone (a map of that level only, a one-level map): with a known start at
+  the leg's first pose, as the venue's filter had the person localized before the
+  ride; the first leg from a global start in both.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from app.localization.config import FilterConfig
+from app.localization.filter import ParticleFilter
+from app.localization.types import InitialPose
+from app.maps.model import SemanticMap, parse_map
+from app.simulation.simulator import SimulationConfig
+from app.simulation.venue import venue_legs, venue_map, venue_spec
+from app.simulation.venue_walk import Barometer, Leg, Ride, VenueFrame, simulate_venue
+
+#: Converged frames this far off (m), or on another level, are confidently wrong.
+WRONG_M = 1.0
+#: A level change is to be confirmed within this long after leaving a connector (s).
+CONFIRM_S = 5.0
+#: Condition name -> whether the frames carry the barometer's altitude.
+CONDITIONS: dict[str, bool] = {"barometer": True, "no-barometer": False}
+
+
+@dataclass
+class VenueRun:
+    """One seed of one condition: per frame the truth, the estimate and its level."""
+
+    condition: str
+    seed: int
+    t: np.ndarray
+    level: np.ndarray  # true level index
+    est_level: np.ndarray
+    err_m: np.ndarray  # plane distance (a wrong level is tens of metres)
+    converged: np.ndarray
+    leg: np.ndarray
+    riding: np.ndarray
+    #: Per ride: (kind, end time s, to level, confirm time s or inf).
+    rides: list[tuple[str, float, int, float]]
+    #: Per walking leg: (level, venue frames right, one-level frames right, frames).
+    legs: list[tuple[int, int, int, int]]
+    step_ms: np.ndarray
+
+
+def single_level_map(level_id: str) -> SemanticMap:
+    """The venue's level ``level_id`` alone, as a map file without levels."""
+    spec = venue_spec()
+    keep = {
+        key: [
+            {k: v for k, v in item.items() if k != "level"}
+            for item in spec[key]  # type: ignore[attr-defined]
+            if item["level"] == level_id
+        ]
+        for key in ("walls", "objects", "regions")
+    }
+    return parse_map({"name": f"venue-{level_id}", **keep})
+
+
+def _walk(seed: int) -> tuple[SemanticMap, list[VenueFrame], list[Leg]]:
+    m = venue_map()
+    start, legs = venue_legs()
+    cfg = SimulationConfig(path=((0.0, 0.0),), miss_prob=0.1, false_rate=0.2)
+    frames = simulate_venue(m, start, legs, cfg, np.random.default_rng(seed), Barometer())
+    return m, frames, legs
+
+
+def run_condition(condition: str, seed: int, particles: int) -> VenueRun:
+    m, frames, legs = _walk(seed)
+    barometer = CONDITIONS[condition]
+    pf = ParticleFilter(m, FilterConfig(particles=particles), rng=np.random.default_rng(seed + 1))
+    n = len(frames)
+    est_level = np.zeros(n, dtype=np.int64)
+    err = np.zeros(n)
+    conv = np.zeros(n, dtype=bool)
+    step_ms = np.zeros(n)
+    for i, vf in enumerate(frames):
+        f = vf.frame
+        started = time.perf_counter()
+        est = pf.step(f.odometry, f.detections, None, vf.altitude if barometer else None)
+        step_ms[i] = (time.perf_counter() - started) * 1e3
+        est_level[i] = int(m.layout.level_of_plane_x(np.array(est.x)))
+        err[i] = float(np.hypot(est.x - f.truth.x, est.y - f.truth.y))
+        conv[i] = est.converged
+    t = np.array([vf.frame.t for vf in frames])
+    level = np.array([vf.level for vf in frames])
+    leg = np.array([vf.leg for vf in frames])
+    riding = np.array([vf.riding for vf in frames])
+    right = conv & (est_level == level) & (err <= WRONG_M)
+    rides = []
+    for k, spec in enumerate(legs):
+        if not isinstance(spec, Ride):
+            continue
+        end_i = int(np.flatnonzero(leg == k)[-1])
+        to = m.layout.level_index(spec.to_level)
+        # First frame from the ride's last on which the new level is confirmed (the
+        # filter may have confirmed it during the door wait: then it holds at the end).
+        ok = np.flatnonzero(right[end_i:] & (level[end_i:] == to))
+        confirm = float(t[end_i + ok[0]] - t[end_i]) if ok.size else float("inf")
+        rides.append((spec.kind, float(t[end_i]), to, confirm))
+    leg_rows = []
+    for k, spec in enumerate(legs):
+        if isinstance(spec, Ride):
+            continue
+        idx = np.flatnonzero(leg == k)
+        lv = int(level[idx[0]])
+        single = single_level_map(m.layout.levels[lv].id)
+        first = frames[idx[0]].file_pose
+        known = None if k == 0 else InitialPose(first.x, first.y, first.theta_rad, 0.3, 0.17)
+        one = ParticleFilter(
+            single,
+            FilterConfig(particles=particles),
+            rng=np.random.default_rng(seed + 2 + k),
+            initial_pose=known,
+        )
+        one_right = 0
+        for j in idx.tolist():
+            f = frames[j].frame
+            est = one.step(None if j == idx[0] else f.odometry, f.detections)
+            fp = frames[j].file_pose
+            close = float(np.hypot(est.x - fp.x, est.y - fp.y)) <= WRONG_M
+            one_right += int(est.converged and close)
+        leg_rows.append((lv, int(right[idx].sum()), one_right, int(idx.size)))
+    return VenueRun(
+        condition, seed, t, level, est_level, err, conv, leg, riding, rides, leg_rows, step_ms
+    )
+
+
+def _job(args: tuple[str, int, int]) -> VenueRun:
+    return run_condition(*args)
+
+
+def summarize(runs: list[VenueRun]) -> list[dict[str, object]]:
+    rows: list[dict[str, object]] = []
+    names = [lv.name for lv in venue_map().layout.levels]
+    for condition in CONDITIONS:
+        mine = [r for r in runs if r.condition == condition]
+        if not mine:
+            continue
+        conv = np.concatenate([r.converged for r in mine])
+        lvl_ok = np.concatenate([r.est_level == r.level for r in mine])
+        err = np.concatenate([r.err_m for r in mine])
+        wrong = conv & (~lvl_ok | (err > WRONG_M))
+        rides = [ride for r in mine for ride in r.rides]
+        confirm = np.array([c for *_, c in rides])
+        by_kind = {}
+        for kind in sorted({k for k, *_ in rides}):
+            c = np.array([ride[3] for ride in rides if ride[0] == kind])
+            by_kind[kind] = {
+                "rides": int(c.size),
+                "median_s": float(np.median(c)),
+                "max_s": float(np.max(c)),
+                "within_5s": int(np.sum(c <= CONFIRM_S)),
+            }
+        per_level = {}
+        for lv, name in enumerate(names):
+            legs = [row for r in mine for row in r.legs if row[0] == lv]
+            frames = sum(row[3] for row in legs)
+            per_level[name] = {
+                "frames": frames,
+                "venue": sum(row[1] for row in legs) / frames if frames else float("nan"),
+                "one_level": sum(row[2] for row in legs) / frames if frames else float("nan"),
+            }
+        rows.append(
+            {
+                "condition": condition,
+                "seeds": len(mine),
+                "frames": int(conv.size),
+                "converged_frames": int(conv.sum()),
+                "level_right_share": float(lvl_ok[conv].mean()) if conv.any() else float("nan"),
+                "wrong_level_frames": int(np.sum(conv & ~lvl_ok)),
+                "confidently_wrong_frames": int(wrong.sum()),
+                "rides": int(confirm.size),
+                "confirmed_within_5s": int(np.sum(confirm <= CONFIRM_S)),
+                "median_confirm_s": float(np.median(confirm)),
+                "max_confirm_s": float(np.max(confirm)),
+                "by_kind": by_kind,
+                "availability": per_level,
+                "median_step_ms": float(np.median(np.concatenate([r.step_ms for r in mine]))),
+            }
+        )
+    return rows
+
+
+def _f(v: float, fmt: str) -> str:
+    return "never" if v == float("inf") else ("n/a" if v != v else format(v, fmt))
+
+
+def markdown_table(rows: list[dict[str, object]]) -> str:
+    lines = [
+        "| condition | converged frames | level right | wrong-level frames | confidently "
+        "wrong | rides confirmed <= 5 s | median / max confirm (s) | step (ms, median) |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for r in rows:
+        lines.append(
+            f"| {r['condition']} | {r['converged_frames']:,} of {r['frames']:,} | "
+            f"{100 * float(r['level_right_share']):.2f} % | {r['wrong_level_frames']} | "  # type: ignore[arg-type]
+            f"{r['confidently_wrong_frames']} | {r['confirmed_within_5s']} of {r['rides']} | "
+            f"{_f(float(r['median_confirm_s']), '.1f')} / {_f(float(r['max_confirm_s']), '.1f')} | "  # type: ignore[arg-type]
+            f"{float(r['median_step_ms']):.2f} |"  # type: ignore[arg-type]
+        )
+    return "\n".join(lines)
+
+
+def markdown(rows: list[dict[str, object]], *, seconds: float, particles: int, seeds: int) -> str:
+    out = [
+        "# Venue suite: three floors, lift, stairs and escalators",
+        "",
+        f"`bearings experiments --suite venue` ({seeds} seeds per condition, {particles:,} "
+        f"particles, {seconds:.0f} s). The walk, the venue and the definitions are in "
+        "`app/experiments/venue.py`; every number below comes from that run.",
+        "",
+        markdown_table(rows),
+        "",
+        "## Confirming the level after each ride",
+        "",
+        "| condition | connector | rides | confirmed <= 5 s | median (s) | max (s) |",
+        "|---|---|---|---|---|---|",
+    ]
+    for r in rows:
+        for kind, k in r["by_kind"].items():  # type: ignore[attr-defined]
+            out.append(
+                f"| {r['condition']} | {kind} | {k['rides']} | {k['within_5s']} | "
+                f"{_f(k['median_s'], '.1f')} | {_f(k['max_s'], '.1f')} |"
+            )
+    out += [
+        "",
+        "## Availability per level (walking frames converged and right)",
+        "",
+        "| condition | level | frames | venue | that level alone (one-level map) |",
+        "|---|---|---|---|---|",
+    ]
+    for r in rows:
+        for name, a in r["availability"].items():  # type: ignore[attr-defined]
+            out.append(
+                f"| {r['condition']} | {name} | {a['frames']:,} | {100 * a['venue']:.1f} % | "
+                f"{100 * a['one_level']:.1f} % |"
+            )
+    return "\n".join(out) + "\n"
+
+
+def run(out: Path, *, seeds: int, particles: int, workers: int) -> list[dict[str, object]]:
+    """Run every condition for ``seeds`` seeds; write venue.md and venue.json to ``out``."""
+    from app.experiments.runner import map_jobs
+
+    jobs = [(c, s, particles) for c in CONDITIONS for s in range(seeds)]
+    started = time.perf_counter()
+    runs = map_jobs(_job, jobs, workers)
+    seconds = time.perf_counter() - started
+    rows = summarize(runs)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "venue.json").write_text(json.dumps(rows, indent=1), encoding="utf-8")
+    (out / "venue.md").write_text(
+        markdown(rows, seconds=seconds, particles=particles, seeds=seeds), encoding="utf-8"
+    )
+    return rows
