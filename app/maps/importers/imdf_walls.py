@@ -99,47 +99,64 @@ def _tidy(lines: shapely.Geometry) -> shapely.Geometry:
     return shapely.line_merge(shapely.union_all(shapely.get_parts(simplified)))
 
 
+#: Segments within these of one another's direction and line are one line (dissolve).
+SAME_ANGLE_RAD = 2e-3
+SAME_LINE_M = 2e-3
+
+
+def _clusters(values: NDArray[np.float64], gap: float) -> list[NDArray[np.int64]]:
+    """Indices grouped so that sorted neighbours closer than ``gap`` share a group."""
+    order = np.argsort(values, kind="stable")
+    cuts = np.flatnonzero(np.diff(values[order]) > gap) + 1
+    return np.split(order, cuts)
+
+
 def dissolve(seg: NDArray[np.float64]) -> NDArray[np.float64]:
     """Collinear segments that overlap, as one (rows x1, y1, x2, y2).
 
-    Segments are grouped by direction (to 1 mrad) and by the offset of their line (to
-    1 mm), as ``map check`` groups them when it looks for duplicated walls; within a
-    group, overlapping spans become one segment along the group's longest member. A
-    segment that overlaps none is kept as it was.
+    Segments whose directions lie within ``SAME_ANGLE_RAD`` and whose lines lie within
+    ``SAME_LINE_M`` of one another (chained, in sorted order: no rounding boundary
+    splits two such) are one line; along it, overlapping spans become one segment on
+    the group's longest member's line. A segment that overlaps none is kept as it was.
     """
     if seg.shape[0] < 2:
         return seg
     a, b = seg[:, 0:2], seg[:, 2:4]
     d = b - a
+    length = np.hypot(d[:, 0], d[:, 1])
     ang = np.mod(np.arctan2(d[:, 1], d[:, 0]), np.pi)
-    normal = np.column_stack([-np.sin(ang), np.cos(ang)])
-    offset = np.sum(a * normal, axis=1)
-    key = np.column_stack([np.round(ang / 1e-3), np.round(offset / 1e-3)]).astype(np.int64)
-    order = np.lexsort((key[:, 1], key[:, 0]))
-    starts = np.flatnonzero(np.r_[True, np.any(np.diff(key[order], axis=0) != 0, axis=1)])
+    # Directions just below pi are those just above 0.
+    ang = np.where(ang > np.pi - SAME_ANGLE_RAD, ang - np.pi, ang)
     out = []
-    for group in np.split(order, starts[1:]):
-        if group.size == 1:
-            out.append(seg[group])
-            continue
-        ref = group[np.argmax(np.hypot(d[group, 0], d[group, 1]))]
-        u = d[ref] / np.hypot(*d[ref])
-        lo = np.minimum(a[group] @ u, b[group] @ u)
-        hi = np.maximum(a[group] @ u, b[group] @ u)
-        base = a[ref] - (a[ref] @ u) * u
-        spans = sorted(zip(lo.tolist(), hi.tolist(), group.tolist(), strict=True))
-        run = [spans[0]]
-        for span in spans[1:]:
-            if span[0] < run[-1][1] - MIN_SEGMENT_M:  # overlaps the run: extend it
-                last = run[-1]
-                run[-1] = (last[0], max(last[1], span[1]), -1)
-            else:
-                run.append(span)
-        for s0, s1, member in run:
-            if member >= 0:
-                out.append(seg[member : member + 1])
-            else:
-                out.append(np.r_[base + s0 * u, base + s1 * u][None])
+    for by_angle in _clusters(ang, SAME_ANGLE_RAD):
+        # Each segment's own line, its offset measured from the cluster's middle (far
+        # from the map's origin a small angle would move it by many millimetres).
+        centre = a[by_angle].mean(axis=0)
+        normal = np.column_stack([-np.sin(ang[by_angle]), np.cos(ang[by_angle])])
+        offset = np.sum((a[by_angle] - centre) * normal, axis=1)
+        for k in _clusters(offset, SAME_LINE_M):
+            group = by_angle[k]
+            if group.size == 1:
+                out.append(seg[group])
+                continue
+            ref = group[np.argmax(length[group])]
+            u = d[ref] / length[ref]
+            lo = np.minimum(a[group] @ u, b[group] @ u)
+            hi = np.maximum(a[group] @ u, b[group] @ u)
+            base = a[ref] - (a[ref] @ u) * u
+            spans = sorted(zip(lo.tolist(), hi.tolist(), group.tolist(), strict=True))
+            run = [spans[0]]
+            for span in spans[1:]:
+                if span[0] < run[-1][1] - MIN_SEGMENT_M:  # overlaps the run: extend it
+                    last = run[-1]
+                    run[-1] = (last[0], max(last[1], span[1]), -1)
+                else:
+                    run.append(span)
+            for s0, s1, member in run:
+                if member >= 0:
+                    out.append(seg[member : member + 1])
+                else:
+                    out.append(np.r_[base + s0 * u, base + s1 * u][None])
     return np.vstack(out)
 
 
