@@ -22,30 +22,25 @@ IMDF feature becomes (docs/API.md, "Importing a floor plan"):
 
 from __future__ import annotations
 
-from collections import Counter
 from collections.abc import Mapping
-from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 import shapely
 
 from app.maps.importers.common import MapImportError, snap_objects
-from app.maps.importers.imdf_connectors import (
-    CONNECTOR_UNITS,
-    ConnectorReport,
-    Place,
-    connectors,
+from app.maps.importers.imdf_connectors import CONNECTOR_UNITS, Place, connectors
+from app.maps.importers.imdf_objects import (
+    LevelParts,
+    amenity_objects,
+    display_point,
+    map_object,
+    opening_objects,
+    seen_class,
 )
-from app.maps.importers.imdf_read import (
-    Feature,
-    Projector,
-    class_word,
-    level_id,
-    read_archive,
-    text_of,
-)
-from app.maps.importers.imdf_walls import SIMPLIFY_M, level_walls, open_kind
+from app.maps.importers.imdf_read import Feature, level_id, read_archive, text_of
+from app.maps.importers.imdf_summary import ImdfSummary
+from app.maps.importers.imdf_walls import SIMPLIFY_M, level_walls
 
 #: Storey height when none is given, metres (IMDF has ordinals, not heights).
 DEFAULT_STOREY_M = 4.0
@@ -53,15 +48,6 @@ DEFAULT_STOREY_M = 4.0
 WALL_FIXTURES = frozenset({"wall", "obstruction", "kiosk"})
 #: Objects this close to a wall of their level are moved onto it, metres.
 SNAP_M = 0.15
-#: An opening belongs to the units within this distance of it, metres.
-TOUCH_M = 0.05
-
-
-def _seen_class(category: str) -> str | None:
-    """The object class of a unit a detector sees, or None."""
-    if category in CONNECTOR_UNITS and category != "ramp":
-        return CONNECTOR_UNITS[category]
-    return "restroom" if category.split(".")[0] == "restroom" else None
 
 
 def _wanted(kind: str, props: dict[str, object]) -> bool:
@@ -85,75 +71,14 @@ def _polygon(geom: shapely.Geometry | None, where: str) -> shapely.Polygon:
     return geom
 
 
-@dataclass
-class ImdfSummary:
-    """What the import made of what (printed by ``bearings map import --imdf``)."""
-
-    source: str
-    levels: list[str] = field(default_factory=list)
-    imdf_levels: int = 0
-    units: int = 0
-    walls: int = 0
-    gaps: int = 0
-    regions: int = 0
-    unit_objects: Counter[str] = field(default_factory=Counter)
-    openings: int = 0
-    doors: int = 0
-    outer_doors: int = 0
-    amenities: int = 0
-    amenity_objects: Counter[str] = field(default_factory=Counter)
-    amenities_not_used: Counter[str] = field(default_factory=Counter)
-    fixtures: int = 0
-    fixture_walls: Counter[str] = field(default_factory=Counter)
-    fixtures_not_used: Counter[str] = field(default_factory=Counter)
-    relationships: int = 0
-    connectors: Counter[str] = field(default_factory=Counter)
-    report: ConnectorReport = field(default_factory=ConnectorReport)
-    snapped: int = 0
-
-    def lines(self) -> list[str]:
-        def counts(c: Mapping[str, int]) -> str:
-            return ", ".join(f"{k} {v}" for k, v in sorted(c.items())) or "none"
-
-        r = self.report
-        return [
-            f"{self.source}: {len(self.levels)} levels from {self.imdf_levels} IMDF levels "
-            f"({', '.join(self.levels)})",
-            f"  units: {self.units} -> {self.walls} walls ({self.gaps} gaps cut at openings), "
-            f"{self.regions} regions (named units), objects: {counts(self.unit_objects)}",
-            f"  openings: {self.openings} -> {self.doors} doors ({self.outer_doors} in the "
-            "outer wall, kept mounted in it), the rest are the elevators' doors",
-            f"  amenities: {self.amenities} -> objects: {counts(self.amenity_objects)}; "
-            f"not used: {counts(self.amenities_not_used)}",
-            f"  fixtures: {self.fixtures} -> as walls: {counts(self.fixture_walls)}; "
-            f"not used: {counts(self.fixtures_not_used)}",
-            f"  connectors: {counts(self.connectors)} ({r.from_relationships} from "
-            f"{self.relationships} relationships, {r.by_overlap} by overlapping units); "
-            f"not used: {counts(r.not_used)}",
-            f"  {self.snapped} objects moved onto a wall of their level",
-        ]
-
-
-@dataclass
-class _Level:
-    """One map level being built: its IMDF features, in metres."""
-
-    id: str
-    ordinal: int
-    name: str
-    units: list[tuple[Feature, shapely.Geometry, str, str | None]] = field(default_factory=list)
-    openings: list[tuple[Feature, shapely.LineString]] = field(default_factory=list)
-    solids: list[shapely.Geometry] = field(default_factory=list)
-    objects: list[dict[str, object]] = field(default_factory=list)
-    walls: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
-
-
-def _levels(features: list[Feature], language: str) -> tuple[list[_Level], dict[str, _Level]]:
+def _levels(
+    features: list[Feature], language: str
+) -> tuple[list[LevelParts], dict[str, LevelParts]]:
     """Map levels by ordinal, and the map level of each IMDF level id."""
     if not features:
         raise MapImportError("level.geojson: no levels")
-    by_ordinal: dict[int, _Level] = {}
-    of_id: dict[str, _Level] = {}
+    by_ordinal: dict[int, LevelParts] = {}
+    of_id: dict[str, LevelParts] = {}
     for i, f in enumerate(features):
         ordinal = f.props.get("ordinal")
         if isinstance(ordinal, float) and ordinal.is_integer():
@@ -168,12 +93,12 @@ def _levels(features: list[Feature], language: str) -> tuple[list[_Level], dict[
             or text_of(f.props.get("short_name"), language)
             or f"Level {ordinal}"
         )
-        level = by_ordinal.setdefault(ordinal, _Level(level_id(ordinal), ordinal, name))
+        level = by_ordinal.setdefault(ordinal, LevelParts(level_id(ordinal), ordinal, name))
         of_id[f.id] = level
     return [by_ordinal[o] for o in sorted(by_ordinal)], of_id
 
 
-def _level_of(f: Feature, of_id: Mapping[str, _Level], where: str) -> _Level:
+def _level_of(f: Feature, of_id: Mapping[str, LevelParts], where: str) -> LevelParts:
     ref = f.props.get("level_id")
     if not isinstance(ref, str) or ref not in of_id:
         raise MapImportError(f"{where} ({f.id}): level_id: {ref!r} is no level of level.geojson")
@@ -194,57 +119,6 @@ def _occupant_names(features: Mapping[str, list[Feature]], language: str) -> dic
         if unit and name:
             out.setdefault(str(unit), name)
     return out
-
-
-def _display_point(f: Feature, geom: shapely.Geometry, project: Projector) -> tuple[float, float]:
-    dp = f.props.get("display_point")
-    if isinstance(dp, dict) and isinstance(dp.get("coordinates"), list):
-        try:
-            x, y = project([dp["coordinates"][:2]])[0]
-            return float(x), float(y)
-        except (ValueError, TypeError):
-            pass
-    p = geom.representative_point()
-    return p.x, p.y
-
-
-def _object(cls: str, x: float, y: float, label: str | None, level: str) -> dict[str, object]:
-    obj: dict[str, object] = {"class": cls, "x": _round(x), "y": _round(y)}
-    if label:
-        obj["label"] = label
-    obj["level"] = level
-    return obj
-
-
-def _opening_objects(level: _Level, places: dict[str, Place], summary: ImdfSummary) -> set[str]:
-    """Doors, elevators and restrooms at the level's openings; the ids of the units
-    that got their object there."""
-    seen: set[str] = set()
-    if not level.units:
-        return seen
-    polys = [g for _, g, _, _ in level.units]
-    tree = shapely.STRtree(polys)
-    for f, line in level.openings:
-        mid = line.interpolate(0.5, normalized=True)
-        touching = [level.units[int(k)] for k in tree.query(line.buffer(TOUCH_M), "intersects")]
-        lift = next((u for u in touching if u[2] == "elevator"), None)
-        name = text_of(f.props.get("name"), "en")
-        if lift is not None:
-            level.objects.append(_object("elevator", mid.x, mid.y, lift[3], level.id))
-            summary.unit_objects["elevator"] += 1
-            seen.add(lift[0].id)
-        else:
-            room = next((u for u in touching if u[3] and open_kind(u[2]) == 0), None)
-            label = name or (f"door to {room[3]}" if room is not None else None)
-            level.objects.append(_object("door", mid.x, mid.y, label, level.id))
-            summary.doors += 1
-        for unit in touching:
-            if _seen_class(unit[2]) == "restroom":
-                level.objects.append(_object("restroom", mid.x, mid.y, unit[3], level.id))
-                summary.unit_objects["restroom"] += 1
-                seen.add(unit[0].id)
-        places[f.id] = Place(level.id, level.ordinal, line.buffer(1.5, quad_segs=2), name, None)
-    return seen
 
 
 def import_imdf(
@@ -269,7 +143,7 @@ def import_imdf(
     summary.imdf_levels = len(features["level"])
     occupants = _occupant_names(features, language)
     places: dict[str, Place] = {}
-    unit_level: dict[str, _Level] = {}
+    unit_level: dict[str, LevelParts] = {}
     regions: list[dict[str, object]] = []
     for i, f in enumerate(features["unit"]):
         where = f"unit.geojson: features[{i}]"
@@ -323,12 +197,12 @@ def import_imdf(
         )
         summary.gaps += made.gaps
         summary.outer_doors += made.outer
-        seen = _opening_objects(level, places, summary)
+        seen = opening_objects(level, places, summary)
         for f, geom, category, uname in level.units:
-            cls = _seen_class(category)
+            cls = seen_class(category)
             if cls is not None and f.id not in seen:
-                x, y = _display_point(f, geom, project)
-                level.objects.append(_object(cls, x, y, uname, level.id))
+                x, y = display_point(f, geom, project)
+                level.objects.append(map_object(cls, x, y, uname, level.id))
                 summary.unit_objects[cls] += 1
         level.walls = made.walls
         walls += [
@@ -336,7 +210,7 @@ def import_imdf(
             for a, b, c, d in np.round(made.walls, 4).tolist()
         ]
     summary.walls = len(walls)
-    _amenities(features["amenity"], unit_level, places, language, summary)
+    amenity_objects(features["amenity"], unit_level, places, language, summary)
     for level in levels:
         summary.snapped += snap_objects(level.objects, level.walls, snap_m)
     made_connectors = connectors(
@@ -363,37 +237,3 @@ def import_imdf(
         "connectors": made_connectors,
     }
     return data, summary
-
-
-def _amenities(
-    features: list[Feature],
-    unit_level: Mapping[str, _Level],
-    places: dict[str, Place],
-    language: str,
-    summary: ImdfSummary,
-) -> None:
-    """Each amenity an object of its category's word, on its unit's level."""
-    for i, f in enumerate(features):
-        geom = f.geometry
-        if geom is None or geom.geom_type != "Point":
-            raise MapImportError(
-                f"amenity.geojson: features[{i}] ({f.id}): geometry: expected a Point"
-            )
-        cls = class_word(f.props.get("category"))
-        units = f.props.get("unit_ids")
-        level = (
-            next((unit_level[u] for u in units if isinstance(u, str) and u in unit_level), None)
-            if isinstance(units, list)
-            else None
-        )
-        if cls is None:
-            summary.amenities_not_used[str(f.props.get("category"))] += 1
-            continue
-        if level is None:
-            summary.amenities_not_used["in no unit of a level"] += 1
-            continue
-        label = text_of(f.props.get("name"), language)
-        level.objects.append(_object(cls, geom.x, geom.y, label, level.id))
-        summary.amenity_objects[cls] += 1
-        places[f.id] = Place(level.id, level.ordinal, geom.buffer(1.5, quad_segs=2), label, None)
-    summary.amenities = len(features)
