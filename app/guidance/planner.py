@@ -331,6 +331,8 @@ class Plan:
 
         A run of stop nodes whose first and last lie on one level is no ride (a path
         that only crossed a stop): its nodes are passed over."""
+        if not self.stops:
+            return len(chain), None  # one level: nothing to ride
         k = 0
         while k < len(chain):
             if not layer.n <= chain[k] < layer.first_target:

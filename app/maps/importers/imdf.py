@@ -1,7 +1,7 @@
 """Import an IMDF venue (Apple's Indoor Mapping Data Format) as a map with levels.
 
 The archive is read and projected to metres by :mod:`.imdf_read`; here is what each
-IMDF feature becomes (docs/API.md, "Importing a floor plan"):
+IMDF feature becomes (docs/API.md, "Importing an IMDF venue"):
 
 * **levels**: one map level per IMDF ordinal (a venue of several buildings has one
   IMDF level per building and floor; they share the ordinal). Its id is ``L<ordinal>``
@@ -9,11 +9,11 @@ IMDF feature becomes (docs/API.md, "Importing a floor plan"):
   times the storey height (IMDF gives none).
 * **walls** from unit outlines, with gaps at openings (:mod:`.imdf_walls`), and the
   outlines of fixtures that block the way and the view (walls, obstructions, kiosks).
-* **objects**: each opening a ``door``, except an elevator's, which is the
-  ``elevator``; the units a detector sees (elevators, escalators, stairs, restrooms)
-  an object of their kind, at their openings when they have any, else at their display
-  point; every amenity an object of its category's first word (``restroom.female`` is
-  a ``restroom``, ``unspecified`` is not used).
+* **objects** (:mod:`.imdf_objects`): each opening a ``door``, except an elevator's,
+  which is the ``elevator``; the units a detector sees (elevators, escalators, stairs,
+  restrooms) an object of their kind, at their openings when they have any, else at
+  their display point; every amenity an object of its category's first word
+  (``restroom.female`` is a ``restroom``, ``unspecified`` is not used).
 * **connectors** from elevator, escalator, stairs and ramp units and relationships
   (:mod:`.imdf_connectors`).
 * **regions**: every named unit; a unit without a name takes its occupant's (through
