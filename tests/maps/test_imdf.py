@@ -292,3 +292,40 @@ def test_an_escalator_without_its_way_is_no_connector(tmp_path: Path) -> None:
     # The escalators are still seen: objects of their kind.
     assert sum(o["class"] == "escalator" for o in data["objects"]) == 4
     assert check_data(data, source="x", expected_name="x").map is not None
+
+
+def test_names_in_the_manifest_s_language_and_no_venue_file(tmp_path: Path) -> None:
+    def french(d: dict) -> None:
+        d["features"][0]["properties"]["name"] = {"en": "Ground Floor", "fr": "Rez-de-chaussée"}
+
+    venue_dir = _broken(tmp_path, "level.geojson", french)
+    (venue_dir / "manifest.json").write_text(json.dumps({"version": "1.0.0", "language": "fr"}))
+    (venue_dir / "venue.geojson").unlink()
+    data, _ = import_imdf(venue_dir, "x")
+    # French where there is French, else English.
+    assert [lv["name"] for lv in data["levels"]] == [
+        "Rez-de-chaussée",
+        "First Floor",
+        "Second Floor",
+    ]
+    # Without the venue's display point the plane is centred on the levels' extent:
+    # the same building's middle here.
+    xy = np.array([[w["x1"], w["y1"]] for w in data["walls"]])
+    assert np.allclose(xy.min(axis=0), [-20, -12], atol=0.1)
+
+
+def test_storey_height_is_a_choice_of_the_command(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / "tall.json"
+    assert (
+        main(["map", "import", "--imdf", str(VENUE), "--storey-m", "5.5", "--out", str(out)]) == 0
+    )
+    levels = json.loads(out.read_text())["levels"]
+    assert [lv["elevation_m"] for lv in levels] == [0.0, 5.5, 11.0]
+    capsys.readouterr()
+    geojson = tmp_path / "floor.geojson"
+    geojson.write_text(json.dumps({"type": "FeatureCollection", "features": []}))
+    args = ["map", "import", "--geojson", str(geojson), "--storey-m", "5", "--out", str(out)]
+    assert main(args) == 1
+    assert "--storey-m goes with --imdf only" in capsys.readouterr().out
