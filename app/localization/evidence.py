@@ -60,7 +60,7 @@ from __future__ import annotations
 import math
 from array import array
 from collections import deque
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -195,6 +195,9 @@ class EvidenceTracker:
         self.grid = grid
         self.rng = rng
         self.settings = settings
+        #: Whether a place (x, y) may hold an alternative at all (set by the filter on
+        #: a map with levels, app.localization.floors); None: anywhere.
+        self.place_allowed: Callable[[float, float], bool] | None = None
         self.reset()
 
     def reset(self) -> None:
@@ -862,6 +865,8 @@ class EvidenceTracker:
                 self._anchor_pose(), np.array([h.x]), np.array([h.y]), np.array([h.theta_rad])
             )[0]
             if self._near_any(h) or not self._walk_fits(move):
+                continue
+            if self.place_allowed is not None and not self.place_allowed(h.x, h.y):
                 continue
             # The best of thousands of candidates fits the window better than the main
             # mode by selection alone: a newcomer never starts ahead; tracked evidence

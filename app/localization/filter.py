@@ -113,6 +113,8 @@ class ParticleFilter:
         )
         #: Level changes (maps with several levels only, app.localization.floors).
         self.floors = FloorTracker(semantic_map) if len(semantic_map.layout.levels) > 1 else None
+        if self.floors is not None and self.evidence is not None:
+            self.evidence.place_allowed = self.floors.place_allowed
         self.last_observation: Observation | None = None
         if state is None:
             self.reset(initial_pose)
@@ -303,6 +305,10 @@ class ParticleFilter:
             )
             if contradicted:
                 self._restart_global()
+            elif self.floors.changed and self.evidence is not None:
+                # The alternatives were carried by the walk's odometry, not the ride:
+                # none of them rode along. The next search looks afresh.
+                self.evidence.reset()
         inject, w = self._correct(detections)
         if heading is not None:
             self.log_w = self.log_w + compass_log_likelihood(self.theta, heading)

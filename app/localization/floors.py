@@ -22,12 +22,13 @@ barometer, move particles only through the map's transitions), with the level a 
 each particle, so a belief on the wrong floor is a wrong position: tens of metres from
 the truth in the plane, never "converged" there.
 
-While the smoothed altitude is more than ``DRIFT_SHARE`` of a storey from the anchor
-the person is between floors (:attr:`FloorTracker.in_transit`): the filter then calls
-nobody located, starts its convergence test afresh, and neither injects particles nor
-lets the evidence search move the cloud (a lift car looks the same on every floor; the
-barometer, not the view, says where a ride ends), so every particle the change meets
-descends from the ones that entered the connector.
+While the smoothed altitude is more than ``DRIFT_SHARE`` of a storey from the anchor, or
+rises or falls as fast as a lift does, the person is between floors
+(:attr:`FloorTracker.in_transit`): the filter then calls nobody located, starts its
+convergence test afresh, and neither injects particles nor lets the evidence search move
+the cloud (a lift car looks the same on every floor; the barometer, not the view, says
+where a ride ends), so every particle the change meets descends from the ones that
+entered the connector.
 
 Without altitude, a particle in a stop moves to a level its connector reaches with a
 small probability per frame (``BLIND_RATE``), and what is seen on each level decides;
@@ -52,6 +53,13 @@ if TYPE_CHECKING:
 
 #: Readings averaged for the level-change test (at 5 frames/s: one second).
 SMOOTH_FRAMES = 5
+#: A lift passing a floor without stopping is between floors too: the means of the newer
+#: and the older half of the last ``RATE_FRAMES`` readings differ by ``LIFT_RISE_M`` or
+#: more (at 5 frames/s, 0.6 m/s: lifts run at 1-2.5 m/s; a person on stairs or an
+#: escalator rises about 0.3 m/s; the noise of that difference is about 0.16 m for
+#: readings of 0.25 m).
+RATE_FRAMES = 10
+LIFT_RISE_M = 0.6
 #: A level change is under way when the smoothed altitude leaves the anchor by this
 #: share of the storey height towards the next level (more than half: after the
 #: anchor moves a storey, the way back needs a fifth of a storey more).
@@ -123,7 +131,7 @@ class FloorTracker:
 
     def reset(self) -> None:
         """Forget the barometer (a new start)."""
-        self._readings: deque[float] = deque(maxlen=SMOOTH_FRAMES)
+        self._readings: deque[float] = deque(maxlen=RATE_FRAMES)
         self.anchor_m: float | None = None
         self.changes = 0
         self.level_probability: float | None = None
@@ -134,8 +142,12 @@ class FloorTracker:
         #: a level other than the one before (the first fix included).
         self.confirmed_level: int | None = None
         self.newly_confirmed = False
-        #: Whether the last frame came without altitude.
+        #: The level the barometer carries a confirmed fix to (None: none confirmed,
+        #: or the chain broke: a frame without altitude, a contradiction).
+        self.carried_level: int | None = None
+        #: Whether the last frame came without altitude, and whether it changed level.
         self.blind = False
+        self.changed = False
 
     # ------------------------------------------------------------ the particles
     def stop_of(self, x: NDArray[np.float64], y: NDArray[np.float64]) -> NDArray[np.int64]:
@@ -172,11 +184,18 @@ class FloorTracker:
         whether the barometer contradicts the whole belief (a level change, and less
         than ``CONTRADICTED_SHARE`` of the weight could make it)."""
         self.blind = altitude is None
+        self.changed = False
         if altitude is None:
+            self.carried_level = None
             self.in_transit = False
             return self._blind(x, y, rng), log_w, False
         self._readings.append(float(altitude.relative_m))
-        smoothed = float(np.mean(self._readings))
+        recent = list(self._readings)
+        smoothed = float(np.mean(recent[-SMOOTH_FRAMES:]))
+        half = RATE_FRAMES // 2
+        moving = len(recent) == RATE_FRAMES and (
+            abs(float(np.mean(recent[half:])) - float(np.mean(recent[:half]))) >= LIFT_RISE_M
+        )
         if self.anchor_m is None:
             self.anchor_m = smoothed
             return x, log_w, False
@@ -184,7 +203,7 @@ class FloorTracker:
         threshold = CHANGE_SHARE * self.storey_m
         band = DRIFT_SHARE * self.storey_m
         if abs(delta) < threshold:
-            self.in_transit = abs(delta) >= band
+            self.in_transit = abs(delta) >= band or moving
             if not self.in_transit:
                 self.anchor_m += DRIFT_GAIN * delta
             return x, log_w, False
@@ -207,10 +226,38 @@ class FloorTracker:
             rise = self._elevation[to[landed]] - self._elevation[frm]
             w = prior[moved]
             self.anchor_m += float(np.sum(w * rise) / max(float(np.sum(w)), 1e-300))
+            self.carried_level = self._carry(frm, to[landed], w)
         else:
             self.anchor_m += threshold * 2.0 if up else -threshold * 2.0
         self.changes += 1
+        self.changed = True
+        if moved_share < CONTRADICTED_SHARE:
+            self.carried_level = None
         return new_x, log_w, moved_share < CONTRADICTED_SHARE
+
+    def _carry(
+        self, frm: NDArray[np.int64], to: NDArray[np.int64], w: NDArray[np.float64]
+    ) -> int | None:
+        """Where the carried level went: the heaviest destination of the particles that
+        left it (None when none did)."""
+        if self.carried_level is None:
+            return None
+        mine = frm == self.carried_level
+        if not mine.any():
+            return None
+        totals = np.bincount(to[mine], weights=w[mine], minlength=len(self.layout.levels))
+        return int(np.argmax(totals))
+
+    def place_allowed(self, x: float, y: float) -> bool:
+        """Whether the evidence search may keep an alternative at plane point (x, y):
+        not in a connector's stop on a level other than the one the barometer carries
+        a confirmed fix to (a lift car looks the same on every floor; the barometer
+        tells them apart). Anywhere while no level is carried."""
+        if self.carried_level is None or self.blind:
+            return True
+        if int(self.layout.level_of_plane_x(np.array(x))) == self.carried_level:
+            return True
+        return bool(self.stop_of(np.array([x]), np.array([y]))[0] < 0)
 
     def _blind(
         self, x: NDArray[np.float64], y: NDArray[np.float64], rng: np.random.Generator
@@ -256,6 +303,8 @@ class FloorTracker:
         self.newly_confirmed = converged and mine != self.confirmed_level
         if converged:
             self.confirmed_level = mine
+            if not self.blind:
+                self.carried_level = mine
 
     # ------------------------------------------------------------ checkpoints
     def checkpoint(self) -> dict[str, Any]:
@@ -266,10 +315,12 @@ class FloorTracker:
             "level_probability": self.level_probability,
             "in_transit": self.in_transit,
             "confirmed_level": self.confirmed_level,
+            "carried_level": self.carried_level,
+            "blind": self.blind,
         }
 
     def restore(self, state: Mapping[str, Any]) -> None:
-        self._readings = deque((float(v) for v in state["readings"]), maxlen=SMOOTH_FRAMES)
+        self._readings = deque((float(v) for v in state["readings"]), maxlen=RATE_FRAMES)
         anchor = state["anchor_m"]
         self.anchor_m = None if anchor is None else float(anchor)
         self.changes = int(state["changes"])
@@ -279,6 +330,9 @@ class FloorTracker:
         confirmed = state["confirmed_level"]
         self.confirmed_level = None if confirmed is None else int(confirmed)
         self.newly_confirmed = False
+        carried = state["carried_level"]
+        self.carried_level = None if carried is None else int(carried)
+        self.blind = bool(state["blind"])
 
 
 def spread_over_levels(pf: ParticleFilter, levels: tuple[int, ...]) -> None:

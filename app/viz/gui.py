@@ -30,6 +30,8 @@ if TYPE_CHECKING:
 
 NONE = "(none)"
 FOVS = ("360", "270", "180")
+#: The level selector's first choice (as app.viz.view names it).
+FOLLOW = "(the person's level)"
 
 
 class Walk(Protocol):
@@ -68,6 +70,8 @@ class ViewHost(Protocol):
 
     def watch(self, session_id: str | None) -> None: ...
 
+    def choose_level(self, choice: str) -> None: ...
+
 
 class ViewControls:
     """GUI handles and what they do; the demo folder only when walks can be started."""
@@ -87,6 +91,9 @@ class ViewControls:
         self.session = gui.add_dropdown("Watch session", (NONE,), initial_value=NONE)
         self.session.on_update(lambda _: view.watch(self._labels.get(self.session.value)))
         self.status = gui.add_markdown("No session yet.")
+        # A venue's levels: the view shows one at a time (the person's, or one chosen).
+        self.level = gui.add_dropdown("Level", (FOLLOW,), initial_value=FOLLOW, disabled=True)
+        self.level.on_update(lambda _: view.choose_level(self.level.value))
         server.on_client_disconnect(lambda client: self.viewer_left(client.client_id))
         if start_walk is None:
             return
@@ -107,6 +114,12 @@ class ViewControls:
         self.start_button.on_click(lambda e: self._run(self.start_walk(e.client_id)))
         self.kidnap_button.on_click(lambda _: self.kidnap())
         self.reset_button.on_click(lambda e: self._run(self.reset_walk(e.client_id)))
+
+    def set_levels(self, names: tuple[str, ...]) -> None:
+        """The level selector's choices for the map shown (none: disabled)."""
+        self.level.options = (FOLLOW, *names)
+        self.level.value = FOLLOW  # type: ignore[misc]
+        self.level.disabled = not names
 
     def _run(self, coro: Any) -> None:
         """Start ``coro`` on the event loop from a GUI callback (which must return None)."""
@@ -203,6 +216,8 @@ class ViewControls:
                 r = s.last_outcome
                 state = "converged" if r is not None and r.estimate.converged else "searching"
                 text = f"**{s.map.name}**, {s.frames} frames, {state}"
+                if r is not None and r.level is not None:
+                    text = f"**{s.map.name}**, {r.level.name}, {s.frames} frames, {state}"
                 if r is not None and r.feedback.text:
                     text += f"\n\n_{r.feedback.text}_"
                 if self.status.content != text:  # only send what changed

@@ -20,7 +20,7 @@ import viser
 
 from app.service.errors import SessionNotFound
 from app.service.sessions import SessionManager, SessionSnapshot
-from app.viz.gui import StartWalk, ViewControls
+from app.viz.gui import FOLLOW, StartWalk, ViewControls
 from app.viz.particles import detection_rays, pose_arrow, sample_particles
 from app.viz.scene import MapScene, build_map_scene
 
@@ -61,6 +61,8 @@ class LiveView:
         self._thread: threading.Thread | None = None
         self._rng = np.random.default_rng(0)
         self.loop: asyncio.AbstractEventLoop | None = None
+        #: On a map with levels, which one to show: FOLLOW or a level's name.
+        self.level_choice = FOLLOW
 
     # ------------------------------------------------------------ lifecycle
     def start(self) -> None:
@@ -79,6 +81,9 @@ class LiveView:
         )
         self.show_map(default_map)
         self.controls = ViewControls(self, self.start_walk)
+        if self.map_scene is not None:
+            shown = self.manager.maps[self.map_scene.map_name]
+            self.controls.set_levels(tuple(lv.name for lv in shown.layout.levels))
         self._thread = threading.Thread(target=self._run, name="bearings-view", daemon=True)
         self._thread.start()
 
@@ -99,7 +104,35 @@ class LiveView:
             return
         if self.map_scene is not None:
             self.map_scene.remove()
-        self.map_scene = build_map_scene(self.server, self.manager.maps[map_name])
+        semantic_map = self.manager.maps[map_name]
+        self.map_scene = build_map_scene(self.server, semantic_map)
+        self.level_choice = FOLLOW
+        if self.controls is not None:
+            self.controls.set_levels(tuple(lv.name for lv in semantic_map.layout.levels))
+
+    def choose_level(self, choice: str) -> None:
+        """Show the level named ``choice``, or (FOLLOW) the watched person's."""
+        self.level_choice = choice
+        self._last_version = -1  # redraw at the next refresh
+        scene = self.map_scene
+        if scene is None or self.server is None:
+            return
+        names = [lv.name for lv in self.manager.maps[scene.map_name].layout.levels]
+        if choice in names:
+            scene.show_level(self.server, names.index(choice))
+
+    def level_to_show(self, snap: SessionSnapshot) -> int | None:
+        """The level the view shows for ``snap``: the one chosen, else the estimate's
+        (None on a map without levels)."""
+        layout = self.manager.maps[snap.map_name].layout
+        if not layout.has_levels:
+            return None
+        names = [lv.name for lv in layout.levels]
+        if self.level_choice in names:
+            return names.index(self.level_choice)
+        if snap.estimate is None:
+            return None if self.map_scene is None else self.map_scene.level_shown
+        return int(layout.level_of_plane_x(np.array(snap.estimate.x)))
 
     def watch(self, session_id: str | None) -> None:
         self.watched = session_id
@@ -141,6 +174,9 @@ class LiveView:
         """Particles, estimate, hypotheses, detection rays and the ground truth."""
         assert self.server is not None
         self.show_map(snap.map_name)
+        level = self.level_to_show(snap)
+        if level is not None and self.map_scene is not None:
+            self.map_scene.show_level(self.server, level)
         scene = self.server.scene
         pts, colours, ticks = sample_particles(snap, self._rng)
         with self.server.atomic():

@@ -153,3 +153,29 @@ def test_the_simulated_barometer_drifts_and_rides_change_the_true_level() -> Non
     assert change != pytest.approx(frames[-1].true_altitude_m, abs=1e-6)  # drift added
     # The odometry never sees the level's offset in the plane.
     assert max(abs(f.frame.odometry.forward_m) for f in frames[1:] if f.frame.odometry) < 1.0
+
+
+def test_a_lift_passing_a_floor_is_between_floors_all_the_way() -> None:
+    tracker = FloorTracker(VENUE)
+    x, y = particles(1.5, 1.5, 0)
+    rng = np.random.default_rng(0)
+    log_w = np.zeros(x.size)
+    rise = np.linspace(100.0, 109.0, 46)  # 9 m at 1 m/s
+    flags = []
+    for r in [100.0] * 10 + list(rise):
+        x, log_w, _ = tracker.apply(x, y, log_w, AltitudeReading(float(r), 0.5), rng)
+        flags.append(tracker.in_transit)
+    # From a second into the ride to its end: never out of transit, also at the First
+    # Floor's elevation (4.5 m up), which the lift passes without stopping.
+    assert all(flags[10 + 8 :])
+    assert not any(flags[:10])
+
+
+def test_the_evidence_search_keeps_no_alternative_in_another_floors_lift_car() -> None:
+    tracker = FloorTracker(VENUE)
+    assert tracker.place_allowed(1.5 + PITCH, 1.5)  # nothing carried yet: anywhere
+    tracker.blind = False
+    tracker.carried_level = 2
+    assert tracker.place_allowed(1.5 + 2 * PITCH, 1.5)  # the carried level's car
+    assert not tracker.place_allowed(1.5 + PITCH, 1.5)  # the First Floor's car
+    assert tracker.place_allowed(6.0 + PITCH, 11.0)  # the First Floor's hall: may be

@@ -156,3 +156,54 @@ def test_the_view_draws_the_way_to_the_destination() -> None:
     # From the estimate to the door at (10, 5.5).
     assert route.points[-1, 1, :2] == pytest.approx((10.0, 5.5))
     assert route.points[0, 0, :2] == pytest.approx((snap.estimate.x, snap.estimate.y), abs=1e-4)
+
+
+def test_a_venue_is_shown_one_level_at_a_time_the_persons_or_the_chosen_one() -> None:
+    from app.simulation.simulator import SimulationConfig
+    from app.simulation.venue import VENUE_NAME, venue_legs, venue_map
+    from app.simulation.venue_walk import simulate_venue
+
+    venue = venue_map()
+    manager = SessionManager({VENUE_NAME: venue}, make_settings(), Metrics())
+    view = LiveView(manager, port=free_port(), max_rate_hz=50)
+
+    async def main() -> None:
+        view.start()
+        try:
+            assert view.controls is not None
+            names = ("Ground Floor", "First Floor", "Second Floor")
+            assert tuple(view.controls.level.options) == ("(the person's level)", *names)
+            scene = view.map_scene
+            assert scene is not None and scene.level_groups is not None
+            assert [g.visible for g in scene.level_groups] == [True, False, False]
+            s = await manager.create(
+                SessionSpec(map_name=VENUE_NAME, particles=3000, seed=2, share_view=True)
+            )
+            start, legs = venue_legs()
+            cfg = SimulationConfig(path=((0.0, 0.0),))
+            frames = simulate_venue(venue, start, legs[:3], cfg, np.random.default_rng(2))
+            for vf in frames:
+                f = vf.frame
+                await manager.process(
+                    s.id,
+                    FrameInput(
+                        odometry=f.odometry, detections=tuple(f.detections), altitude=vf.altitude
+                    ),
+                )
+            assert s.last_outcome is not None and s.last_outcome.level is not None
+            assert s.last_outcome.level.id == "L2"
+            view.watch(s.id)
+            assert view.refresh()
+            # The person's level: the Second Floor alone, framed from above.
+            assert [g.visible for g in scene.level_groups] == [False, False, True]
+            look = np.asarray(view.server.initial_camera.look_at)  # type: ignore[union-attr]
+            assert look[0] == pytest.approx(12.0 + 2 * venue.layout.pitch_m)
+            # A level chosen in the panel is shown whatever the person's.
+            view.choose_level("Ground Floor")
+            assert view.refresh()
+            assert [g.visible for g in scene.level_groups] == [True, False, False]
+        finally:
+            view.stop()
+            manager.close()
+
+    asyncio.run(main())
