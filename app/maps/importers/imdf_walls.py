@@ -102,6 +102,8 @@ def _tidy(lines: shapely.Geometry) -> shapely.Geometry:
 #: Segments within these of one another's direction and line are one line (dissolve).
 SAME_ANGLE_RAD = 2e-3
 SAME_LINE_M = 2e-3
+#: Parallel walls closer than this are told apart one pair at a time, metres.
+NEAR_LINE_M = 0.05
 
 
 def _clusters(values: NDArray[np.float64], gap: float) -> list[NDArray[np.int64]]:
@@ -111,52 +113,78 @@ def _clusters(values: NDArray[np.float64], gap: float) -> list[NDArray[np.int64]
     return np.split(order, cuts)
 
 
+def _lines(a: NDArray[np.float64], b: NDArray[np.float64]) -> list[NDArray[np.int64]]:
+    """Groups of the segments a -> b (about parallel) that lie on one line: each
+    shorter segment's ends within ``SAME_LINE_M`` of a longer one's line, chained."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    d = b - a
+    length = np.hypot(d[:, 0], d[:, 1])
+    n = np.column_stack([-d[:, 1], d[:, 0]]) / length[:, None]
+    # Row i's line, column j's ends: |(end_j - a_i) . n_i|.
+    off_a = np.abs(np.einsum("ijk,ik->ij", a[None, :, :] - a[:, None, :], n))
+    off_b = np.abs(np.einsum("ijk,ik->ij", b[None, :, :] - a[:, None, :], n))
+    on = (off_a <= SAME_LINE_M) & (off_b <= SAME_LINE_M) & (length[:, None] >= length[None, :])
+    rows, cols = np.nonzero(on)
+    graph = coo_matrix((np.ones(rows.size), (rows, cols)), shape=(a.shape[0],) * 2)
+    count, label = connected_components(graph, directed=False)
+    return [np.flatnonzero(label == k) for k in range(count)]
+
+
+def _merge(seg: NDArray[np.float64], group: NDArray[np.int64]) -> list[NDArray[np.float64]]:
+    """The group's segments (one line) with overlapping spans joined along its longest."""
+    a, b = seg[group, 0:2], seg[group, 2:4]
+    length = np.hypot(*(b - a).T)
+    ref = int(np.argmax(length))
+    u = (b[ref] - a[ref]) / length[ref]
+    lo = np.minimum(a @ u, b @ u)
+    hi = np.maximum(a @ u, b @ u)
+    base = a[ref] - (a[ref] @ u) * u
+    spans = sorted(zip(lo.tolist(), hi.tolist(), group.tolist(), strict=True))
+    run = [spans[0]]
+    for span in spans[1:]:
+        if span[0] < run[-1][1] - MIN_SEGMENT_M:  # overlaps the run: extend it
+            last = run[-1]
+            run[-1] = (last[0], max(last[1], span[1]), -1)
+        else:
+            run.append(span)
+    return [
+        seg[member : member + 1] if member >= 0 else np.r_[base + s0 * u, base + s1 * u][None]
+        for s0, s1, member in run
+    ]
+
+
 def dissolve(seg: NDArray[np.float64]) -> NDArray[np.float64]:
     """Collinear segments that overlap, as one (rows x1, y1, x2, y2).
 
-    Segments whose directions lie within ``SAME_ANGLE_RAD`` and whose lines lie within
-    ``SAME_LINE_M`` of one another (chained, in sorted order: no rounding boundary
-    splits two such) are one line; along it, overlapping spans become one segment on
-    the group's longest member's line. A segment that overlaps none is kept as it was.
+    Segments are about parallel when their directions lie within ``SAME_ANGLE_RAD`` of
+    one another (chained in sorted order, so no rounding boundary parts two), then
+    near one another's line within ``NEAR_LINE_M`` (measured from their middle), and
+    on one line when a shorter one's ends lie within ``SAME_LINE_M`` of a longer one's
+    line (tested pair by pair: a short segment's direction is uncertain, the longer
+    one's line is not). Along a line, overlapping spans become one segment on the
+    longest member's line; a segment that overlaps none is kept as it was.
     """
     if seg.shape[0] < 2:
         return seg
-    a, b = seg[:, 0:2], seg[:, 2:4]
-    d = b - a
-    length = np.hypot(d[:, 0], d[:, 1])
+    d = seg[:, 2:4] - seg[:, 0:2]
     ang = np.mod(np.arctan2(d[:, 1], d[:, 0]), np.pi)
     # Directions just below pi are those just above 0.
     ang = np.where(ang > np.pi - SAME_ANGLE_RAD, ang - np.pi, ang)
     out = []
     for by_angle in _clusters(ang, SAME_ANGLE_RAD):
-        # Each segment's own line, its offset measured from the cluster's middle (far
-        # from the map's origin a small angle would move it by many millimetres).
-        centre = a[by_angle].mean(axis=0)
-        normal = np.column_stack([-np.sin(ang[by_angle]), np.cos(ang[by_angle])])
-        offset = np.sum((a[by_angle] - centre) * normal, axis=1)
-        for k in _clusters(offset, SAME_LINE_M):
-            group = by_angle[k]
-            if group.size == 1:
-                out.append(seg[group])
+        mid = 0.5 * (seg[by_angle, 0:2] + seg[by_angle, 2:4])
+        mean = float(np.mean(ang[by_angle]))
+        normal = np.array([-np.sin(mean), np.cos(mean)])
+        offset = (mid - mid.mean(axis=0)) @ normal
+        for near in _clusters(offset, NEAR_LINE_M):
+            members = by_angle[near]
+            if members.size == 1:
+                out.append(seg[members])
                 continue
-            ref = group[np.argmax(length[group])]
-            u = d[ref] / length[ref]
-            lo = np.minimum(a[group] @ u, b[group] @ u)
-            hi = np.maximum(a[group] @ u, b[group] @ u)
-            base = a[ref] - (a[ref] @ u) * u
-            spans = sorted(zip(lo.tolist(), hi.tolist(), group.tolist(), strict=True))
-            run = [spans[0]]
-            for span in spans[1:]:
-                if span[0] < run[-1][1] - MIN_SEGMENT_M:  # overlaps the run: extend it
-                    last = run[-1]
-                    run[-1] = (last[0], max(last[1], span[1]), -1)
-                else:
-                    run.append(span)
-            for s0, s1, member in run:
-                if member >= 0:
-                    out.append(seg[member : member + 1])
-                else:
-                    out.append(np.r_[base + s0 * u, base + s1 * u][None])
+            for line in _lines(seg[members, 0:2], seg[members, 2:4]):
+                out += _merge(seg, members[line])
     return np.vstack(out)
 
 
