@@ -120,12 +120,14 @@ class GuidanceSpeaker:
         self._arrived = False
         self._step = None
 
-    def no_way(self, target: str, now: float) -> str:
-        """Located, but no walkable way leads from here to ``target`` (said now and then)."""
+    def no_way(self, target: str, now: float, step_free: bool = False) -> str:
+        """Located, but no walkable way (no step-free one, with ``step_free``) leads from
+        here to ``target`` (said now and then)."""
         self._said_at = self._clock = self._where = None
         if self._finding_at is None or not 0 <= now - self._finding_at < FINDING_REPEAT_S:
             self._finding_at = now
-            return f"I cannot find a way from here to {target}."
+            way = "a step-free way" if step_free else "a way"
+            return f"I cannot find {way} from here to {target}."
         return ""
 
     def update(

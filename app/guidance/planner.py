@@ -303,7 +303,8 @@ class Plan:
                 relax = float(np.hypot(*(self._centres(np.array([cell]))[0] - start))) + self.res
             assert cell is not None  # reached, or snapped onto a reachable cell above
             return self._route(layer, start, int(cell), relax)
-        raise Unreachable(f"no walkable path from here to {self.target.name}")
+        way = "step-free path (lifts and ramps only)" if self.target.step_free else "walkable path"
+        raise Unreachable(f"no {way} from here to {self.target.name}")
 
     def _route(self, layer: _Layer, start: NDArray[np.float64], cell: int, relax: float) -> Route:
         chain = [int(layer.node[cell])]

@@ -99,8 +99,11 @@ def test_step_free_takes_the_lift() -> None:
     assert directions(g).startswith("The elevator up to the First Floor: go ")
     # A plan without step_free is another plan (cached apart).
     assert plan is not plan_for(VENUE, DestinationSpec("region", "Bakery"))
-    # Without the lift nothing step-free leads up.
-    with pytest.raises(Unreachable):
+    # Without the lift nothing step-free leads up, and the speaker says so.
+    assert GuidanceSpeaker().no_way("Bakery", 0.0, step_free=True) == (
+        "I cannot find a step-free way from here to Bakery."
+    )
+    with pytest.raises(Unreachable, match=r"no step-free path \(lifts and ramps only\)"):
         no_lift = _without({LIFT})
         guide(plan_for(no_lift, DestinationSpec("region", "Bakery", step_free=True)),
               *ENTRANCE_HALL, 0.0, "L0")  # fmt: skip
