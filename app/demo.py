@@ -18,12 +18,15 @@ from typing import Any
 import numpy as np
 
 from app.localization.compass import CompassReading
+from app.localization.floors import AltitudeReading
 from app.localization.types import Odometry
 from app.maps.geometry import wrap_angle
 from app.service.errors import LimitReached, SessionNotFound
 from app.service.sessions import SessionManager
 from app.service.types import FrameInput, SensorSpec, SessionSpec
-from app.simulation.simulator import SimFrame, simulate
+from app.simulation.simulator import SimFrame, SimulationConfig, simulate
+from app.simulation.venue_demo import demo_legs
+from app.simulation.venue_walk import simulate_venue
 from app.simulation.walks import demo_config
 
 log = logging.getLogger("bearings.demo")
@@ -42,9 +45,11 @@ class DemoSettings:
     max_duration_s: float | None = None  # end the walk (and its session) after this long
 
 
-def frame_input_of(frame: SimFrame) -> FrameInput:
-    """A simulated frame as the service takes it (the ground truth rides along for the view)."""
+def frame_input_of(frame: SimFrame, altitude: AltitudeReading | None = None) -> FrameInput:
+    """A simulated frame as the service takes it (the ground truth rides along for the
+    view), with a venue walk's barometer reading."""
     return FrameInput(
+        altitude=altitude,
         timestamp=frame.t,
         odometry=frame.odometry,
         detections=tuple(frame.detections),
@@ -76,6 +81,8 @@ class DemoWalk:
         self._rng = np.random.default_rng(settings.seed)
         self._task: asyncio.Task[None] | None = None
         self.finished = False
+        #: A venue walk's barometer readings, frame by frame (empty on one level).
+        self._altitudes: list[AltitudeReading | None] = []
 
     def kidnap(self) -> None:
         """Carry the person elsewhere at the next frame (no odometry for that frame)."""
@@ -97,6 +104,13 @@ class DemoWalk:
     def _frames(self) -> list[SimFrame]:
         s = self.settings
         semantic_map = self.manager.maps[s.map_name]
+        if semantic_map.layout.has_levels:  # a walk with a ride (app.simulation.venue_demo)
+            start, legs = demo_legs(semantic_map, self._rng)
+            cfg = SimulationConfig(path=((0.0, 0.0),), fov_deg=s.fov_deg, random_loss=s.missing)
+            walk = simulate_venue(semantic_map, start, legs, cfg, self._rng)
+            self._altitudes = [vf.altitude for vf in walk]
+            return [vf.frame for vf in walk]
+        self._altitudes = []
         cfg = demo_config(
             semantic_map, self._rng, fov_deg=s.fov_deg, occlusion=s.occlusion, missing=s.missing
         )
@@ -106,6 +120,7 @@ class DemoWalk:
         frames = self._frames()
         start = int(self._rng.integers(len(frames) // 3, len(frames)))
         rest = frames[start:]
+        self._altitudes = self._altitudes[start:]
         return [replace(rest[0], odometry=None), *rest[1:]]
 
     async def run(self) -> None:
@@ -149,7 +164,8 @@ class DemoWalk:
                 turn = float(wrap_angle(frames[0].truth.theta_rad - last.theta_rad))
                 frames[0] = replace(frames[0], odometry=Odometry(0.0, 0.0, turn))
             try:
-                await self.manager.process(session_id, frame_input_of(frames[i]))
+                altitude = self._altitudes[i] if i < len(self._altitudes) else None
+                await self.manager.process(session_id, frame_input_of(frames[i], altitude))
             except (SessionNotFound, LimitReached):
                 log.info("demo session ended (or the service is restarting); demo walk stops")
                 return

@@ -14,8 +14,11 @@ from app.api.convert import camera_of
 from app.api.deps import ManagerDep
 from app.api.errors import error_responses
 from app.api.schemas import CameraIn
+from app.maps.model import SemanticMap
 from app.service.errors import UnknownMap
-from app.simulation.simulator import simulate
+from app.simulation.simulator import SimulationConfig, simulate
+from app.simulation.venue_demo import demo_legs
+from app.simulation.venue_walk import simulate_venue
 from app.simulation.walks import demo_config
 from app.validation import Finite, Integer, StrictInput
 
@@ -44,13 +47,17 @@ class SimulationRequest(StrictInput):
     responses=error_responses(400, 404, 413, 422),
 )
 async def simulations(body: SimulationRequest, manager: ManagerDep) -> dict[str, object]:
-    """Frames in the ``Frame`` format (plus ``truth``) for a client to stream to a session."""
+    """Frames in the ``Frame`` format (plus ``truth``) for a client to stream to a session;
+    on a map with levels, a walk with a ride between levels, with ``altitude`` (and
+    without ``truth``)."""
     if body.map not in manager.maps:
         raise UnknownMap(body.map, sorted(manager.maps))
     semantic_map = manager.maps[body.map]
 
     def make() -> list[dict[str, object]]:
         rng = np.random.default_rng(body.seed)
+        if semantic_map.layout.has_levels:
+            return venue_frames(semantic_map, body, rng)
         cfg = demo_config(
             semantic_map,
             rng,
@@ -66,6 +73,34 @@ async def simulations(body: SimulationRequest, manager: ManagerDep) -> dict[str,
 
     frames = await asyncio.to_thread(make)
     return {"map": body.map, "rate_hz": 5.0, "frames": frames}
+
+
+def venue_frames(
+    semantic_map: SemanticMap, body: SimulationRequest, rng: np.random.Generator
+) -> list[dict[str, object]]:
+    """A walk through a venue with a ride between levels (app.simulation.venue_demo),
+    its frames carrying the barometer's altitude. Without ``truth``: the simulator's
+    truth is in the filter's plane, not the file's frame."""
+    start, legs = demo_legs(semantic_map, rng)
+    cfg = SimulationConfig(
+        path=((0.0, 0.0),),
+        fov_deg=body.fov_deg,
+        random_loss=body.missing,
+        false_rate=body.false_rate,
+        bearing_noise_deg=body.bearing_noise_deg,
+    )
+    camera = camera_of(body.camera)
+    out = []
+    for vf in simulate_venue(semantic_map, start, legs, cfg, rng):
+        frame = vf.frame.to_contract(camera)
+        del frame["truth"]
+        if vf.altitude is not None:
+            frame["altitude"] = {
+                "relative_m": round(vf.altitude.relative_m, 3),
+                "std_m": vf.altitude.std_m,
+            }
+        out.append(frame)
+    return out
 
 
 @router.get("/view", summary="Where the live viser view is served")
