@@ -135,7 +135,8 @@ class Session:
             guidance = guide(self.destination, estimate.x, estimate.y, estimate.theta_rad)
         except Unreachable as exc:
             warnings.append(f"guidance: {exc}")
-            return None, self.speaker.no_way(self.destination.target.name, now)
+            target = self.destination.target
+            return None, self.speaker.no_way(target.name, now, target.step_free)
         return guidance, self.speaker.update(guidance, True, now, estimate.x, estimate.y)
 
     def __post_init__(self) -> None:

@@ -41,8 +41,14 @@ def _path(
         if float(np.hypot(*(p - end))) < 4.0:
             continue
         a, b = (end, p) if away else (p, end)
+        # A point destination on a venue is in its level's frame, with the level.
+        file_xy, on_level = layout.from_plane(b[None])
+        level_id = layout.levels[int(on_level[0])].id
+        to = DestinationSpec(
+            "point", x=float(file_xy[0, 0]), y=float(file_xy[0, 1]), level=level_id
+        )
         try:
-            plan = plan_for(semantic_map, DestinationSpec("point", x=float(b[0]), y=float(b[1])))
+            plan = plan_for(semantic_map, to)
             route = plan.route(float(a[0]), float(a[1]))
         except (Unreachable, ValueError):
             continue

@@ -179,3 +179,15 @@ def test_the_evidence_search_keeps_no_alternative_in_another_floors_lift_car() -
     assert tracker.place_allowed(1.5 + 2 * PITCH, 1.5)  # the carried level's car
     assert not tracker.place_allowed(1.5 + PITCH, 1.5)  # the First Floor's car
     assert tracker.place_allowed(6.0 + PITCH, 11.0)  # the First Floor's hall: may be
+
+
+def test_without_a_barometer_a_pose_in_a_connector_is_between_floors() -> None:
+    tracker = FloorTracker(VENUE)
+    x, y = particles(1.5, 1.5, 0, 10)
+    tracker.apply(x, y, np.zeros(x.size), None, np.random.default_rng(0))
+    assert tracker.blind
+    assert tracker.between_floors(1.5, 1.5)  # in the lift car: any floor
+    assert not tracker.between_floors(6.0, 11.0)  # in the hall
+    # With a barometer at rest, the lift car is a place like any other.
+    tracker.apply(x, y, np.zeros(x.size), AltitudeReading(3.0), np.random.default_rng(0))
+    assert not tracker.blind and not tracker.between_floors(1.5, 1.5)
