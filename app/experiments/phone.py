@@ -104,6 +104,7 @@ CONDITIONS: dict[str, Condition] = {
     "vio-pinhole66": Condition(PINHOLE_FOV_DEG, vio_phone(), pinhole=True),
     "pdr-360": Condition(360.0, pdr_phone()),
     "pdr-pinhole66": Condition(PINHOLE_FOV_DEG, pdr_phone(), pinhole=True),
+    "pdr-270": Condition(270.0, pdr_phone()),
     "vio-missed30-270": Condition(270.0, vio_phone(), miss_prob=0.3),
     "vio-stale-360": Condition(360.0, vio_phone(stale=StaleMap())),
     "known-start-pinhole66": Condition(
@@ -158,8 +159,8 @@ EXTRA: dict[str, tuple[str, ...]] = {
         *(f"vio-360-without-{name}" for name in LEAVE_ONE_OUT),
         "vio-stale-360",
     ),
-    "door_corridor": ("vio-missed30-270",),
-    "two_wing_office": (),
+    "door_corridor": ("vio-missed30-270", "pdr-270"),
+    "two_wing_office": ("pdr-270",),
 }
 #: The quick run (development and the test): few scenarios, short walks.
 QUICK = (
