@@ -26,7 +26,12 @@ from app.config import Settings
 from app.feedback import Narrator
 from app.feedback.guidance import GuidanceSpeaker
 from app.guidance import DestinationSpec, Plan, plan_for
-from app.localization.config import ODOMETRY_NOISE, REAL_DETECTOR_TEMPER, FilterConfig
+from app.localization.config import (
+    ODOMETRY_NOISE,
+    REAL_DETECTOR_FIT_BIAS_DEG,
+    REAL_DETECTOR_TEMPER,
+    FilterConfig,
+)
 from app.localization.filter import ParticleFilter
 from app.localization.floors import spread_over_levels
 from app.localization.types import InitialPose
@@ -297,6 +302,7 @@ class SessionManager:
             fov_centre_deg=0.0 if camera is None else camera.fov_centre_deg,
             class_error=sensor.class_error,
             evidence_temper=REAL_DETECTOR_TEMPER,
+            fit_bias_deg=REAL_DETECTOR_FIT_BIAS_DEG,
             trans_noise_frac=ODOMETRY_NOISE[request.odometry_source][0],
             rot_noise_frac=ODOMETRY_NOISE[request.odometry_source][1],
         )
