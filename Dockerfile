@@ -16,10 +16,12 @@ RUN useradd --create-home --uid 10001 bearings
 WORKDIR /srv/bearings
 
 # A regular (non-editable) install of the wheel: the bundled maps and the demo page
-# travel inside the package (app/resources), so the source folder is not needed at run
-# time and is removed. The numba cache goes to NUMBA_CACHE_DIR.
+# (maps/ and static/ at the top level) travel inside the package, so the source folder
+# is not needed at run time and is removed. The numba cache goes to NUMBA_CACHE_DIR.
 COPY pyproject.toml README.md LICENSE ./
 COPY app ./app
+COPY maps ./maps
+COPY static ./static
 RUN pip install . && rm -rf /srv/bearings/* && mkdir -p /tmp/numba-cache \
     && chown bearings:bearings /tmp/numba-cache
 

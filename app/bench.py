@@ -20,12 +20,14 @@ from app.localization.config import FilterConfig
 from app.localization.filter import ParticleFilter, warm_up
 from app.localization.types import Detection, Odometry
 from app.maps.model import SemanticMap, parse_map
+from app.maps.prepare import ensure_prepared
 
 CLASSES = ("door", "window", "table")
 
 
 def generated_map(n_objects: int, seed: int = 0) -> SemanticMap:
-    """A 20 m x 12 m floor split into 4 x 2 rooms, with ``n_objects`` over 3 classes."""
+    """A 20 m x 12 m floor split into 4 x 2 rooms, with ``n_objects`` over 3 classes,
+    prepared (its grids built)."""
     rng = np.random.default_rng(seed)
     w, h = 20.0, 12.0
     walls = [
@@ -49,7 +51,7 @@ def generated_map(n_objects: int, seed: int = 0) -> SemanticMap:
         }
         for i in range(n_objects)
     ]
-    return parse_map({"name": "bench", "walls": walls, "objects": objects})
+    return ensure_prepared(parse_map({"name": "bench", "walls": walls, "objects": objects}))
 
 
 def cpu_model() -> str:

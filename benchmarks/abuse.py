@@ -32,7 +32,7 @@ import numpy as np
 import websockets
 
 from app.maps.check import load_map
-from app.maps.model import bundled_maps_dir
+from app.resources import bundled_maps_dir
 from app.simulation.scenarios import paper_config
 from app.simulation.simulator import simulate
 from benchmarks.load import wait_until_healthy

@@ -23,20 +23,23 @@ from fastapi import FastAPI
 from app.config import Settings
 from app.maps.check import load_map
 from app.maps.model import SemanticMap, parse_map
+from app.maps.prepare import ensure_prepared
 from app.resources import bundled_maps_dir
 from app.server import BearingsServer, uvicorn_config
 
 
 # ---------------------------------------------------------------------------- maps
 def room(objects: list[dict], walls: list[dict] | None = None, name: str = "room") -> SemanticMap:
-    """A 6 m x 4 m walled room with the given objects (and extra walls)."""
+    """A 6 m x 4 m walled room with the given objects (and extra walls), prepared."""
     outline = [
         {"x1": 0, "y1": 0, "x2": 6, "y2": 0},
         {"x1": 6, "y1": 0, "x2": 6, "y2": 4},
         {"x1": 6, "y1": 4, "x2": 0, "y2": 4},
         {"x1": 0, "y1": 4, "x2": 0, "y2": 0},
     ]
-    return parse_map({"name": name, "walls": outline + (walls or []), "objects": objects})
+    return ensure_prepared(
+        parse_map({"name": name, "walls": outline + (walls or []), "objects": objects})
+    )
 
 
 def paper_office() -> SemanticMap:

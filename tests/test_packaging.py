@@ -1,11 +1,14 @@
-"""The wheel works installed, not only from a checkout.
+"""Both install kinds serve the bundled maps and the demo page.
 
-Builds the wheel from pyproject.toml, installs it into a fresh virtual environment
-and runs ``bearings serve`` from an unrelated directory: the bundled maps and the
-demo page must come from the installed package. To stay fast the venv borrows the
-already installed dependencies (a path file pointing at this interpreter's
-site-packages, which, unlike ``--system-site-packages``, also works when the tests run
-inside a venv); the package itself is only the wheel's copy.
+The maps and the page live at the top of the repository (``maps/``, ``static/``); the
+wheel carries them inside the package. Builds the wheel from pyproject.toml, installs it
+into a fresh virtual environment and runs ``bearings serve`` from an unrelated
+directory: the maps and the page must come from the installed package. An editable
+install into another fresh venv must serve the checkout's own folders. To stay fast
+each venv borrows the already installed dependencies (a path file pointing at this
+interpreter's site-packages, which, unlike ``--system-site-packages``, also works when
+the tests run inside a venv); the package itself is only the wheel's copy or the
+checkout.
 """
 
 from __future__ import annotations
@@ -23,7 +26,7 @@ from pathlib import Path
 
 import pytest
 
-from app.resources import bundled_maps_dir
+from app.resources import bundled_maps_dir, static_dir
 from tests.helpers import free_port
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -49,7 +52,7 @@ def test_wheel_holds_the_resources_the_type_marker_and_the_licence(wheel: Path) 
     assert "app/resources/static/index.html" in names
     assert "app/py.typed" in names
     assert any(n.endswith(".dist-info/licenses/LICENSE") for n in names)
-    assert not any(n.startswith(("tests/", "benchmarks/")) for n in names)
+    assert not any(n.startswith(("tests/", "benchmarks/", "maps/", "static/")) for n in names)
 
 
 def get(url: str) -> tuple[int, bytes]:
@@ -57,8 +60,8 @@ def get(url: str) -> tuple[int, bytes]:
         return r.status, r.read()
 
 
-@pytest.mark.ci  # about 80 s: a fresh install compiles every kernel into an empty cache
-def test_installed_wheel_serves_bundled_maps_and_the_demo_page(wheel: Path, tmp_path: Path) -> None:
+def fresh_venv(tmp_path: Path) -> Path:
+    """A venv without pip that sees this interpreter's dependencies; its python."""
     venv = tmp_path / "venv"
     subprocess.run([sys.executable, "-m", "venv", "--without-pip", str(venv)], check=True)
     python = venv / "bin" / "python"
@@ -74,40 +77,40 @@ def test_installed_wheel_serves_bundled_maps_and_the_demo_page(wheel: Path, tmp_
     # an editable install of this checkout, are not processed).
     paths = {sysconfig.get_paths()["purelib"], sysconfig.get_paths()["platlib"]}
     (site / "_bearings_test_deps.pth").write_text("\n".join(sorted(paths)) + "\n")
-    pip = [sys.executable, "-m", "pip", "--python", str(python)]
+    return python
+
+
+def install(python: Path, *args: str) -> None:
     subprocess.run(
-        [*pip, "install", "-q", "--no-deps", str(wheel)],
+        [sys.executable, "-m", "pip", "--python", str(python), "install", "-q", "--no-deps", *args],
         check=True,
         timeout=300,
         capture_output=True,
     )
-    elsewhere = tmp_path / "elsewhere"
-    elsewhere.mkdir()
-    env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "VIRTUAL_ENV")}
-    env["NUMBA_CACHE_DIR"] = str(tmp_path / "numba-cache")
-    where = subprocess.run(
-        [str(python), "-c", "import app; print(app.__file__)"],
-        cwd=elsewhere,
-        env=env,
-        check=True,
-        capture_output=True,
-        text=True,
-    ).stdout.strip()
-    assert Path(where).is_relative_to(venv), f"imported the checkout, not the wheel: {where}"
 
+
+def run_python(python: Path, code: str, cwd: Path, env: dict[str, str]) -> str:
+    done = subprocess.run(
+        [str(python), "-c", code], cwd=cwd, env=env, check=True, capture_output=True, text=True
+    )
+    return done.stdout.strip()
+
+
+def serves_maps_and_page(bearings: Path, cwd: Path, env: dict[str, str], log_path: Path) -> None:
+    """Start ``bearings serve`` there; every bundled map is listed and / is the page."""
     port = free_port()
-    log = (tmp_path / "serve.log").open("w")
+    log = log_path.open("w")
     server = subprocess.Popen(
-        [str(venv / "bin" / "bearings"), "serve", "--no-viser", "--port", str(port)],
-        cwd=elsewhere,
+        [str(bearings), "serve", "--no-viser", "--port", str(port)],
+        cwd=cwd,
         env=env,
         stdout=log,
         stderr=subprocess.STDOUT,
     )
     try:
-        deadline = time.time() + 240  # start-up compiles the kernels into an empty cache
+        deadline = time.time() + 240  # start-up may compile the kernels into an empty cache
         while True:
-            assert server.poll() is None, (tmp_path / "serve.log").read_text()
+            assert server.poll() is None, log_path.read_text()
             try:
                 status, body = get(f"http://127.0.0.1:{port}/maps")
                 break
@@ -116,11 +119,64 @@ def test_installed_wheel_serves_bundled_maps_and_the_demo_page(wheel: Path, tmp_
                 time.sleep(0.5)
         assert status == 200
         served = {m["name"] for m in json.loads(body)}
-        assert {p.stem for p in bundled_maps_dir().glob("*.json")} <= served
+        assert {p.stem for p in (ROOT / "maps").glob("*.json")} <= served
         status, page = get(f"http://127.0.0.1:{port}/")
         assert status == 200
-        assert page == (bundled_maps_dir().parent / "static" / "index.html").read_bytes()
+        assert page == (ROOT / "static" / "index.html").read_bytes()
     finally:
         server.terminate()
         server.wait(timeout=30)
         log.close()
+
+
+def clean_env(**extra: str) -> dict[str, str]:
+    env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "VIRTUAL_ENV")}
+    return {**env, **extra}
+
+
+def test_a_checkout_finds_the_top_level_folders() -> None:
+    """No copy inside app/: the tests (a checkout) read maps/ and static/ themselves."""
+    assert bundled_maps_dir() == ROOT / "maps" and static_dir() == ROOT / "static"
+    assert not (ROOT / "app" / "resources" / "maps").exists()
+    assert not (ROOT / "app" / "resources" / "static").exists()
+
+
+@pytest.mark.ci  # about 80 s: a fresh install compiles every kernel into an empty cache
+def test_installed_wheel_serves_bundled_maps_and_the_demo_page(wheel: Path, tmp_path: Path) -> None:
+    python = fresh_venv(tmp_path)
+    install(python, str(wheel))
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    env = clean_env(NUMBA_CACHE_DIR=str(tmp_path / "numba-cache"))
+    where = run_python(python, "import app; print(app.__file__)", elsewhere, env)
+    assert Path(where).is_relative_to(tmp_path / "venv"), f"imported the checkout: {where}"
+    folders = run_python(
+        python,
+        "from app.resources import bundled_maps_dir as m, static_dir as s; print(m(), s())",
+        elsewhere,
+        env,
+    )
+    site_app = Path(where).parent
+    assert folders == f"{site_app / 'resources' / 'maps'} {site_app / 'resources' / 'static'}"
+    serves_maps_and_page(python.parent / "bearings", elsewhere, env, tmp_path / "serve.log")
+
+
+@pytest.mark.ci  # builds an editable wheel in an isolated environment (hatchling from PyPI)
+def test_editable_install_serves_the_checkouts_maps_and_page(tmp_path: Path) -> None:
+    """An editable install has no copy of the folders (force-include does not reach it):
+    app/resources finds the checkout's own, and the server serves them."""
+    python = fresh_venv(tmp_path)
+    install(python, "-e", str(ROOT))
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    env = clean_env()  # the checkout's numba cache: the kernels are compiled already
+    where = run_python(python, "import app; print(app.__file__)", elsewhere, env)
+    assert Path(where) == ROOT / "app" / "__init__.py", f"not the checkout: {where}"
+    folders = run_python(
+        python,
+        "from app.resources import bundled_maps_dir as m, static_dir as s; print(m(), s())",
+        elsewhere,
+        env,
+    )
+    assert folders == f"{ROOT / 'maps'} {ROOT / 'static'}"
+    serves_maps_and_page(python.parent / "bearings", elsewhere, env, tmp_path / "serve.log")

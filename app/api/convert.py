@@ -29,7 +29,7 @@ from app.localization.compass import CompassReading
 from app.localization.floors import AltitudeReading
 from app.localization.types import Detection, InitialPose, Odometry, Pose
 from app.maps.geometry import wrap_deg
-from app.service.sessions import Session
+from app.service.session import Session
 from app.service.types import FrameInput, FrameOutcome, LevelRef, SensorSpec, SessionSpec
 
 
@@ -62,10 +62,12 @@ def session_spec(body: SessionCreate) -> SessionSpec:
             bearing_std_deg=s.bearing_std_deg,
             fov_deg=s.fov_deg,
             class_bearing_std_deg=dict(s.class_bearing_std_deg),
+            class_error=s.class_error,
         ),
         feedback=FeedbackOptions(fb.style, fb.units, fb.max_items),
         camera=camera_of(body.camera),
         share_view=body.share_view,
+        odometry_source=body.odometry.source,
         initial_level=level,
     )
 
@@ -124,6 +126,7 @@ def frame_input(frame: Frame, camera: Camera | None = None) -> FrameInput:
         describe=frame.describe,
         truth=truth,
         heading=heading,
+        detections_age_s=frame.detections_age_s,
         altitude=altitude,
     )
 
@@ -239,6 +242,7 @@ def frame_result_data(outcome: FrameOutcome) -> dict[str, Any]:
                 }
                 for i in feedback.items
             ],
+            "suggestion": feedback.suggestion,
         },
         "warnings": list(outcome.warnings),
         "guidance": _guidance_data(outcome.guidance),

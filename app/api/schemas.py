@@ -136,6 +136,13 @@ class Frame(StrictInput):
     heading: HeadingIn | None = Field(
         None, description="the phone compass's heading, or null (heavy-tailed: may be off)"
     )
+    detections_age_s: Finite = Field(
+        0.0,
+        ge=0.0,
+        le=2.0,
+        description="how long before the end of this frame's odometry the detections were "
+        "captured (camera and detector latency), seconds; they are weighed at that pose",
+    )
     altitude: AltitudeIn | None = Field(
         None, description="the phone barometer's relative altitude, or null (maps with levels)"
     )
@@ -151,6 +158,23 @@ class SensorSettings(StrictInput):
     class_bearing_std_deg: dict[
         str, Annotated[float, Field(gt=0, le=90, allow_inf_nan=False, strict=True)]
     ] = Field(default_factory=dict, description="addition: per-class bearing std, degrees")
+    class_error: Finite = Field(
+        0.03,
+        ge=0.0,
+        le=0.5,
+        description="probability that a detection's class is not the object's (confusion)",
+    )
+
+
+class OdometrySettings(StrictInput):
+    """Where the frames' odometry comes from: tightens the motion model when known."""
+
+    source: Literal["vio", "pdr", "unknown"] = Field(
+        "unknown",
+        description="vio: visual-inertial tracking (scale within about 2 %, heading drift a "
+        "few degrees a minute); pdr: pedestrian dead reckoning (step length off by up to "
+        "about 10 %, heading drift up to about 10 degrees a minute); unknown: not said",
+    )
 
 
 class FeedbackSettings(StrictInput):
@@ -222,6 +246,7 @@ class SessionCreate(StrictInput):
         None, description="known start; null starts with no knowledge (global localization)"
     )
     sensor: SensorSettings = Field(default_factory=SensorSettings)
+    odometry: OdometrySettings = Field(default_factory=OdometrySettings)
     feedback: FeedbackSettings = Field(default_factory=FeedbackSettings)
     camera: CameraIn | None = Field(
         None,
@@ -310,6 +335,11 @@ class FeedbackItemOut(_Out):
 class FeedbackOut(_Out):
     text: str = Field(description="what to speak now (may be empty)")
     items: list[FeedbackItemOut]
+    suggestion: Literal["turn", "walk"] | None = Field(
+        None,
+        description="while not located, what would help most: turn on the spot to see more, "
+        "or walk a few steps; null once located",
+    )
 
 
 class NextTurnOut(_Out):

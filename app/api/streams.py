@@ -67,6 +67,11 @@ class Stream:
         self._closed = asyncio.Event()
         #: Set when the service is shutting down: the stream waits for :meth:`close`.
         self.stopping = False
+        #: Messages taken in that are owed an answer, and answers sent: equal once the
+        #: stream has ended normally (a difference is logged: an answer was lost).
+        self.received = 0
+        self.answered = 0
+        self._drained = False  # the writer reached the end of the answers owed
 
     async def run(self) -> None:
         reader = self._reader = asyncio.create_task(self._read())
@@ -79,6 +84,12 @@ class Stream:
             await writer
         if self.stopping:
             await self._closed.wait()
+        if self._drained and self.received != self.answered:
+            log.warning(
+                "a stream ended with %d of %d messages unanswered",
+                self.received - self.answered,
+                self.received,
+            )
 
     def stop_reading(self) -> None:
         """Accept no more frames; the ones accepted are still answered."""
@@ -102,7 +113,13 @@ class Stream:
             self._closed.set()
 
     def _answer_now(self, text: str) -> None:
-        self._answers.put_nowait(text)
+        self._owe(text)
+
+    def _owe(self, answer: str | asyncio.Future[FrameOutcome]) -> None:
+        """One message taken in: its answer (text, or the future of its result) goes out in turn."""
+        self.received += 1
+        self.manager.metrics.stream_messages.inc()
+        self._answers.put_nowait(answer)
 
     async def _read(self) -> None:
         while True:
@@ -153,13 +170,14 @@ class Stream:
                 code, text = str(body.pop("code")), str(body.pop("message"))
                 self._answer_now(error_message(code, text, **body))
                 continue
-            self._answers.put_nowait(future)
+            self._owe(future)
 
     async def _write(self) -> None:
         cache: tuple[FrameOutcome, str] | None = None  # merged frames share one answer
         while True:
             item = await self._answers.get()
             if item is _END:
+                self._drained = True
                 return
             if isinstance(item, tuple):
                 _, code, reason = item
@@ -186,6 +204,8 @@ class Stream:
                         cache = (outcome, frame_result_json(outcome))
                     text = cache[1]
             await self.ws.send_text(text)
+            self.answered += 1
+            self.manager.metrics.stream_answers.inc()
             self._room.release()
 
 

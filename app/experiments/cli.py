@@ -33,7 +33,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--suite",
-        choices=("tables", "integrity", "building", "venue"),
+        choices=("tables", "integrity", "building", "phone", "venue"),
         default="tables",
         help="tables: the paper's Tables I-IV (default); integrity: the hard-cases suite "
         "(--quick: five scenarios, 2 seeds); building: a walk through the bundled two-wing "
@@ -43,8 +43,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--scenarios",
         default=None,
-        help="integrity only: comma-separated MAP or MAP/CONDITION (* for any map), e.g. "
-        "'symmetric_room,*/compass-180'",
+        help="integrity and phone: comma-separated MAP or MAP/CONDITION (* for any map), "
+        "e.g. 'symmetric_room,*/compass-180'",
     )
 
 
@@ -53,6 +53,8 @@ def run(args: argparse.Namespace) -> int:
         return _run_integrity(args)
     if args.suite == "building":
         return _run_building(args)
+    if args.suite == "phone":
+        return _run_phone(args)
     if args.suite == "venue":
         return _run_venue(args)
     tables = tuple(t.strip().upper() for t in args.tables.split(",") if t.strip())
@@ -122,6 +124,24 @@ def _run_building(args: argparse.Namespace) -> int:
     )  # fmt: skip
     print(building.markdown_table(rows))
     print(f"wrote {args.out / 'building.md'}, building.json and building.png")
+    return 0
+
+
+def _run_phone(args: argparse.Namespace) -> int:
+    from app.experiments import phone
+
+    seeds = min(args.seeds, 2) if args.quick else args.seeds
+    if seeds < 1 or args.particles < 100:
+        raise SystemExit("bearings experiments: need --seeds >= 1 and --particles >= 100")
+    try:
+        summary = phone.run(
+            args.out, seeds=seeds, particles=args.particles, workers=max(1, args.workers),
+            quick=args.quick, select=args.scenarios,
+        )  # fmt: skip
+    except ValueError as exc:
+        raise SystemExit(f"bearings experiments: {exc}") from None
+    print(phone.markdown_table(summary))
+    print(f"wrote {args.out / 'phone.md'}, phone.json and phone.png")
     return 0
 
 

@@ -35,9 +35,10 @@ from app.feedback.phrasing import (
     distance_phrase,
 )
 from app.localization.sensor import Observation
-from app.localization.types import Detection, Estimate
+from app.localization.types import Detection, Estimate, Odometry
 from app.maps.geometry import wrap_rad
 from app.maps.model import SemanticMap
+from app.maps.prepare import ensure_prepared
 
 #: Repeat an unchanged announcement after this long (seconds).
 REPEAT_AFTER_S = 60.0
@@ -49,6 +50,18 @@ MIN_ALTERNATIVE_WEIGHT = 0.1
 CERTAIN_STD_M = 0.25
 #: ... and above this protection radius (m): converged, but the belief a little wider.
 CERTAIN_PROTECTION_M = 1.0
+#: A suggestion (turn or walk) is spoken at most this often (seconds; docs/API.md).
+SUGGEST_EVERY_S = 10.0
+#: A camera narrower than this is turned to see more; a full turn on the spot (or a
+#: wider camera) has shown what there is to see from here: walking helps next.
+LOOK_AROUND_FOV_DEG = 300.0
+FULL_TURN_RAD = 2.0 * math.pi
+#: After walking this far (m) while not located, looking around is worth it again.
+WALK_SOME_M = 3.0
+SUGGESTION_WORDS = {
+    "turn": "Turn slowly on the spot to look around.",
+    "walk": "Walk a few steps to help me find where you are.",
+}
 
 
 @dataclass(frozen=True)
@@ -73,6 +86,8 @@ class FeedbackItem:
 class Feedback:
     text: str
     items: list[FeedbackItem] = field(default_factory=list)
+    #: While not located, what would help most: "turn", "walk", or None.
+    suggestion: str | None = None
 
 
 @dataclass
@@ -86,7 +101,7 @@ class Narrator:
     """Per-session narrator; remembers what was said to avoid repeating it."""
 
     def __init__(self, semantic_map: SemanticMap, options: FeedbackOptions | None = None) -> None:
-        self.map = semantic_map
+        self.map = ensure_prepared(semantic_map)  # its visibility grid, built now if need be
         self.options = options or FeedbackOptions()
         self._said: dict[tuple[object, ...], _Said] = {}
         self._region: str | None = None
@@ -95,6 +110,11 @@ class Narrator:
         self._ambiguity: tuple[str, ...] = ()
         self._objects_at: float | None = None
         self._class_index = {c: i for i, c in enumerate(semantic_map.classes)}
+        #: While not located: how far the person turned on the spot and walked since the
+        #: last look around, and when a suggestion was last spoken.
+        self._turned_rad = 0.0
+        self._walked_m = 0.0
+        self._suggested_at: float | None = None
 
     # ------------------------------------------------------------- checkpoints
     def checkpoint(self) -> dict[str, Any]:
@@ -109,6 +129,9 @@ class Narrator:
             "status_at": self._status_at,
             "ambiguity": list(self._ambiguity),
             "objects_at": self._objects_at,
+            "turned_rad": self._turned_rad,
+            "walked_m": self._walked_m,
+            "suggested_at": self._suggested_at,
         }
 
     def restore(self, state: Mapping[str, Any]) -> None:
@@ -121,6 +144,10 @@ class Narrator:
         self._status_at = state["status_at"]
         self._ambiguity = tuple(state["ambiguity"])
         self._objects_at = state["objects_at"]
+        # (checkpoints from before suggestions hold none of these)
+        self._turned_rad = float(state.get("turned_rad", 0.0))
+        self._walked_m = float(state.get("walked_m", 0.0))
+        self._suggested_at = state.get("suggested_at")
 
     # ------------------------------------------------------------------ public
     def update(
@@ -133,6 +160,7 @@ class Narrator:
         fov_deg: float = 360.0,
         fov_centre_deg: float = 0.0,
         observation: Observation | None = None,
+        odometry: Odometry | None = None,
     ) -> Feedback:
         """Feedback for one frame (see the module docstring for the rules).
 
@@ -143,10 +171,35 @@ class Narrator:
         """
         now = time.monotonic() if timestamp_s is None else float(timestamp_s)
         if estimate.converged:
+            self._turned_rad = self._walked_m = 0.0
+            self._suggested_at = None
             fov = (fov_deg, fov_centre_deg)
             return self._located(estimate, detections, now, describe, fov, observation)
         dets = [d for d in detections if d.score > 0 and d.cls in self.map.class_members]
-        return self._uncertain(estimate, dets, now, describe)
+        feedback = self._uncertain(estimate, dets, now, describe)
+        suggestion = self._suggest(odometry, fov_deg)
+        text = feedback.text
+        last = self._suggested_at
+        # (a time in the future, from another process's clock, counts as long ago)
+        if describe or last is None or not 0.0 <= now - last < SUGGEST_EVERY_S:
+            text = (
+                f"{text} {SUGGESTION_WORDS[suggestion]}" if text else SUGGESTION_WORDS[suggestion]
+            )
+            self._suggested_at = now
+        return Feedback(text, feedback.items, suggestion)
+
+    def _suggest(self, odometry: Odometry | None, fov_deg: float) -> str:
+        """What would help most while not located: turning on the spot until a narrow
+        camera has looked all around, else walking (until a few metres, then looking
+        around again)."""
+        if odometry is not None:
+            self._turned_rad += abs(odometry.turn_rad)
+            self._walked_m += math.hypot(odometry.forward_m, odometry.left_m)
+        if self._walked_m >= WALK_SOME_M:
+            self._turned_rad = self._walked_m = 0.0
+        if fov_deg < LOOK_AROUND_FOV_DEG and self._turned_rad < FULL_TURN_RAD:
+            return "turn"
+        return "walk"
 
     # ------------------------------------------------------------- not located
     def _uncertain(

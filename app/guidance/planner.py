@@ -29,6 +29,7 @@ from numpy.typing import NDArray
 from app.guidance.targets import DestinationSpec, Target, resolve
 from app.maps.geometry import points_in_polygon, segments_cross_walls, wrap_deg
 from app.maps.model import SemanticMap
+from app.maps.prepare import ensure_prepared
 
 #: Paths keep at least about this much room from walls where the map allows (metres).
 CLEARANCE_M = 0.3
@@ -96,7 +97,7 @@ class Plan:
     """
 
     def __init__(self, semantic_map: SemanticMap, target: Target) -> None:
-        self.map = semantic_map
+        self.map = ensure_prepared(semantic_map)  # its free space, built now if need be
         self.target = target
         fs = semantic_map.free_space
         self.res = fs.resolution_m
@@ -444,12 +445,10 @@ def plan_for(semantic_map: SemanticMap, spec: DestinationSpec) -> Plan:
     """
     target = resolve(semantic_map, spec)
     with _lock:
-        cache: OrderedDict[tuple[object, ...], Plan] | None = getattr(
-            semantic_map, "_guidance_plans", None
+        # The map keeps its plans (the latest CACHE_SIZE, by spec), so they go with it.
+        cache: OrderedDict[tuple[object, ...], Plan] = semantic_map.derived_value(
+            ("guidance_plans",), OrderedDict
         )
-        if cache is None:
-            cache = OrderedDict()
-            semantic_map._guidance_plans = cache  # type: ignore[attr-defined]
         plan = cache.get(spec.key)
         if plan is not None:
             cache.move_to_end(spec.key)

@@ -37,6 +37,10 @@ class FilterConfig:
     clutter: bool = True
     #: Probability that a detection is clutter (false positive), used for the floor.
     clutter_prob: float = 0.05
+    #: Probability that a detection's class is not its object's (detector confusion). A
+    #: confused detection is explained by no object of the class it names, so the model
+    #: counts it with the clutter: the floor's share is 1 - (1 - clutter)(1 - class error).
+    class_error: float = 0.0
     #: Augmented MCL with sensor resetting (w_slow / w_fast).
     recovery: bool = True
     alpha_slow: float = 0.02
@@ -64,6 +68,11 @@ class FilterConfig:
     #: Resample when the effective sample size falls below this fraction of N.
     resample_threshold: float = 0.5
 
+    @property
+    def floor_prob(self) -> float:
+        """Probability that a detection is explained by no object of its class."""
+        return 1.0 - (1.0 - self.clutter_prob) * (1.0 - self.class_error)
+
     def bearing_std_rad(self, cls: str) -> float:
         """The bearing standard deviation for one class, in radians."""
         return float(np.radians(self.class_bearing_std_deg.get(cls, self.bearing_std_deg)))
@@ -73,3 +82,13 @@ class FilterConfig:
         """The paper's model only: no visibility, no clutter floor, no recovery."""
         base = cls(visibility=False, clutter=False, recovery=False, adaptive=False, evidence=False)
         return replace(base, **overrides)
+
+
+#: Motion noise by odometry source (docs/API.md, ``SessionCreate.odometry``): the share of
+#: each motion (translation, turn) the noise may reach. VIO and an unknown source keep
+#: the defaults every suite was measured with; PDR's coarser steps get more.
+ODOMETRY_NOISE: dict[str, tuple[float, float]] = {
+    "vio": (0.1, 0.1),
+    "pdr": (0.15, 0.15),
+    "unknown": (0.1, 0.1),
+}

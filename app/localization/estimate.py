@@ -1,4 +1,4 @@
-"""An honest summary of the particle cloud: clusters, the best pose, and ``converged``.
+"""An honest summary of the particle cloud: its clusters and the best pose.
 
 A weighted mean of all particles is meaningless when the belief has several modes
 (a symmetric room gives mirror-image hypotheses; the mean between them is a place
@@ -10,16 +10,16 @@ where nobody is). So the cloud is split into clusters by greedy mode seeking:
 3. those particles form a hypothesis; remove them and repeat (up to three).
 
 The pose reported is the heaviest cluster's weighted mean (circular mean for the
-heading). ``converged`` is true only when that cluster holds at least
-``min_mass`` of the weight and is tight in position and heading.
+heading). :func:`estimate_pose` calls that pose converged when its cluster holds at
+least ``min_mass`` of the weight and is tight in position and heading; that is only the
+first condition: the ``converged`` a client is told, and the protection radius, are
+:mod:`~app.localization.convergence`'s. :func:`with_alternatives` joins the alternatives
+of :mod:`~app.localization.evidence` to the hypotheses.
 """
 
 from __future__ import annotations
 
-import math
-from collections.abc import Mapping
 from dataclasses import dataclass, replace
-from typing import Any
 
 import numpy as np
 from numba import njit
@@ -28,8 +28,6 @@ from numpy.typing import NDArray
 from app.localization.fastmath import FAST, sincos
 from app.localization.resampling import systematic_indexes
 from app.localization.types import Estimate, Hypothesis
-from app.maps.geometry import wrap_rad
-from app.state import from_plain
 
 
 @dataclass(frozen=True)
@@ -279,265 +277,6 @@ def estimate_pose(
         Hypothesis(h[1], h[2], h[3], h[0], float(np.hypot(h[4], h[5]))) for h in hyps
     )
     return Estimate(mx, my, mt, sx, sy, st, bool(converged), hypotheses, n, ess)
-
-
-@dataclass(frozen=True)
-class FitQuality:
-    """How well the estimated pose explains the recent detections (see the filter).
-
-    ``fit``: smoothed mean squared bearing residual (in stds) of the detections that an
-    object explains better than the clutter floor does; ``unexplained``: smoothed share
-    of detections the clutter floor explains better (false ones, or a wrong pose);
-    ``bad_frame``: this frame alone says the pose is wrong (most of at least three
-    detections unexplained).
-    """
-
-    fit: float
-    unexplained: float
-    bad_frame: bool = False
-    #: An object in clear view keeps going unreported (:mod:`~app.localization.unseen`).
-    contradicted: bool = False
-
-
-class ConvergenceGate:
-    """``converged`` with hysteresis: hard to gain, lost only for a real reason.
-
-    **Gained** when the heaviest cluster is tight and heavy (:func:`estimate_pose`) and
-    has stayed put (moving no more than the odometry allows plus ``tolerance_m``,
-    turning no more than ``tolerance_rad``) for ``frames`` consecutive frames, explains
-    what the camera sees (``fit`` at most ``gain_fit``, at most ``gain_unexplained`` of
-    the detections left to clutter), detections arrived in the last
-    ``gain_without_evidence`` frames, a global consistency search has run since the
-    cluster formed, and the alternatives it found hold at most ``gain_alternatives``
-    of the probability (:mod:`~app.localization.evidence`).
-
-    **Held** while the cluster stays reasonably heavy and tight (``hold_*``), does not
-    jump, still explains the detections (looser ``hold_fit`` and ``hold_unexplained``,
-    no frame that most detections contradict), dead reckoning has not lasted longer
-    than ``hold_without_evidence`` frames, the odometry has not broken off (a frame
-    without it after frames with it: the person may have been carried anywhere), and
-    the alternatives stay below ``hold_alternatives`` (counting those that survived
-    their probation). Only frames with detections count towards a light cluster
-    (frames without any leave freshly injected particles unweighed). A false detection
-    explained by clutter does not count against the estimate; a kidnap, a pose
-    drifting away from the evidence, or an alternative place gaining probability does.
-    """
-
-    gain_fit: float = 2.0
-    hold_fit: float = 4.0
-    gain_unexplained: float = 0.35
-    hold_unexplained: float = 0.6
-    gain_alternatives: float = 0.01
-    hold_alternatives: float = 0.05
-    #: 10 frames is 2 s at 5 frames/s; 75 frames is 15 s.
-    gain_without_evidence: int = 10
-    hold_without_evidence: int = 75
-    hold_mass: float = 0.6
-    hold_std_xy_m: float = 0.5
-    hold_std_theta_rad: float = float(np.radians(20.0))
-    hold_jump_m: float = 0.5
-    #: Frames in a row the cluster may stay lighter than ``hold_mass`` (a frame with a
-    #: single detection can lend freshly injected particles a passing share).
-    hold_light_frames: int = 3
-
-    def __init__(
-        self, frames: int = 5, tolerance_m: float = 0.3, tolerance_rad: float = np.radians(15.0)
-    ) -> None:
-        self.frames = frames
-        self.tolerance_m = tolerance_m
-        self.tolerance_rad = tolerance_rad
-        self.reset()
-
-    def reset(self) -> None:
-        self._streak = 0
-        self._last: Estimate | None = None
-        self._held = False
-        self._light = 0
-        self.lost_because: tuple[str, ...] = ()
-
-    def checkpoint(self) -> dict[str, Any]:
-        """The gate's memory (its last estimate as it is: frozen)."""
-        return {
-            "streak": self._streak,
-            "last": self._last,
-            "held": self._held,
-            "light": self._light,
-        }
-
-    def restore(self, state: Mapping[str, Any]) -> None:
-        self._streak = int(state["streak"])
-        self._last = from_plain(Estimate | None, state["last"])
-        self._held = bool(state["held"])
-        self._light = int(state["light"])
-
-    def confirm(
-        self,
-        raw: Estimate,
-        moved_m: float = 0.0,
-        turned_rad: float = 0.0,
-        quality: FitQuality | None = None,
-        frames_without_evidence: int = 0,
-        alternatives: float = 0.0,
-        searched_ago: int | None = 0,
-        motion_lost: bool = False,
-        confirmed_alternatives: float | None = None,
-        evidence_frame: bool = True,
-    ) -> Estimate:
-        """``raw`` with ``converged`` decided by the rules above."""
-        last = self._last
-        self._last = raw
-        step = float(np.hypot(raw.x - last.x, raw.y - last.y)) if last is not None else np.inf
-        turn = abs(wrap_rad(float(raw.theta_rad - last.theta_rad))) if last else np.pi
-        if self._held:
-            top = raw.hypotheses[0] if raw.hypotheses else None
-            light = top is None or top.weight < self.hold_mass
-            if light and evidence_frame:
-                self._light += 1
-            elif not light:
-                self._light = 0
-            against = alternatives if confirmed_alternatives is None else confirmed_alternatives
-            reasons = {
-                "light": top is None or self._light >= self.hold_light_frames,
-                "wide": max(raw.std_x_m, raw.std_y_m) > self.hold_std_xy_m
-                or raw.std_theta_rad > self.hold_std_theta_rad,
-                "jump": step > moved_m + self.hold_jump_m,
-                "misfit": quality is None
-                or quality.fit > self.hold_fit
-                or quality.unexplained > self.hold_unexplained,
-                "bad frame": quality is not None and quality.bad_frame,
-                "unseen object": quality is not None and quality.contradicted,
-                "dead reckoning": frames_without_evidence > self.hold_without_evidence,
-                "alternative": against > self.hold_alternatives,
-                "odometry lost": motion_lost,
-            }
-            self._held = not any(reasons.values())
-            if not self._held:
-                self._streak = 0
-                #: Why ``converged`` was last lost (for diagnostics and the suite).
-                self.lost_because = tuple(k for k, v in reasons.items() if v)
-            return raw.with_converged(self._held)
-        fits = (
-            quality is not None
-            and quality.fit <= self.gain_fit
-            and quality.unexplained <= self.gain_unexplained
-            and not quality.bad_frame
-            and not quality.contradicted
-            and frames_without_evidence <= self.gain_without_evidence
-        )
-        steady = (
-            raw.converged
-            and fits
-            and step <= moved_m + self.tolerance_m
-            and turn <= abs(turned_rad) + self.tolerance_rad
-        )
-        self._streak = self._streak + 1 if steady else (1 if raw.converged and fits else 0)
-        self._held = (
-            self._streak >= self.frames
-            and searched_ago is not None
-            and searched_ago < self._streak
-            and alternatives <= self.gain_alternatives
-        )
-        return raw.with_converged(self._held)
-
-
-#: Probability the protection radius must hold (docs/API.md, FrameResult.protection_m).
-PROTECTION_PROBABILITY = 0.99
-#: Particles (a systematic resample) whose distances give the radius's quantile.
-PROTECTION_SAMPLE = 1_000
-#: Calibration of the radius on the integrity suite (docs/results/integrity.md): the
-#: cloud's own 99 % radius, scaled by this factor, plus this floor (m).
-PROTECTION_SCALE = 1.5
-PROTECTION_FLOOR_M = 0.05
-
-
-#: Relative margin between a squared distance's order and its distance's: the two
-#: roundings of dx*dx + dy*dy and the C library's last-bit error in hypot move a
-#: distance by far less (about 1e-15 of it).
-_ORDER_MARGIN = 1e-12
-
-
-@njit(cache=True, nogil=True, error_model="numpy")
-def _drawn_distances(x, y, w, n, u0, ex, ey, lo):  # fmt: skip  # pragma: no cover - compiled
-    """The ``lo``-th and ``lo + 1``-th smallest of ``hypot(x - ex, y - ey)`` over ``n``
-    particles drawn by systematic resampling with offset ``u0`` (ascending order
-    statistics counted from 0; the second is the first when ``lo`` is the last).
-
-    The very numbers of numpy's ``hypot`` (both call the C library's) and a partition,
-    without a thousand ``hypot`` calls (15 ns each): the squared distances are ranked
-    instead, and ``hypot`` runs only on the few whose squared distance lies within
-    ``_ORDER_MARGIN`` of the two sought. A squared distance below that band belongs to
-    a distance below every distance in it, one above to one above, so the two order
-    statistics are the band's, counted past the ones below.
-    """
-    idx = systematic_indexes(w, n, u0)
-    sq = np.empty(n)
-    for k in range(n):
-        i = idx[k]
-        dx = x[i] - ex
-        dy = y[i] - ey
-        sq[k] = dx * dx + dy * dy
-    hi = min(lo + 1, n - 1)
-    part = np.partition(sq, lo)
-    s_hi = part[lo]
-    if hi > lo:  # the next order statistic: the least of those after lo
-        s_hi = part[lo + 1]
-        for k in range(lo + 2, n):
-            s_hi = min(s_hi, part[k])
-    # (The 1e-300: squared distances that underflow, under 1e-154 m, all fall in it.)
-    low = part[lo] * (1.0 - _ORDER_MARGIN) - 1e-300
-    high = s_hi * (1.0 + _ORDER_MARGIN) + 1e-300
-    below = 0
-    band = np.empty(n)
-    m = 0
-    for k in range(n):
-        if sq[k] < low:
-            below += 1
-        elif sq[k] <= high:
-            i = idx[k]
-            band[m] = np.hypot(x[i] - ex, y[i] - ey)
-            m += 1
-    ranked = np.sort(band[:m])
-    return ranked[lo - below], ranked[hi - below]
-
-
-def protection_radius(
-    x: NDArray[np.float64],
-    y: NDArray[np.float64],
-    weights: NDArray[np.float64],
-    estimate: Estimate,
-    rng: np.random.Generator,
-    alternative_share: float = 0.0,
-    alternatives_reach_m: float = 0.0,
-) -> float:
-    """Radius (m) around the estimate holding the truth with 99 % probability.
-
-    The whole belief counts: the filter's particles (far clusters included) hold
-    ``1 - alternative_share`` of the probability, the alternatives of
-    :mod:`~app.localization.evidence` the rest, all within ``alternatives_reach_m``.
-    Within the particles, the radius is the larger of their weighted quantile and the
-    Gaussian radius of the heaviest cluster's spread (sqrt(-2 ln(1 - q)) times its
-    largest standard deviation), scaled by ``PROTECTION_SCALE`` plus
-    ``PROTECTION_FLOOR_M`` (calibrated on the integrity suite).
-    """
-    q = PROTECTION_PROBABILITY
-    need = 1.0 if alternative_share >= 1.0 - q else q / (1.0 - alternative_share)
-    # np.quantile's linear interpolation between the two order statistics around pos
-    # (at a whole pos, the second's share is 0).
-    pos = min(need, 1.0) * (PROTECTION_SAMPLE - 1)
-    lo = math.floor(pos)
-    d_lo, d_next = _drawn_distances(
-        np.ascontiguousarray(x, dtype=np.float64),
-        np.ascontiguousarray(y, dtype=np.float64),
-        np.ascontiguousarray(weights, dtype=np.float64),
-        PROTECTION_SAMPLE, rng.random(), float(estimate.x), float(estimate.y), lo,
-    )  # fmt: skip
-    r_particles = float(d_lo + (pos - lo) * (d_next - d_lo))
-    sigma = max(estimate.std_x_m, estimate.std_y_m)
-    r_gauss = float(np.sqrt(-2.0 * np.log(1.0 - min(need, 0.9999)))) * sigma
-    r = PROTECTION_SCALE * max(r_particles, r_gauss) + PROTECTION_FLOOR_M
-    if alternative_share >= 1.0 - q:
-        r = max(r, alternatives_reach_m)
-    return r
 
 
 def with_alternatives(

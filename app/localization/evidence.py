@@ -52,7 +52,7 @@ While the main belief does not explain the detections nothing is searched, weigh
 kept (converged could be neither gained nor held). The probability of the alternatives
 under the whole belief, ``e^evidence / (1 + sum e^evidence)`` summed (the main belief's
 prior counted equal to each alternative's), gates ``converged`` (see
-:class:`~app.localization.estimate.ConvergenceGate`) and enters the protection radius.
+:class:`~app.localization.convergence.ConvergenceGate`) and enters the protection radius.
 """
 
 from __future__ import annotations
@@ -74,7 +74,7 @@ from app.localization.motion import motion_log_penalty, sample_motion
 from app.localization.recovery import sample_from_observation
 from app.localization.resampling import systematic_resample
 from app.localization.sensor import Observation, observation_columns, observations_from_columns
-from app.localization.types import Hypothesis, Odometry
+from app.localization.types import Hypothesis, InitialPose, Odometry
 from app.maps.geometry import wrap_angle, wrap_deg
 from app.maps.model import SemanticMap
 from app.maps.visibility import VisibilityGrid
@@ -230,6 +230,52 @@ class EvidenceTracker:
         #: Searches run against the current main mode while it stayed tight.
         self.mode_searches = 0
         self._last_main: Hypothesis | None = None
+        #: A known start (:meth:`set_prior`), and the main mode's pose at the start under
+        #: it (carried along when another place becomes the main mode); None without one.
+        self._prior: InitialPose | None = None
+        self._start: tuple[float, float, float] | None = None
+
+    def set_prior(self, prior: InitialPose | None) -> None:
+        """A known start: places it excludes are no alternatives (docs/API.md,
+        ``initial_pose``). An alternative is a rigid motion of the main mode, so where
+        it started is that motion applied to where the main mode started: its prior
+        odds against the main mode are the ratio of the start's prior densities there,
+        and they enter its evidence when it is found."""
+        self._prior = prior
+        self._start = None if prior is None else (prior.x, prior.y, prior.theta_rad)
+
+    @property
+    def prior_confines(self) -> bool:
+        """Whether the known start leaves no room for another place: its 3-std spread is
+        within what counts as the same place (no search needed to rule others out)."""
+        p = self._prior
+        return (
+            p is not None
+            and 3.0 * p.std_xy_m < self.settings.distinct_m
+            and 3.0 * p.std_theta_rad < self.settings.distinct_rad
+        )
+
+    def _prior_log_ratio(self, moves: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Log prior odds of the places ``moves`` (A, 3) carry the main mode onto, against
+        the main mode: each start's squared Mahalanobis distance to the known start,
+        halved, relative to the main mode's own. Zeros without a known start."""
+        p, start = self._prior, self._start
+        if p is None or start is None or not moves.shape[0]:
+            return np.zeros(moves.shape[0])
+        sx, sy, st = (np.array([v]) for v in start)
+        cx, cy, ct = _carry(moves, sx, sy, st)
+
+        def d2(x: NDArray[np.float64], y: NDArray[np.float64], t: NDArray[np.float64]) -> Any:
+            turn = wrap_angle(t - p.theta_rad)
+            return ((x - p.x) ** 2 + (y - p.y) ** 2) / p.std_xy_m**2 + (turn / p.std_theta_rad) ** 2
+
+        return -0.5 * (d2(cx[:, 0], cy[:, 0], ct[:, 0]) - d2(sx, sy, st))
+
+    def _carry_start(self, move: NDArray[np.float64]) -> None:
+        """The main mode became the place ``move`` (3,) carries it onto: so did its start."""
+        if self._start is not None:
+            cx, cy, ct = _carry(move[None], *(np.array([v]) for v in self._start))
+            self._start = (float(cx[0, 0]), float(cy[0, 0]), float(ct[0, 0]))
 
     # ---------------------------------------------------------- checkpoints
     def checkpoint(self) -> dict[str, Any]:
@@ -252,6 +298,8 @@ class EvidenceTracker:
             "swaps": self.swaps,
             "mode_searches": self.mode_searches,
             "last_main": self._last_main,
+            "prior": self._prior,
+            "start": self._start,
         }
 
     def restore(self, state: Mapping[str, Any]) -> None:
@@ -275,6 +323,10 @@ class EvidenceTracker:
         self.swaps = int(state["swaps"])
         self.mode_searches = int(state["mode_searches"])
         self._last_main = from_plain(Hypothesis | None, state["last_main"])
+        # (checkpoints before known starts were priors hold neither)
+        self._prior = from_plain(InitialPose | None, state.get("prior"))
+        start = state.get("start")
+        self._start = None if start is None else tuple(float(v) for v in start)  # type: ignore[assignment]
 
     def _history_columns(self) -> dict[str, Any]:
         """The window of recent frames as a few arrays: the odometry as rows (forward,
@@ -671,13 +723,20 @@ class EvidenceTracker:
         if hit.size:
             self._make_main(int(hit[np.argmax(self.evidence[hit])]))
             return
-        if self._draw_anchor(main, particles) and fitted:
-            # The old anchor's place, now an alternative, carried from the new anchor.
-            back = _moves_onto(self._anchor_pose(), np.array([ax]), np.array([ay]), np.array([at]))
-            self._append(back[0], 0.0)
+        if self._draw_anchor(main, particles):
+            # The old anchor's place, now an alternative, carried from the new anchor; with
+            # a known start, at the odds the prior gives it against the new place.
+            nx, ny, nt = self._anchor_pose()
+            ahead = _moves_onto((ax, ay, at), np.array([nx]), np.array([ny]), np.array([nt]))[0]
+            odds = -float(self._prior_log_ratio(ahead[None])[0])
+            self._carry_start(ahead)
+            if fitted:
+                back = _moves_onto((nx, ny, nt), np.array([ax]), np.array([ay]), np.array([at]))
+                self._append(back[0], odds)
 
     def _make_main(self, i: int) -> None:
         """Alternative ``i`` becomes the main mode; the old main an alternative."""
+        self._carry_start(self.moves[i])
         ax, ay, at = self._anchor_pose()
         shift, seg_shift = float(self.llr[i]), float(self.seg[i])
         assert self._anchor is not None
@@ -868,10 +927,14 @@ class EvidenceTracker:
                 continue
             if self.place_allowed is not None and not self.place_allowed(h.x, h.y):
                 continue
+            # A known start that makes the place unlikely by itself excludes it.
+            odds = float(self._prior_log_ratio(move[None])[0])
+            if odds < st.seed_llr:
+                continue
             # The best of thousands of candidates fits the window better than the main
             # mode by selection alone: a newcomer never starts ahead; tracked evidence
             # will show whether it is.
-            self._append(move, min(gain, 0.0) + prior)
+            self._append(move, min(gain, 0.0) + prior + odds)
 
     def _replace_places(
         self,

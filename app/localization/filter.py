@@ -21,16 +21,13 @@ from numpy.typing import NDArray
 from app.localization import sensor_kernel
 from app.localization.compass import CompassReading, compass_log_likelihood
 from app.localization.config import FilterConfig
-from app.localization.estimate import (
-    ConvergenceGate,
-    FitQuality,
-    estimate_pose,
-    protection_radius,
-    with_alternatives,
-)
+from app.localization.convergence import ConvergenceGate, FitQuality, protection_radius
+from app.localization.dilution import BearingGeometry
+from app.localization.estimate import estimate_pose, with_alternatives
 from app.localization.evidence import PATTERN, EvidenceTracker
 from app.localization.floors import AltitudeReading, FloorTracker
 from app.localization.kld import kld_sample_size
+from app.localization.latency import CaptureClock, moved_forward
 from app.localization.motion import penalized, sample_motion
 from app.localization.recovery import AugmentedMCL, sample_from_observation
 from app.localization.resampling import (
@@ -45,6 +42,7 @@ from app.localization.types import Detection, Estimate, InitialPose, Odometry
 from app.localization.unseen import UnseenObjects
 from app.maps.geometry import wrap_angle
 from app.maps.model import SemanticMap
+from app.maps.prepare import ensure_prepared
 from app.state import from_plain
 
 #: Share of a global start's particles drawn from the first observation.
@@ -64,8 +62,10 @@ FIT_FOV_MARGIN_STDS = 3.0
 FIT_MAX_SPREAD_M = 0.7
 #: Without a clutter floor, residuals beyond this many stds count as unexplained.
 PAPER_RESIDUAL_CUTOFF = 3.0
-#: Score-weighted mean of the clipped squared residuals that makes one frame veto.
+#: Score-weighted mean of the clipped squared residuals that makes one frame bad ...
 BAD_FRAME_FIT = 8.0
+#: ... and bad frames with detections in a row that veto converged.
+BAD_FRAMES_IN_A_ROW = 2
 #: Alternatives are searched for while the heaviest cluster is at most this wide (m).
 SEARCH_MAX_SPREAD_M = 0.5
 
@@ -91,7 +91,7 @@ class ParticleFilter:
         initial_pose: InitialPose | None = None,
         state: Mapping[str, Any] | None = None,
     ) -> None:
-        self.map = semantic_map
+        self.map = ensure_prepared(semantic_map)  # its grids, built now if need be
         self.config = config or FilterConfig()
         self.rng = rng
         self._vis = semantic_map.visibility if self.config.visibility else None
@@ -116,6 +116,10 @@ class ParticleFilter:
         if self.floors is not None and self.evidence is not None:
             self.evidence.place_allowed = self.floors.place_allowed
         self.last_observation: Observation | None = None
+        #: Motion between detection captures (:mod:`~app.localization.latency`).
+        self.capture = CaptureClock()
+        #: What systematic bearing errors can do to the fix (:mod:`~app.localization.dilution`).
+        self.geometry = BearingGeometry(semantic_map, self.config)
         if state is None:
             self.reset(initial_pose)
         else:  # from a checkpoint (:meth:`checkpoint`): no cloud to draw first
@@ -134,12 +138,18 @@ class ParticleFilter:
                 self.rng.normal(initial_pose.theta_rad, initial_pose.std_theta_rad, n)
             )
         self.log_w = np.zeros(n, dtype=np.float64)
+        self.capture.reset()
+        self.geometry.reset()
+        if initial_pose is not None:
+            start = (initial_pose.x, initial_pose.y, initial_pose.theta_rad)
+            self.geometry.set_prior(start, initial_pose.std_xy_m)
         # A global start with recovery on seeds its cloud from the first evidence.
         self._seed_from_observation = initial_pose is None and self.config.recovery
         self._recovery.reset()
         self._gate.reset()
         if self.evidence is not None:
             self.evidence.reset()
+            self.evidence.set_prior(initial_pose)
         if self.unseen is not None:
             self.unseen.reset()
         if self.floors is not None:
@@ -147,11 +157,19 @@ class ParticleFilter:
         #: How well the estimate explains the detections (smoothed); None before any.
         self.quality: FitQuality | None = None
         self._had_odometry = False
+        #: Frames with detections in a row that were bad on their own (see _update_fit).
+        self._bad_run = 0
         self.frames_without_evidence = 0
         #: How often every particle became impossible and the filter started again.
         self.restarts = 0
         self.steps = 0
         self.estimate: Estimate = estimate_pose(self.x, self.y, self.theta, self.weights)
+
+    @functools.cached_property
+    def _map_span_m(self) -> float:
+        """The map's diagonal (m): the largest protection radius worth stating."""
+        x0, y0, x1, y1 = self.map.bounds
+        return float(np.hypot(x1 - x0, y1 - y0))
 
     @property
     def n(self) -> int:
@@ -188,6 +206,7 @@ class ParticleFilter:
         self._seed_from_observation = self.config.recovery
         self._recovery.reset()
         self._gate.reset()
+        self.geometry.reset()
         if self.evidence is not None:
             self.evidence.reset()
         if self.unseen is not None:
@@ -288,27 +307,54 @@ class ParticleFilter:
         detections: Sequence[Detection],
         heading: CompassReading | None = None,
         altitude: AltitudeReading | None = None,
+        *,
+        detections_age_s: float = 0.0,
+        frame_s: float | None = None,
     ) -> Estimate:
         """One full filter step: predict, correct, estimate, resample when due.
 
         ``heading``, a compass reading, weights the particles' headings too
         (:mod:`~app.localization.compass`); ``altitude``, the barometer's, moves
-        particles between levels (:mod:`~app.localization.floors`).
+        particles between levels (:mod:`~app.localization.floors`). ``detections_age_s``:
+        how long before the end of this frame's ``odometry`` (lasting ``frame_s``, None:
+        not known) the detections were captured; the particles stand for the pose at
+        that moment (:mod:`~app.localization.latency`), and the estimate returned is
+        moved on to the frame's end (:attr:`estimate` stays at the capture).
 
         The estimate summarizes the weighted particles before resampling: resampling
         only adds noise to what they say (and to what the injected particles say).
         """
+        odometry = self.capture.step(odometry, frame_s, detections_age_s)
+        self._step(odometry, detections, heading, altitude)
+        back = self.capture.back
+        if back.forward_m == 0.0 and back.left_m == 0.0 and back.turn_rad == 0.0:
+            return self.estimate
+        return moved_forward(self.estimate, back)
+
+    def _step(
+        self,
+        odometry: Odometry | None,
+        detections: Sequence[Detection],
+        heading: CompassReading | None,
+        altitude: AltitudeReading | None = None,
+    ) -> None:
+        """:meth:`step` in capture time: ``odometry`` is the motion between captures."""
         self.predict(odometry)
+        if odometry is not None:
+            self.geometry.moved(odometry)
         if self.floors is not None:
             self.x, self.log_w, contradicted = self.floors.apply(
                 self.x, self.y, self.log_w, altitude, self.rng
             )
             if contradicted:
                 self._restart_global()
-            elif self.floors.changed and self.evidence is not None:
-                # The alternatives were carried by the walk's odometry, not the ride:
-                # none of them rode along. The next search looks afresh.
-                self.evidence.reset()
+            elif self.floors.changed:
+                # The fix the bearings' geometry gave rides along with the person.
+                self.geometry.shift_x(self.floors.shift_x_m)
+                if self.evidence is not None:
+                    # The alternatives were carried by the walk's odometry, not the ride:
+                    # none of them rode along. The next search looks afresh.
+                    self.evidence.reset()
         inject, w = self._correct(detections)
         if heading is not None:
             self.log_w = self.log_w + compass_log_likelihood(self.theta, heading)
@@ -327,6 +373,8 @@ class ParticleFilter:
             raw, w, ess = self._weigh_alternatives(odometry, raw, w, ess, heading)
             share, searched_ago = self.evidence.alternative_share, self.evidence.searched_ago
             confirmed = self.evidence.confirmed_share
+            if searched_ago is None and self.evidence.prior_confines:
+                searched_ago = 0  # a tight known start rules out every other place
         self._update_fit(raw)
         moved = 1.0 if odometry is None else float(np.hypot(odometry.forward_m, odometry.left_m))
         turned = np.pi if odometry is None else odometry.turn_rad
@@ -343,6 +391,7 @@ class ParticleFilter:
             motion_lost=lost,
             confirmed_alternatives=confirmed,
             evidence_frame=self.frames_without_evidence == 0,
+            geometry_m=(fix_m := self.geometry.radius_m(raw.x, raw.y, raw.theta_rad)),
         )
         if est.converged and transit:
             est = est.with_converged(False)
@@ -351,13 +400,16 @@ class ParticleFilter:
         if est.converged:
             reach = self.evidence.farthest_m(est.x, est.y) if self.evidence is not None else 0.0
             radius = protection_radius(self.x, self.y, w, est, self.rng, share, reach)
+            # Errors the cloud cannot know of (a box's centre, an object drawn a little off)
+            # repeat every frame; the geometry bounds what they can do (capped at the map's
+            # size: a fix no geometry pins down is still somewhere on the map).
+            radius = max(radius, min(fix_m, self._map_span_m))
             est = est.with_protection(radius)
         if self.floors is not None:
             self.floors.after_estimate(self.x, w, est.x, est.converged)
         self.estimate = est
         self._resample(w, ess, inject)
         self.steps += 1
-        return self.estimate
 
     def _weigh_alternatives(
         self,
@@ -386,6 +438,7 @@ class ParticleFilter:
         self.x, self.y, self.theta = self.evidence.swap(self.n)
         self.log_w = np.zeros(self.n)
         self._gate.reset()
+        self.geometry.clear_frames()
         self.quality = None
         w = self.weights
         ess = effective_sample_size(w)
@@ -430,12 +483,15 @@ class ParticleFilter:
             "seed_from_observation": self._seed_from_observation,
             "quality": self.quality,
             "had_odometry": self._had_odometry,
+            "bad_run": self._bad_run,
             "evidence": None if self.evidence is None else self.evidence.checkpoint(),
             "unseen": None if self.unseen is None else self.unseen.checkpoint(),
             "frames_without_evidence": self.frames_without_evidence,
             "restarts": self.restarts,
             "steps": self.steps,
             "estimate": self.estimate,
+            "capture": self.capture.checkpoint(),
+            "geometry": self.geometry.checkpoint(),
         }
         if self.floors is not None:  # maps with several levels only
             state["floors"] = self.floors.checkpoint()
@@ -456,6 +512,7 @@ class ParticleFilter:
         self._seed_from_observation = bool(state["seed_from_observation"])
         self.quality = from_plain(FitQuality | None, state["quality"])
         self._had_odometry = bool(state["had_odometry"])
+        self._bad_run = int(state.get("bad_run", 0))
         if self.evidence is not None and state["evidence"] is not None:
             self.evidence.restore(state["evidence"])
         if self.unseen is not None and state.get("unseen") is not None:
@@ -466,6 +523,8 @@ class ParticleFilter:
         self.restarts = int(state["restarts"])
         self.steps = int(state["steps"])
         self.estimate = from_plain(Estimate, state["estimate"])
+        self.capture.restore(state.get("capture"))
+        self.geometry.restore(state.get("geometry"))
         self.last_observation = None
 
     def _update_fit(self, raw: Estimate) -> None:
@@ -497,6 +556,7 @@ class ParticleFilter:
         row = self._vis.row(raw.x, raw.y) if self._vis is not None else None
         if self.unseen is not None:
             self.unseen.update(raw.x, raw.y, raw.theta_rad, obs, row)
+        self.geometry.add(raw.x, raw.y, raw.theta_rad, obs, row)
         r = normalized_residuals(raw.x, raw.y, raw.theta_rad, obs, self.map, self._fit_config, row)
         if self.config.clutter:
             g = obs.det_group
@@ -514,7 +574,11 @@ class ParticleFilter:
         # A burst of false detections where the camera still reports what the pose
         # has in clear view is clutter, not a contradiction.
         missing = self.unseen is None or self.unseen.frame_contradicts
-        bad = total >= 3.0 and clipped >= BAD_FRAME_FIT and missing
+        bad_now = total >= 3.0 and clipped >= BAD_FRAME_FIT and missing
+        # One bad frame is a glitch a phone makes now and then (a burst of boxes while
+        # turning, a person walking past); a kidnap stays bad.
+        self._bad_run = self._bad_run + 1 if bad_now else 0
+        bad = self._bad_run >= BAD_FRAMES_IN_A_ROW
         a_share = FIT_SMOOTHING * min(1.0, total / FIT_FULL_SCORE)
         if self.unseen is not None:
             if self.unseen.frame_expected == 0 and good == 0.0:

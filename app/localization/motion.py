@@ -20,9 +20,8 @@ from numpy.typing import NDArray
 from app.localization.config import FilterConfig
 from app.localization.fastmath import FAST, fill_normal, grid_cell, sincos
 from app.localization.types import Odometry
-from app.maps.geometry import GEOMETRY_EPS
+from app.maps.geometry import GEOMETRY_EPS, crosses_wall
 from app.maps.model import WALL_CLEARANCE_M, SemanticMap
-from app.maps.prepare import crosses_wall
 
 #: When a frame carries no odometry the person may still have moved: diffuse this much.
 NO_ODOMETRY_STD_M = 0.15

@@ -192,7 +192,7 @@ def _assemble(
 ) -> Observation:
     """An observation from its detections' arrays and its classes: the class groups'
     arrays come from the map (:func:`_class_layout`)."""
-    eps = config.clutter_prob if config.clutter else 0.0
+    eps = config.floor_prob if config.clutter else 0.0
     kappa, floor, keep, starts, members = _class_layout(semantic_map, config, classes, eps)
     return Observation(
         det_bearing=bearing,

@@ -169,7 +169,9 @@ SensorSetup = tuple[
 def _sensor_setup(
     semantic_map: SemanticMap, config: FilterConfig, grid: VisibilityGrid | None
 ) -> SensorSetup:
-    """The kernel's map, visibility and field-of-view arguments (``_kernel``'s 2nd-12th)."""
+    """The kernel's map, visibility and field-of-view arguments (:data:`SensorSetup`):
+    ``_kernel``'s 4th to 12th, ``use_vis`` to ``obj_xy``, between the poses and the
+    observation."""
     if config.visibility and grid is not None:
         vis_bits = grid.bits
         rows, cols = grid.shape

@@ -23,8 +23,8 @@ from typing import Literal
 
 import numpy as np
 
-from app.maps.freespace import FreeSpaceGrid
-from app.maps.geometry import segments_cross_walls
+from app.maps.freespace import WALL_CLEARANCE_M, FreeSpaceGrid
+from app.maps.geometry import enclosed, nearest_walls, segments_cross_walls
 from app.maps.model import (
     MOUNT_TOLERANCE_M,
     MapError,
@@ -33,7 +33,7 @@ from app.maps.model import (
     parse_map,
     validate_spec,
 )
-from app.maps.prepare import enclosed, nearest_walls
+from app.maps.prepare import PreparedMap, build_free_space, prepare
 
 log = logging.getLogger("bearings.maps")
 
@@ -79,6 +79,8 @@ class CheckResult:
     source: str
     map: SemanticMap | None
     problems: list[Problem]
+    #: The map's grids and how they were obtained, when the check prepared them.
+    prepared: PreparedMap | None = None
 
     @property
     def errors(self) -> list[Problem]:
@@ -315,23 +317,18 @@ def _object_fixes(source: str, m: SemanticMap) -> tuple[Fixes, list[Problem]]:
 
 def _free_space_problem(
     source: str, m: SemanticMap, prepare_grids: bool, cache_dir: Path | None
-) -> tuple[FreeSpaceGrid, Problem | None]:
+) -> tuple[Problem | None, PreparedMap | None, FreeSpaceGrid]:
     """No free space at all. With ``prepare_grids`` the map's grids are prepared here
-    (read from ``cache_dir`` when there), else only the free space is built."""
-    from app.maps.prepare import build_free_space, prepare
-
-    if prepare_grids:
-        fs = prepare(m, cache_dir).free_space
-    else:
-        fs = build_free_space(m, m.grid_resolution_m)
+    (read from ``cache_dir`` when there, and returned), else only the free space is
+    built. The free space comes back too (the levels' checks read it)."""
+    prepared = prepare(m, cache_dir) if prepare_grids else None
+    fs = build_free_space(m, m.grid_resolution_m) if prepared is None else prepared.free_space
     if fs.free_cells.size:
-        return fs, None
-    return fs, _no_free_space(source)
+        return None, prepared, fs
+    return _no_free_space(source), None, fs
 
 
 def _no_free_space(source: str, where: str = "") -> Problem:
-    from app.maps.model import WALL_CLEARANCE_M
-
     return Problem(
         source,
         "walls",
@@ -421,13 +418,13 @@ def check_data(
         for i, (x, y) in fixes.items():
             fixed["objects"][i]["x"], fixed["objects"][i]["y"] = x, y  # type: ignore[index]
         m = parse_map(fixed, source=source, expected_name=expected_name)
-    fs, empty = _free_space_problem(source, m, prepare_grids, cache_dir)
+    empty, prepared, fs = _free_space_problem(source, m, prepare_grids, cache_dir)
     if empty is not None:
         return CheckResult(source, None, [*problems, empty])
     level_errors = _level_problems(source, m, fs)
     if level_errors:
         return CheckResult(source, None, [*problems, *level_errors])
-    return CheckResult(source, m, problems)
+    return CheckResult(source, m, problems, prepared)
 
 
 def check_file(
@@ -487,8 +484,6 @@ def load_map_dirs(
     logged and the map is served. Later directories win on a name clash. Returns the
     maps and every problem found.
     """
-    from app.maps.prepare import prepare
-
     maps: dict[str, SemanticMap] = {}
     problems: list[Problem] = []
     for directory in directories:
@@ -506,7 +501,7 @@ def load_map_dirs(
                 continue
             for p in result.problems:
                 log.warning("%s", p)
-            prepared = result.map.prepared_or_none or prepare(result.map, cache_dir)
+            prepared = result.prepared or prepare(result.map, cache_dir)
             log.info(
                 "map %s: %d walls, %d objects; grids %s in %.3f s",
                 result.map.name,
@@ -519,8 +514,9 @@ def load_map_dirs(
     return maps, problems
 
 
-def load_map(path: str | Path) -> SemanticMap:
-    """Load and check one map file (:func:`app.maps.check.check_file`).
+def load_map(path: str | Path, *, cache_dir: Path | None = None) -> SemanticMap:
+    """Load, check and prepare one map file (:func:`check_file`; its grids read from
+    ``cache_dir`` when there, else built, and cached there).
 
     Its ``name`` must match the file name. Warnings are dropped (their fixes, such as
     an object snapped onto a wall, are applied).
@@ -528,7 +524,7 @@ def load_map(path: str | Path) -> SemanticMap:
     Raises:
         MapError: with every error found, each naming its field.
     """
-    result = check_file(path)
+    result = check_file(path, prepare_grids=True, cache_dir=cache_dir)
     if result.map is None:
         errors = result.errors
         raise MapError("; ".join(str(p) for p in errors), [(p.field, p.message) for p in errors])
@@ -536,7 +532,8 @@ def load_map(path: str | Path) -> SemanticMap:
 
 
 def load_map_dir(directory: str | Path) -> dict[str, SemanticMap]:
-    """Load every ``*.json`` map in a directory, keyed by name (sorted); any error raises."""
+    """Load and prepare every ``*.json`` map in a directory (:func:`load_map`), keyed by
+    name (sorted); any error raises."""
     d = Path(directory)
     if not d.is_dir():
         raise MapError(f"{d}: not a directory of maps")

@@ -1,7 +1,10 @@
-"""Plane geometry on numpy arrays: angles, segment crossings, polygons.
+"""Plane geometry on numpy arrays: angles, segment crossings, points and walls, polygons.
 
 Everything here is vectorized and unit-agnostic except angles, which are radians;
-:class:`PolygonCells` answers one point at a time from a grid built with arrays.
+:class:`PolygonCells` answers one point at a time from a grid built with arrays. The
+compiled point-and-wall tests (:func:`crosses_wall`, :func:`nearest_walls`,
+:func:`enclosed`) serve the map model, its checks and the grids prepared from it
+(:mod:`app.maps.prepare`), which all stand on this module.
 """
 
 from __future__ import annotations
@@ -52,7 +55,7 @@ def wrap_rad(angle: float) -> float:
 def wrap_scalar(angle: float) -> float:  # pragma: no cover - compiled
     """:func:`wrap_angle` of one angle, for compiled kernels (:func:`wrap_rad` is its
     Python twin: numba compiles no ``math.fmod``, so the two texts stay apart, and
-    tests/localization/test_geometry.py holds them to the same bits)."""
+    tests/maps/test_geometry.py holds them to the same bits)."""
     # np.mod's float remainder: fmod, moved into [0, 2 pi) when negative, +0.0 when zero.
     two_pi = 2.0 * np.pi
     m = np.fmod(angle + np.pi, two_pi)
@@ -143,6 +146,95 @@ def point_segment_distance(points: ArrayLike, walls: ArrayLike) -> FloatArray:
     t = np.clip(np.sum((p - a) * d, axis=-1) / length_sq, 0.0, 1.0)
     closest = a + t[..., None] * d
     return np.linalg.norm(p - closest, axis=-1)
+
+
+# ------------------------------------------------ compiled point and wall tests
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def crosses_wall(px, py, qx, qy, ax, ay, bx, by, eps):  # fmt: skip  # pragma: no cover
+    """Whether segment p->q properly crosses wall a->b (one pair of
+    :func:`segments_cross_walls`, same tolerances)."""
+    rx = qx - px
+    ry = qy - py
+    sx = bx - ax
+    sy = by - ay
+    denom = rx * sy - ry * sx
+    if abs(denom) < eps:
+        return False
+    apx = ax - px
+    apy = ay - py
+    t = (apx * sy - apy * sx) / denom
+    u = (apx * ry - apy * rx) / denom
+    return eps < t < 1.0 - eps and -eps <= u <= 1.0 + eps
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _enclosed_points(px, py, walls, eps):  # fmt: skip  # pragma: no cover - compiled
+    """Whether a wall crosses each point's horizontal and vertical lines on both sides."""
+    out = np.zeros(px.shape[0], dtype=np.bool_)
+    for i in range(px.shape[0]):
+        x, y = px[i], py[i]
+        left = right = down = up = False
+        for w in range(walls.shape[0]):
+            x1, y1, x2, y2 = walls[w, 0], walls[w, 1], walls[w, 2], walls[w, 3]
+            if abs(y2 - y1) > eps and min(y1, y2) <= y <= max(y1, y2):
+                cx = x1 + (y - y1) * (x2 - x1) / (y2 - y1)
+                left = left or cx < x
+                right = right or cx > x
+            if abs(x2 - x1) > eps and min(x1, x2) <= x <= max(x1, x2):
+                cy = y1 + (x - x1) * (y2 - y1) / (x2 - x1)
+                down = down or cy < y
+                up = up or cy > y
+            if left and right and down and up:
+                out[i] = True
+                break
+    return out
+
+
+def enclosed(points: np.ndarray, walls: np.ndarray) -> np.ndarray:
+    """Whether each point (M, 2) has a wall on all four axis sides (the free space's
+    enclosure, without the clearance), shape (M,)."""
+    pts = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 2)
+    w = np.ascontiguousarray(walls, dtype=np.float64).reshape(-1, 4)
+    if w.shape[0] == 0:
+        return np.ones(pts.shape[0], dtype=bool)
+    return _enclosed_points(pts[:, 0].copy(), pts[:, 1].copy(), w, GEOMETRY_EPS)
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _nearest_walls(px, py, walls, eps, tolerance, near):  # fmt: skip  # pragma: no cover
+    """Distance to and index of each point's nearest wall; near[i, w] = within tolerance."""
+    n = px.shape[0]
+    dist = np.full(n, np.inf)
+    index = np.full(n, -1, dtype=np.int64)
+    for i in range(n):
+        for w in range(walls.shape[0]):
+            x1, y1 = walls[w, 0], walls[w, 1]
+            dx = walls[w, 2] - x1
+            dy = walls[w, 3] - y1
+            t = ((px[i] - x1) * dx + (py[i] - y1) * dy) / max(dx * dx + dy * dy, eps)
+            t = min(max(t, 0.0), 1.0)
+            ex = px[i] - (x1 + t * dx)
+            ey = py[i] - (y1 + t * dy)
+            d = np.sqrt(ex * ex + ey * ey)
+            near[i, w] = d < tolerance
+            if d < dist[i]:
+                dist[i] = d
+                index[i] = w
+    return dist, index
+
+
+def nearest_walls(
+    points: np.ndarray, walls: np.ndarray, tolerance: float = 0.0
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per point (M, 2): distance to the nearest wall, its index (-1 without walls), and
+    which walls lie closer than ``tolerance`` (M, W); compiled, no (M, W, 2) temporaries."""
+    pts = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 2)
+    w = np.ascontiguousarray(walls, dtype=np.float64).reshape(-1, 4)
+    near = np.zeros((pts.shape[0], w.shape[0]), dtype=np.bool_)
+    dist, index = _nearest_walls(
+        pts[:, 0].copy(), pts[:, 1].copy(), w, GEOMETRY_EPS, float(tolerance), near
+    )
+    return dist, index, near
 
 
 def polygon_edges(polygons: list[NDArray[np.float64]]) -> tuple[FloatArray, NDArray[np.int64]]:

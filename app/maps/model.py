@@ -3,9 +3,11 @@
 A map file (see docs/API.md) holds walls, semantic objects (class, position, optional
 label) and optional named regions. :func:`load_map` validates a file with pydantic and
 refuses anything invalid with a message that names the field and the reason;
-:class:`SemanticMap` is the validated map as numpy arrays plus the derived, cached
-structures the filter needs (free space and visibility grids, see
-:mod:`app.maps.prepare`).
+:class:`SemanticMap` is the validated map as numpy arrays, plus the free-space and
+visibility grids the filter needs once the map is prepared. Preparing is a step of its
+own (:mod:`app.maps.prepare`, which stands on this module): the loaders do it
+(:func:`app.maps.check.load_map`, :func:`~app.maps.check.load_map_dirs`), and code that
+needs the grids of a map it built itself calls :func:`app.maps.prepare.ensure_prepared`.
 """
 
 from __future__ import annotations
@@ -14,7 +16,7 @@ import contextlib
 import re
 from collections.abc import Callable
 from functools import cached_property
-from typing import TYPE_CHECKING, Any, TypeVar
+from typing import Any, TypeVar
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -26,17 +28,13 @@ from app.maps.freespace import MapError as MapError  # re-exported
 from app.maps.geometry import (
     PolygonCells,
     first_polygon,
+    nearest_walls,
     polygon_edges,
     segments_cross_walls,
 )
 from app.maps.levels import ConnectorSpec, LevelLayout, LevelSpec, reference_problems
-from app.maps.prepare import nearest_walls
-from app.resources import bundled_maps_dir as bundled_maps_dir  # re-exported for old imports
+from app.maps.visibility import VisibilityGrid
 from app.validation import Finite, StrictInput, problem_text
-
-if TYPE_CHECKING:
-    from app.maps.prepare import PreparedMap
-    from app.maps.visibility import VisibilityGrid
 
 #: An object class is a lower-case word: letters, digits, '_' or '-', starting with a letter.
 CLASS_PATTERN = re.compile(r"^[a-z][a-z0-9_-]*$")
@@ -49,6 +47,11 @@ MOUNT_TOLERANCE_M = 0.05
 DERIVED_LIMIT = 1024
 
 T = TypeVar("T")
+
+
+class MapNotPrepared(RuntimeError):
+    """A map's grids were asked for before the map was prepared (a programming error:
+    prepare it first, see :mod:`app.maps.prepare`)."""
 
 
 class WallSpec(StrictInput):
@@ -202,7 +205,8 @@ class SemanticMap:
         #: Object n is mounted in wall w: within MOUNT_TOLERANCE_M of it.
         self.mounted_walls = nearest_walls(self.object_xy, self.walls, MOUNT_TOLERANCE_M)[2]
         self._grid_resolution_m = grid_resolution_m
-        self._prepared: PreparedMap | None = None
+        self._free_space: FreeSpaceGrid | None = None
+        self._visibility: VisibilityGrid | None = None
 
     def __repr__(self) -> str:
         return (
@@ -302,35 +306,47 @@ class SemanticMap:
         return self._grid_resolution_m
 
     @property
-    def prepared_or_none(self) -> PreparedMap | None:
-        """The map's grids if it was prepared (:mod:`app.maps.prepare`), else None."""
-        return self._prepared
+    def prepared(self) -> bool:
+        """Whether the map holds its grids (:mod:`app.maps.prepare`)."""
+        return self._visibility is not None
 
-    def attach(self, prepared: PreparedMap) -> None:
-        """Hold grids built (or read from the cache) for this map."""
-        self._prepared = prepared
+    def attach(self, free_space: FreeSpaceGrid, visibility: VisibilityGrid) -> None:
+        """Hold the grids built (or read from the cache) for this map."""
+        if visibility.n_objects != self.object_count:
+            raise ValueError(
+                f"map {self.name!r}: a visibility grid of {visibility.n_objects} objects "
+                f"does not fit a map of {self.object_count}"
+            )
+        self._free_space = free_space
+        self._visibility = visibility
+
+    def _not_prepared(self, grid: str) -> MapNotPrepared:
+        return MapNotPrepared(
+            f"map {self.name!r} has no {grid} grid: prepare it first "
+            "(app.maps.prepare.ensure_prepared, or load it with app.maps.check.load_map)"
+        )
 
     @property
     def free_space(self) -> FreeSpaceGrid:
         """Where a person can stand (:func:`app.maps.prepare.build_free_space`).
 
-        Built when the map is prepared; a map never prepared builds it on first use.
+        Raises:
+            MapNotPrepared: the map was never prepared.
         """
-        prepared = self._prepared
-        return (prepared if prepared is not None else self._prepare()).free_space
+        if self._free_space is None:
+            raise self._not_prepared("free-space")
+        return self._free_space
 
     @property
     def visibility(self) -> VisibilityGrid:
-        """Which objects each cell sees (:func:`app.maps.prepare.build_visibility`)."""
-        prepared = self._prepared
-        return (prepared if prepared is not None else self._prepare()).visibility
+        """Which objects each cell sees (:func:`app.maps.prepare.build_visibility`).
 
-    def _prepare(self) -> PreparedMap:
-        """Build the grids now (a map never prepared). The two properties above run
-        several times a frame: they read the grids directly once they exist."""
-        from app.maps.prepare import prepared_of
-
-        return prepared_of(self)
+        Raises:
+            MapNotPrepared: the map was never prepared.
+        """
+        if self._visibility is None:
+            raise self._not_prepared("visibility")
+        return self._visibility
 
     def to_json(self) -> dict[str, object]:
         """The map file's JSON (with ``class`` spelled as in the file); a file without

@@ -36,17 +36,14 @@ import time
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import numpy as np
 from numba import njit
 
 from app.maps.freespace import WALL_CLEARANCE_M, FreeSpaceGrid
-from app.maps.geometry import GEOMETRY_EPS
+from app.maps.geometry import GEOMETRY_EPS, crosses_wall
+from app.maps.model import SemanticMap
 from app.maps.visibility import VisibilityGrid, pack_bits
-
-if TYPE_CHECKING:
-    from app.maps.model import SemanticMap
 
 log = logging.getLogger("bearings.maps")
 
@@ -73,24 +70,6 @@ class PreparedMap:
 
 
 # ----------------------------------------------------------------------- kernels
-@njit(cache=True, nogil=True, error_model="numpy", inline="always")
-def crosses_wall(px, py, qx, qy, ax, ay, bx, by, eps):  # fmt: skip  # pragma: no cover
-    """Whether segment p->q properly crosses wall a->b (one pair of
-    :func:`~app.maps.geometry.segments_cross_walls`, same tolerances)."""
-    rx = qx - px
-    ry = qy - py
-    sx = bx - ax
-    sy = by - ay
-    denom = rx * sy - ry * sx
-    if abs(denom) < eps:
-        return False
-    apx = ax - px
-    apy = ay - py
-    t = (apx * sy - apy * sx) / denom
-    u = (apx * ry - apy * rx) / denom
-    return eps < t < 1.0 - eps and -eps <= u <= 1.0 + eps
-
-
 @njit(cache=True, nogil=True, error_model="numpy")
 def _free_mask(walls, ox, oy, res, rows, cols, clearance, eps):  # fmt: skip  # pragma: no cover
     """The free-space mask (rows, cols): enclosed on four sides and clear of walls."""
@@ -147,76 +126,6 @@ def _free_mask(walls, ox, oy, res, rows, cols, clearance, eps):  # fmt: skip  # 
                 if np.sqrt(ex * ex + ey * ey) < reach:
                     mask[r, c] = False
     return mask
-
-
-@njit(cache=True, nogil=True, error_model="numpy")
-def _enclosed_points(px, py, walls, eps):  # fmt: skip  # pragma: no cover - compiled
-    """Whether a wall crosses each point's horizontal and vertical lines on both sides."""
-    out = np.zeros(px.shape[0], dtype=np.bool_)
-    for i in range(px.shape[0]):
-        x, y = px[i], py[i]
-        left = right = down = up = False
-        for w in range(walls.shape[0]):
-            x1, y1, x2, y2 = walls[w, 0], walls[w, 1], walls[w, 2], walls[w, 3]
-            if abs(y2 - y1) > eps and min(y1, y2) <= y <= max(y1, y2):
-                cx = x1 + (y - y1) * (x2 - x1) / (y2 - y1)
-                left = left or cx < x
-                right = right or cx > x
-            if abs(x2 - x1) > eps and min(x1, x2) <= x <= max(x1, x2):
-                cy = y1 + (x - x1) * (y2 - y1) / (x2 - x1)
-                down = down or cy < y
-                up = up or cy > y
-            if left and right and down and up:
-                out[i] = True
-                break
-    return out
-
-
-def enclosed(points: np.ndarray, walls: np.ndarray) -> np.ndarray:
-    """Whether each point (M, 2) has a wall on all four axis sides (the free space's
-    enclosure, without the clearance), shape (M,)."""
-    pts = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 2)
-    w = np.ascontiguousarray(walls, dtype=np.float64).reshape(-1, 4)
-    if w.shape[0] == 0:
-        return np.ones(pts.shape[0], dtype=bool)
-    return _enclosed_points(pts[:, 0].copy(), pts[:, 1].copy(), w, GEOMETRY_EPS)
-
-
-@njit(cache=True, nogil=True, error_model="numpy")
-def _nearest_walls(px, py, walls, eps, tolerance, near):  # fmt: skip  # pragma: no cover
-    """Distance to and index of each point's nearest wall; near[i, w] = within tolerance."""
-    n = px.shape[0]
-    dist = np.full(n, np.inf)
-    index = np.full(n, -1, dtype=np.int64)
-    for i in range(n):
-        for w in range(walls.shape[0]):
-            x1, y1 = walls[w, 0], walls[w, 1]
-            dx = walls[w, 2] - x1
-            dy = walls[w, 3] - y1
-            t = ((px[i] - x1) * dx + (py[i] - y1) * dy) / max(dx * dx + dy * dy, eps)
-            t = min(max(t, 0.0), 1.0)
-            ex = px[i] - (x1 + t * dx)
-            ey = py[i] - (y1 + t * dy)
-            d = np.sqrt(ex * ex + ey * ey)
-            near[i, w] = d < tolerance
-            if d < dist[i]:
-                dist[i] = d
-                index[i] = w
-    return dist, index
-
-
-def nearest_walls(
-    points: np.ndarray, walls: np.ndarray, tolerance: float = 0.0
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Per point (M, 2): distance to the nearest wall, its index (-1 without walls), and
-    which walls lie closer than ``tolerance`` (M, W); compiled, no (M, W, 2) temporaries."""
-    pts = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 2)
-    w = np.ascontiguousarray(walls, dtype=np.float64).reshape(-1, 4)
-    near = np.zeros((pts.shape[0], w.shape[0]), dtype=np.bool_)
-    dist, index = _nearest_walls(
-        pts[:, 0].copy(), pts[:, 1].copy(), w, GEOMETRY_EPS, float(tolerance), near
-    )
-    return dist, index, near
 
 
 #: Angular bins per object when culling walls for the visibility rays.
@@ -495,24 +404,25 @@ def prepare(semantic_map: SemanticMap, cache_dir: Path | None = None) -> Prepare
                 _save(path, prepared.free_space, prepared.visibility)
             except OSError as exc:
                 log.warning("map %s: cannot write cache %s (%s)", semantic_map.name, path, exc)
-    semantic_map.attach(prepared)
+    semantic_map.attach(prepared.free_space, prepared.visibility)
     return prepared
 
 
 _build_lock = threading.Lock()
 
 
-def prepared_of(semantic_map: SemanticMap) -> PreparedMap:
-    """The map's grids, built now (once, thread-safe) if it was never prepared.
+def ensure_prepared(semantic_map: SemanticMap) -> SemanticMap:
+    """The map, with its grids built now (once, thread-safe, no cache) if it was never
+    prepared.
 
-    The service prepares every map at load; this is for maps made in code (tests,
-    the simulator, benchmarks).
+    The loaders prepare the maps they load (:func:`app.maps.check.load_map`,
+    :func:`~app.maps.check.load_map_dirs`); this is for maps made in code (tests, the
+    simulator's and the experiments' maps, benchmarks), and for the consumers that need
+    the grids to say so where they take a map (the filter, the narrator, the planner).
     """
-    got = semantic_map.prepared_or_none
-    if got is None:
+    if not semantic_map.prepared:
         with _build_lock:
-            got = semantic_map.prepared_or_none
-            if got is None:
+            if not semantic_map.prepared:
                 got = build(semantic_map)
-                semantic_map.attach(got)
-    return got
+                semantic_map.attach(got.free_space, got.visibility)
+    return semantic_map

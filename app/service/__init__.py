@@ -12,7 +12,8 @@ from app.service.errors import (
     RequestTooLarge,
     SessionNotFound,
 )
-from app.service.sessions import Session, SessionManager, SessionSnapshot
+from app.service.session import Session, SessionSnapshot
+from app.service.sessions import SessionManager
 from app.service.types import FrameInput, FrameOutcome, SensorSpec, SessionSpec
 
 __all__ = [

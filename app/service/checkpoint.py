@@ -6,7 +6,9 @@ A checkpoint holds everything a session needs to go on elsewhere: how it was cre
 averages, the convergence gate, the alternative hypotheses' tracker, the random
 generator), the narrator's memory (:meth:`Narrator.checkpoint`), the guidance speaker's,
 the destination, the owner, the frame count and the latest result. Each part serializes
-itself; this module only assembles the parts and packs them.
+itself, the session assembles them (:meth:`~app.service.session.Session.capture`) and
+takes them back (:meth:`~app.service.session.Session.restore`); this module packs them
+into bytes and reads them back.
 
 Checkpoints are written about once a second; every frame answered since the last one is
 kept in a journal (one short entry per frame) and replayed on resume, so a session
@@ -36,21 +38,14 @@ import math
 import struct
 from collections.abc import Mapping
 from datetime import datetime
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import msgpack
 import numpy as np
 import orjson
 
-from app.feedback.guidance import GuidanceSpeaker
-from app.guidance.planner import Plan
-from app.guidance.targets import Target
-from app.localization.types import Detection, Pose
-from app.service.types import FrameInput, FrameOutcome, SessionSpec
-from app.state import from_plain, plain_step, to_plain
-
-if TYPE_CHECKING:
-    from app.service.sessions import Session
+from app.service.types import FrameInput, SessionSpec
+from app.state import from_plain, plain_step
 
 MAGIC = b"BRGC1"
 FORMAT_VERSION = 4
@@ -121,36 +116,6 @@ def unpack(data: bytes) -> dict[str, Any]:
     return state
 
 
-def capture(session: Session) -> dict[str, Any]:
-    """A session's state (call under its ``state_lock``, or when no step can run), to
-    :func:`pack` before the session steps again: frozen values (spec, outcome,
-    estimates) and some of the filter's arrays are the session's own, not copies.
-
-    Before its first frame a session is exactly what its spec (with the seed drawn at
-    creation) builds, so its filter and narrator are left out.
-    """
-    fresh = session.frames == 0
-    plan = session.destination
-    return {
-        "format": FORMAT_VERSION,
-        "id": session.id,
-        "spec": session.spec,
-        "created_at": session.created_at.isoformat(),
-        "particles": session.particles,
-        "frames": session.frames,
-        "owner": session.owner,
-        "shared": session.shared,
-        "speaker": to_plain(session.speaker),
-        "destination": None if plan is None else plan.target,
-        "last_timestamp": session.last_timestamp,
-        "last_outcome": session.last_outcome,
-        "last_detections": [[d.cls, d.bearing_rad, d.score] for d in session.last_detections],
-        "truth": session.truth,
-        "filter": None if fresh else session.filter.checkpoint(),
-        "narrator": None if fresh else session.narrator.checkpoint(),
-    }
-
-
 def spec_of(state: Mapping[str, Any]) -> SessionSpec:
     """The spec a checkpointed session was created from (to build it again)."""
     spec: SessionSpec = from_plain(SessionSpec, state["spec"])
@@ -159,27 +124,6 @@ def spec_of(state: Mapping[str, Any]) -> SessionSpec:
 
 def created_at_of(state: Mapping[str, Any]) -> datetime:
     return datetime.fromisoformat(state["created_at"])
-
-
-def apply(session: Session, state: Mapping[str, Any]) -> None:
-    """Put a checkpoint's state into a session built from the same spec (its filter
-    already restored, see :meth:`SessionManager._build`)."""
-    if state["narrator"] is not None:
-        session.narrator.restore(state["narrator"])
-    session.frames = int(state["frames"])
-    session.owner = state["owner"]
-    session.shared = bool(state["shared"])
-    session.speaker = from_plain(GuidanceSpeaker, state["speaker"])
-    if state["destination"] is not None:
-        session.destination = Plan(session.map, from_plain(Target, state["destination"]))
-    session.last_timestamp = state["last_timestamp"]
-    session.last_outcome = from_plain(FrameOutcome | None, state["last_outcome"])
-    session.last_detections = [
-        Detection(*d) if isinstance(d, list) else from_plain(Detection, d)  # rows since format 4
-        for d in state["last_detections"]
-    ]
-    session.truth = from_plain(Pose | None, state["truth"])
-    session.version += 1
 
 
 #: The fields of :class:`FrameInput` a journal entry holds, in its order (a test holds
@@ -191,6 +135,7 @@ ENTRY_FIELDS = (
     "describe",
     "truth",
     "heading",
+    "detections_age_s",
     "altitude",
 )
 
@@ -198,10 +143,10 @@ ENTRY_FIELDS = (
 def encode_frame(seq: int, frame: FrameInput, merged: int = 1) -> bytes:
     """One journal entry: the step's sequence number, then the frame (``merged`` frames
     merged into one) as a JSON array: ``[merged, timestamp, odometry, detections,
-    describe, truth, heading]`` and, when the frame has one, ``altitude`` (a venue's
-    barometer: frames without one are written as before it), each detection a row
-    ``[class, bearing, score]`` and the other values as :func:`~app.state.to_plain`
-    writes them.
+    describe, truth, heading, detections_age_s]`` and, when the frame has one,
+    ``altitude`` (a venue's barometer: frames without one are written as before it),
+    each detection a row ``[class, bearing, score]`` and the other values as
+    :func:`~app.state.to_plain` writes them.
 
     Every frame a shared store journals is encoded here, on the event loop. The
     detections as rows, rather than one object each, take orjson 1 us instead of 5 for
@@ -212,6 +157,7 @@ def encode_frame(seq: int, frame: FrameInput, merged: int = 1) -> bytes:
     rows = [[d.cls, d.bearing_rad, d.score] for d in frame.detections]
     f = frame
     body: list[object] = [merged, f.timestamp, f.odometry, rows, f.describe, f.truth, f.heading]
+    body.append(f.detections_age_s)
     if f.altitude is not None:
         body.append(f.altitude)
     return b"%d|" % seq + orjson.dumps(body, default=plain_step)
@@ -226,9 +172,9 @@ def decode_frame(entry: bytes) -> tuple[int, FrameInput, int]:
     if isinstance(body, dict):
         return int(seq), from_plain(FrameInput, body["frame"]), int(body["merged"])
     merged, *values = body
-    if len(values) not in (len(ENTRY_FIELDS) - 1, len(ENTRY_FIELDS)):
-        raise ValueError(f"a journal entry of {len(values)} values is no frame")
-    plain = dict(zip(ENTRY_FIELDS, values, strict=False))  # altitude only when there
+    # (entries written before detections had an age hold one value less, and entries
+    # without a barometer reading one less again: their defaults)
+    plain = dict(zip(ENTRY_FIELDS[: len(values)], values, strict=True))
     plain["detections"] = [
         {"cls": c, "bearing_rad": b, "score": s} for c, b, s in plain["detections"]
     ]

@@ -48,6 +48,16 @@ class Metrics:
             "Frames merged into a waiting frame because the session was busy",
             registry=self.registry,
         )
+        self.stream_messages = Counter(
+            "bearings_stream_messages",
+            "WebSocket messages taken in (each gets exactly one answer)",
+            registry=self.registry,
+        )
+        self.stream_answers = Counter(
+            "bearings_stream_answers",
+            "WebSocket answers sent (results and errors, one per message taken in)",
+            registry=self.registry,
+        )
         self.frames_refused = Counter(
             "bearings_frames_refused",
             "Frames refused by a key's rate quota",

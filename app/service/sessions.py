@@ -1,4 +1,4 @@
-"""Live sessions: each owns one particle filter and one narrator.
+"""The session manager: creates, finds, feeds and expires sessions (:mod:`app.service.session`).
 
 Frames of one session run strictly in order, one step at a time: a session's frames
 wait in a short queue that merges them when they come faster than the filter runs
@@ -14,26 +14,24 @@ from __future__ import annotations
 import asyncio
 import logging
 import secrets
-import threading
 import time
 from collections.abc import Mapping
-from dataclasses import dataclass, field, replace
+from dataclasses import replace
 from datetime import UTC, datetime
 from typing import Any
 
 import numpy as np
 
 from app.config import Settings
-from app.feedback import Feedback, Narrator
+from app.feedback import Narrator
 from app.feedback.guidance import GuidanceSpeaker
-from app.feedback.levels import level_sentence
-from app.guidance import DestinationSpec, Guidance, Plan, Target, Unreachable, guide, plan_for
-from app.localization.camera import Camera
-from app.localization.config import FilterConfig
+from app.guidance import DestinationSpec, Target, plan_for
+from app.localization.config import ODOMETRY_NOISE, FilterConfig
 from app.localization.filter import ParticleFilter
 from app.localization.floors import spread_over_levels
-from app.localization.types import Detection, Estimate, InitialPose, Pose
+from app.localization.types import InitialPose
 from app.maps.model import SemanticMap
+from app.maps.prepare import ensure_prepared
 from app.service.access import OPEN, Principal, TokenBucket
 from app.service.errors import (
     CapacityReached,
@@ -47,200 +45,14 @@ from app.service.errors import (
     session_tag,
 )
 from app.service.metrics import Metrics
-from app.service.queueing import FrameQueue, merged_warning
+from app.service.queueing import Waiting
 from app.service.scheduler import FairStepper
+from app.service.session import Session
 from app.service.sharing import SessionSharing
 from app.service.store import MemoryStore, SessionStore
-from app.service.types import FrameInput, FrameOutcome, LevelRef, SessionSpec
+from app.service.types import FrameInput, FrameOutcome, SessionSpec
 
 log = logging.getLogger("bearings.sessions")
-
-
-def unknown_class_warnings(
-    detections: tuple[Detection, ...], semantic_map: SemanticMap
-) -> list[str]:
-    """A warning for each detected class the map lacks (those detections are ignored)."""
-    unknown = sorted({d.cls for d in detections} - set(semantic_map.classes))
-    return [
-        f"class {c!r} is not on map {semantic_map.name!r}; its detections were ignored"
-        for c in unknown
-    ]
-
-
-@dataclass(frozen=True)
-class SessionSnapshot:
-    """A consistent copy of a session's state for readers on other threads (the view)."""
-
-    id: str
-    map_name: str
-    version: int
-    frames: int
-    x: np.ndarray
-    y: np.ndarray
-    theta: np.ndarray
-    weights: np.ndarray
-    estimate: Estimate | None
-    detections: list[Detection]
-    truth: Pose | None
-    #: The path to the destination from the estimate (metres, (P, 2)), or None.
-    route: np.ndarray | None = None
-
-
-@dataclass
-class Session:
-    """One person's localization: filter, narrator and the latest result."""
-
-    id: str
-    map: SemanticMap
-    filter: ParticleFilter
-    narrator: Narrator
-    particles: int
-    created_at: datetime
-    #: What the session was built from (a checkpoint rebuilds it from this).
-    spec: SessionSpec | None = None
-    owner: str | None = None
-    shared: bool = False
-    queue_limit: int = 2
-    last_active: float = field(default_factory=time.monotonic)
-    frames: int = 0
-    last_outcome: FrameOutcome | None = None
-    last_detections: list[Detection] = field(default_factory=list)
-    truth: Pose | None = None
-    version: int = 0
-    last_timestamp: float | None = None
-    state_lock: threading.Lock = field(default_factory=threading.Lock)
-    camera: Camera | None = None
-    #: The destination's plan (None: no destination) and what was said about the way.
-    destination: Plan | None = None
-    speaker: GuidanceSpeaker = field(default_factory=GuidanceSpeaker)
-    last_guidance: Guidance | None = None
-
-    def set_destination(self, plan: Plan | None) -> None:
-        """Guide to ``plan``'s target from the next frame on (None: stop guiding)."""
-        with self.state_lock:
-            self.destination = plan
-            self.speaker.reset()
-            self.last_guidance = None
-            self.version += 1  # a checkpoint keeps it
-
-    def _guide(
-        self, estimate: Estimate, now: float, warnings: list[str]
-    ) -> tuple[Guidance | None, str]:
-        """Directions from the estimate (only when converged) and what to say of them."""
-        if self.destination is None:
-            return None, ""
-        if not estimate.converged:
-            return None, self.speaker.update(None, False, now, estimate.x, estimate.y)
-        try:
-            guidance = guide(self.destination, estimate.x, estimate.y, estimate.theta_rad)
-        except Unreachable as exc:
-            warnings.append(f"guidance: {exc}")
-            return None, self.speaker.no_way(self.destination.target.name, now)
-        return guidance, self.speaker.update(guidance, True, now, estimate.x, estimate.y)
-
-    def _levels_of(self, estimate: Estimate) -> dict[str, Any]:
-        """The estimate's level, each hypothesis's and the level's probability (a map
-        with levels only: empty otherwise)."""
-        floors = self.filter.floors
-        if floors is None:
-            return {}
-        refs = level_refs(self.map)
-        layout = self.map.layout
-        xs = np.array([estimate.x, *(h.x for h in estimate.hypotheses)])
-        levels = layout.level_of_plane_x(xs)
-        return {
-            "level": refs[int(levels[0])],
-            "hypothesis_levels": tuple(refs[int(k)] for k in levels[1:]),
-            "level_probability": floors.level_probability,
-        }
-
-    queue: FrameQueue = field(init=False)
-    pump: asyncio.Task[None] | None = None
-
-    def __post_init__(self) -> None:
-        self.queue = FrameQueue(self.queue_limit)
-
-    @property
-    def tag(self) -> str:
-        return session_tag(self.id)
-
-    @property
-    def busy(self) -> bool:
-        """A step is running or frames are waiting."""
-        return self.pump is not None
-
-    def process_sync(self, frame: FrameInput, merged: int = 1) -> FrameOutcome:
-        """Run one frame (``merged`` frames merged into one) through the filter and narrator."""
-        detections = list(frame.detections)
-        warnings = unknown_class_warnings(frame.detections, self.map)
-        if merged > 1:
-            warnings.append(merged_warning(merged))
-        if (
-            frame.timestamp is not None
-            and self.last_timestamp is not None
-            and frame.timestamp < self.last_timestamp
-        ):
-            warnings.append(
-                f"timestamp {frame.timestamp} is earlier than the previous frame's "
-                f"{self.last_timestamp}; frames are processed in the order received"
-            )
-        with self.state_lock:
-            estimate = self.filter.step(frame.odometry, detections, frame.heading, frame.altitude)
-            feedback = self.narrator.update(
-                estimate,
-                detections,
-                timestamp_s=frame.timestamp,
-                describe=frame.describe,
-                fov_deg=self.filter.config.fov_deg,
-                fov_centre_deg=self.filter.config.fov_centre_deg,
-                observation=self.filter.last_observation,
-            )
-            now = time.monotonic() if frame.timestamp is None else frame.timestamp
-            guidance, said = self._guide(estimate, now, warnings)
-            floors = self.filter.floors
-            if floors is not None and floors.newly_confirmed and floors.confirmed_level is not None:
-                where = level_sentence(self.map.layout.levels[floors.confirmed_level].name)
-                feedback = Feedback(f"{where} {feedback.text}".strip(), feedback.items)
-            if said:
-                joined = f"{feedback.text} {said}" if feedback.text else said
-                feedback = Feedback(joined, feedback.items)
-            self.last_guidance = guidance
-            self.frames += 1
-            result = FrameOutcome(
-                seq=self.frames,
-                estimate=estimate,
-                feedback=feedback,
-                warnings=tuple(warnings),
-                regions=tuple(self.map.region_at(h.x, h.y) for h in estimate.hypotheses),
-                guidance=guidance,
-                **self._levels_of(estimate),
-            )
-            self.last_outcome = result
-            self.last_detections = detections
-            self.truth = frame.truth
-            if frame.timestamp is not None:
-                self.last_timestamp = frame.timestamp
-            self.version += 1
-        return result
-
-    def snapshot(self) -> SessionSnapshot:
-        """Copies of the particles and latest state, safe to call from any thread."""
-        with self.state_lock:
-            pf = self.filter
-            return SessionSnapshot(
-                id=self.id,
-                map_name=self.map.name,
-                version=self.version,
-                frames=self.frames,
-                x=pf.x.copy(),
-                y=pf.y.copy(),
-                theta=pf.theta.copy(),
-                weights=pf.weights,
-                estimate=pf.estimate if self.frames else None,
-                detections=list(self.last_detections),
-                truth=self.truth,
-                route=None if self.last_guidance is None else self.last_guidance.path.copy(),
-            )
 
 
 def initial_on_levels(
@@ -291,16 +103,6 @@ def initial_on_levels(
     return replace(initial, x=initial.x + float(layout.offsets(first))), tuple(free)
 
 
-def level_refs(semantic_map: SemanticMap) -> tuple[LevelRef, ...]:
-    """The map's levels as results name them (kept with the map)."""
-    return semantic_map.derived_value(
-        ("level_refs",),
-        lambda: tuple(
-            LevelRef(lv.id, lv.name, lv.ordinal, lv.offset_x) for lv in semantic_map.layout.levels
-        ),
-    )
-
-
 class SessionManager:
     """Creates, finds, feeds and expires sessions, within the service's limits and quotas."""
 
@@ -311,7 +113,8 @@ class SessionManager:
         metrics: Metrics,
         store: SessionStore | None = None,
     ) -> None:
-        self.maps = maps
+        #: The maps served, each prepared (its grids built now if the caller had not).
+        self.maps = {name: ensure_prepared(m) for name, m in maps.items()}
         self.settings = settings
         self.metrics = metrics
         self._sessions: dict[str, Session] = {}
@@ -355,6 +158,14 @@ class SessionManager:
     def sessions(self) -> list[Session]:
         """Live sessions, oldest first."""
         return list(self._sessions.values())
+
+    def live(self, session_id: str) -> Session | None:
+        """The session if this worker serves it now, whoever owns it (else None)."""
+        return self._sessions.get(session_id)
+
+    def live_ids(self) -> list[str]:
+        """The ids of the sessions served here (safe to call from another thread)."""
+        return list(self._sessions)
 
     def get(self, session_id: str, owner: Principal | None = None) -> Session:
         """The session, if ``owner`` may see it (None: the service itself, which sees all)."""
@@ -457,7 +268,7 @@ class SessionManager:
                 1.0,
             )
 
-    def _build(
+    def build(
         self,
         request: SessionSpec,
         *,
@@ -484,6 +295,9 @@ class SessionManager:
             # A camera fixes the field of view (and where its middle points).
             fov_deg=sensor.fov_deg if camera is None else camera.fov_deg,
             fov_centre_deg=0.0 if camera is None else camera.fov_centre_deg,
+            class_error=sensor.class_error,
+            trans_noise_frac=ODOMETRY_NOISE[request.odometry_source][0],
+            rot_noise_frac=ODOMETRY_NOISE[request.odometry_source][1],
         )
         seed = request.seed if request.seed is not None else secrets.randbits(63)
         initial, levels = initial_on_levels(semantic_map, request)
@@ -495,7 +309,7 @@ class SessionManager:
             state=filter_state,
         )
         if filter_state is None and len(levels) > 1:
-            spread_over_levels(pf, levels)
+            pf.x = spread_over_levels(pf.x, semantic_map, levels, pf.rng)
         narrator = Narrator(semantic_map, request.feedback)
         return Session(
             id=session_id or secrets.token_urlsafe(24),  # 192 random bits
@@ -515,7 +329,7 @@ class SessionManager:
         """A new session owned by ``owner``; the filter is built off the event loop."""
         particles = request.particles or self.settings.default_particles
         self._check_room(owner, particles)
-        session = await asyncio.to_thread(self._build, request)
+        session = await asyncio.to_thread(self.build, request)
         self._check_room(owner, particles)  # another create may have won the race
         session.owner = owner.name
         if self.sharing is not None:
@@ -609,7 +423,14 @@ class SessionManager:
         return session.owner if session.owner is not None else session.id
 
     async def _pump(self, session: Session) -> None:
-        """Feed the session's waiting frames to the stepper, one step at a time."""
+        """Feed the session's waiting frames to the stepper, one step at a time.
+
+        Every accepted frame's future is resolved exactly once: with the step's result
+        (shared by frames merged into one), with the step's error, or, when the pump ends
+        any other way (cancelled at shutdown, its step dropped by the stepper), with
+        :class:`SessionUnavailable` for that frame and every frame still waiting.
+        """
+        item: Waiting | None = None
         try:
             while (item := session.queue.pop()) is not None:
                 live = [w for w in item.waiters if not w.done()]
@@ -643,6 +464,20 @@ class SessionManager:
                         w.set_result(result)
         finally:
             session.pump = None
+            unanswered = [item] if item is not None else []
+            while (rest := session.queue.pop()) is not None:
+                unanswered.append(rest)
+            for left in unanswered:
+                for w in left.waiters:
+                    if not w.done():
+                        w.set_exception(
+                            SessionUnavailable(
+                                "this frame was not processed (the service is stopping); "
+                                "reconnect and send it again",
+                                "restarting",
+                                1.0,
+                            )
+                        )
 
     def _step_sync(
         self, session: Session, frame: FrameInput, merged: int

@@ -37,16 +37,15 @@ import threading
 import time
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
-from typing import TYPE_CHECKING, Any, TypeVar
+from typing import Any, TypeVar
 
 import app.service.checkpoint as checkpoint
+from app.service.access import Principal
 from app.service.errors import SessionNotFound, SessionUnavailable, log_event
+from app.service.host import SessionHost
+from app.service.session import Session
 from app.service.store import SessionStore
 from app.service.types import FrameInput
-
-if TYPE_CHECKING:
-    from app.service.access import Principal
-    from app.service.sessions import Session, SessionManager
 
 log = logging.getLogger("bearings.sharing")
 T = TypeVar("T")
@@ -60,11 +59,13 @@ CHECKPOINT_EARLY_S = 0.05
 
 
 class SessionSharing:
-    """The store side of one :class:`~app.service.sessions.SessionManager`."""
+    """The store side of one worker's sessions, kept through ``host`` (the
+    :class:`~app.service.sessions.SessionManager`, seen as a
+    :class:`~app.service.host.SessionHost`)."""
 
     def __init__(
         self,
-        manager: SessionManager,
+        host: SessionHost,
         store: SessionStore,
         *,
         lease_s: float,
@@ -72,7 +73,7 @@ class SessionSharing:
         idle_timeout_s: float,
         handoff_idle_s: float = 1.0,
     ) -> None:
-        self.manager = manager
+        self.host = host
         self.store = store
         self.lease_s = lease_s
         self.checkpoint_interval_s = checkpoint_interval_s
@@ -105,7 +106,7 @@ class SessionSharing:
         # Packed under the lock too: the captured state refers to the session's own
         # (frozen or not yet replaced) values rather than copies.
         with session.state_lock:
-            state = checkpoint.capture(session)
+            state = session.capture()
             return session.id, checkpoint.pack(state), int(state["frames"]), session.version
 
     async def save(self, sessions: list[Session]) -> list[Session]:
@@ -121,7 +122,7 @@ class SessionSharing:
             await asyncio.sleep(0)
         items = [(sid, data, frames) for sid, data, frames, _ in packed]
         ok = await self.store.save(items, self.owner, self.idle_timeout_s)
-        metrics = self.manager.metrics
+        metrics = self.host.metrics
         lost = []
         for session, (sid, data, _, version), held in zip(sessions, packed, ok, strict=True):
             if held:
@@ -190,8 +191,8 @@ class SessionSharing:
             await self._run(self.store.release, [sid], self.owner)
             raise
         self._saved[sid] = session.version if not replayed else -1
-        self.manager.adopt(session)
-        self.manager.metrics.sessions_resumed.inc()
+        self.host.adopt(session)
+        self.host.metrics.sessions_resumed.inc()
         log_event(
             "session_resumed",
             tag=session.tag,
@@ -205,13 +206,13 @@ class SessionSharing:
     def _restore(self, sid: str, data: bytes, journal: list[bytes]) -> tuple[Session, int]:
         """Build the session from its checkpoint, then replay the frames after it."""
         state = checkpoint.unpack(data)
-        session = self.manager._build(
+        session = self.host.build(
             checkpoint.spec_of(state),
             session_id=sid,
             created_at=checkpoint.created_at_of(state),
             filter_state=state["filter"],
         )
-        checkpoint.apply(session, state)
+        session.restore(state)
         replayed = 0
         for entry in journal:
             seq, frame, merged = checkpoint.decode_frame(entry)
@@ -253,7 +254,7 @@ class SessionSharing:
     async def let_go(self, session_id: str) -> None:
         """Checkpoint a session and release it now (its WebSocket closed: the client may
         come back through another worker, which then need not wait)."""
-        session = self.manager._sessions.get(session_id)
+        session = self.host.live(session_id)
         if session is None or session.busy or self.stopping:
             return
         self._releasing.add(session_id)
@@ -293,7 +294,7 @@ class SessionSharing:
         period = self.lease_s / 5
         while not stop.wait(period):
             # Sessions being resumed too: a slow restore must not lose its lease.
-            ids = list(dict.fromkeys([*self.manager._sessions, *self._resuming]))
+            ids = list(dict.fromkeys([*self.host.live_ids(), *self._resuming]))
             try:
                 held = self.store.renew(ids, self.owner, self.lease_s)
             except Exception:
@@ -327,15 +328,15 @@ class SessionSharing:
             stop.set()
 
     async def keep(self) -> None:
-        manager = self.manager
+        host = self.host
         with self._lost_lock:
             lost, self._lost = self._lost, set()
         for sid in lost:
-            session = manager._sessions.get(sid)
+            session = host.live(sid)
             # A step in flight finds out itself, as it journals.
             if session is not None and not session.busy:
                 self._drop(session, "lease_lost")
-        sessions = manager.sessions()
+        sessions = host.sessions()
         now = time.monotonic()
         live = sessions
         idle = [s for s in live if now - s.last_active > self.handoff_idle_s and not s.busy]
@@ -358,7 +359,7 @@ class SessionSharing:
             self._releasing.difference_update(ids)
 
     def _drop(self, session: Session, reason: str | None) -> None:
-        self.manager.forget(session)
+        self.host.forget(session)
         self._saved.pop(session.id, None)
         if reason is not None:
             log_event(f"session_{reason}", tag=session.tag, frames=session.frames)
@@ -369,9 +370,9 @@ class SessionSharing:
         Runs after the manager answered every frame it accepted (no step in flight).
         """
         self.stopping = True
-        sessions = self.manager.sessions()
+        sessions = self.host.sessions()
         for session in sessions:
-            self.manager.forget(session)
+            self.host.forget(session)
         await self.save(sessions)
         await self._run(self.store.release, [s.id for s in sessions], self.owner)
         await self.store.aclose()

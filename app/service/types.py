@@ -27,6 +27,8 @@ class SensorSpec:
     bearing_std_deg: float = 2.0
     fov_deg: float = 360.0
     class_bearing_std_deg: Mapping[str, float] = field(default_factory=dict)
+    #: Probability that a detection's class is not the object's.
+    class_error: float = 0.03
 
 
 @dataclass(frozen=True)
@@ -47,6 +49,8 @@ class SessionSpec:
     #: The phone camera; its field of view replaces ``sensor.fov_deg`` when given.
     camera: Camera | None = None
     share_view: bool = False
+    #: Where the odometry comes from: "vio", "pdr" or "unknown" (tightens the motion model).
+    odometry_source: str = "unknown"
     #: The level id of ``initial_pose`` on a map with levels (None: any of them).
     initial_level: str | None = None
 
@@ -62,6 +66,8 @@ class FrameInput:
     truth: Pose | None = None
     #: The phone compass's heading (map frame), or None.
     heading: CompassReading | None = None
+    #: How long before the end of the odometry the detections were captured (seconds).
+    detections_age_s: float = 0.0
     #: The phone barometer's relative altitude, or None.
     altitude: AltitudeReading | None = None
 

@@ -156,7 +156,7 @@ def _corners(semantic_map: SemanticMap) -> np.ndarray:
     return shared if shared.size else keys
 
 
-def _truth_poses(cfg: SimulationConfig, semantic_map: SemanticMap) -> list[tuple[Pose, bool, bool]]:
+def truth_poses(cfg: SimulationConfig, semantic_map: SemanticMap) -> list[tuple[Pose, bool, bool]]:
     """Ground-truth pose per frame, whether the view is blocked then, and whether the
     person was just carried there (kidnapped)."""
     dt = 1.0 / cfg.rate_hz
@@ -300,7 +300,7 @@ def simulate(
         camera = CameraModel(
             config.camera.fov_deg, config.max_range_m, config.camera.fov_centre_deg
         )
-    truth = _truth_poses(config, semantic_map)
+    truth = truth_poses(config, semantic_map)
     frames: list[SimFrame] = []
     dt = 1.0 / config.rate_hz
     for i, (pose, blocked, jumped) in enumerate(truth):

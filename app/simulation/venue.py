@@ -12,6 +12,7 @@ does not settle the floor at once.
 from __future__ import annotations
 
 from app.maps.model import SemanticMap, parse_map
+from app.maps.prepare import ensure_prepared
 from app.simulation.venue_walk import Leg, Ride, Walk
 
 #: The venue's name (a usable map file name).
@@ -178,8 +179,8 @@ def venue_spec(name: str = VENUE_NAME) -> dict[str, object]:
 
 
 def venue_map() -> SemanticMap:
-    """The venue as a :class:`SemanticMap`."""
-    return parse_map(venue_spec())
+    """The venue as a :class:`SemanticMap`, its grids prepared."""
+    return ensure_prepared(parse_map(venue_spec()))
 
 
 def venue_legs() -> tuple[str, list[Leg]]:

@@ -8,6 +8,7 @@ import numpy as np
 
 from app.maps.geometry import segments_cross_walls
 from app.maps.model import SemanticMap
+from app.maps.prepare import ensure_prepared
 from app.simulation.scenarios import PAPER_PATH, paper_config
 from app.simulation.simulator import CornerVisit, SimulationConfig
 
@@ -19,7 +20,7 @@ def loop_path(
     elsewhere ``points`` random free points, each in line of sight of the previous."""
     if semantic_map.name == "paper_office":
         return (*PAPER_PATH, PAPER_PATH[0])
-    fs = semantic_map.free_space
+    fs = ensure_prepared(semantic_map).free_space
     path = [tuple(fs.sample(1, rng)[0])]
     tries = 0
     while len(path) < points and tries < 2000:

@@ -26,7 +26,7 @@ import viser
 from app.service.sessions import SessionManager
 
 if TYPE_CHECKING:
-    from app.service.sessions import Session
+    from app.service.session import Session
 
 NONE = "(none)"
 FOVS = ("360", "270", "180")

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from app.service.sessions import SessionSnapshot
+from app.service.session import SessionSnapshot
 
 MAX_DRAWN = 5_000
 HEADING_TICK_M = 0.15

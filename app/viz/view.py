@@ -19,7 +19,8 @@ import numpy as np
 import viser
 
 from app.service.errors import SessionNotFound
-from app.service.sessions import SessionManager, SessionSnapshot
+from app.service.session import SessionSnapshot
+from app.service.sessions import SessionManager
 from app.viz.gui import FOLLOW, StartWalk, ViewControls
 from app.viz.particles import detection_rays, pose_arrow, sample_particles
 from app.viz.scene import MapScene, build_map_scene

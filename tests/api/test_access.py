@@ -1,11 +1,15 @@
-"""Keys, ownership, quotas and origins over a real uvicorn server with real clients."""
+"""Keys, ownership, quotas and origins over a real uvicorn server with real clients.
+
+The tests share one server, so none may depend on what another left behind: every
+session a test creates is deleted after it (passed or not, :func:`new_session`), and
+each rate-limited key serves one test only (a key's token bucket outlives its sessions).
+"""
 
 from __future__ import annotations
 
 import asyncio
 import json
-import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import httpx
@@ -19,10 +23,12 @@ from tests.helpers import free_port, make_settings, serving
 ALICE = "alice-key-0123456789abcdef"
 BOB = "bob-key-0123456789abcdef-bob"
 SLOW = "slow-key-0123456789abcdef"
+SLOW_WS = "slow-websocket-key-0123456789"
 KEYS = f"""# name key max_sessions max_particles max_frames_per_s
-alice {ALICE} 2 3000 1000
-bob   {BOB}   3 -    -
-slow  {SLOW}  1 1000 2
+alice   {ALICE}   2 3000 1000
+bob     {BOB}     3 -    -
+slow    {SLOW}    1 1000 2
+slow-ws {SLOW_WS} 1 1000 2
 """
 
 
@@ -48,12 +54,27 @@ def http(url: str) -> Iterator[httpx.Client]:
         yield client
 
 
-def new_session(http: httpx.Client, key: str, particles: int = 500) -> str:
-    r = http.post(
-        "/sessions", json={"map": "paper_office", "particles": particles}, headers=auth(key)
-    )
-    assert r.status_code == 201, r.text
-    return r.json()["id"]
+NewSession = Callable[..., str]
+
+
+@pytest.fixture
+def new_session(http: httpx.Client) -> Iterator[NewSession]:
+    """``new_session(key, particles=500)``: a session of ``key`` on the paper office,
+    deleted after the test (whatever the test did), so that no test finds a quota
+    another one used up."""
+    made: list[tuple[str, str]] = []
+
+    def make(key: str, particles: int = 500) -> str:
+        r = http.post(
+            "/sessions", json={"map": "paper_office", "particles": particles}, headers=auth(key)
+        )
+        assert r.status_code == 201, r.text
+        made.append((r.json()["id"], key))
+        return made[-1][0]
+
+    yield make
+    for sid, key in made:
+        assert http.delete(f"/sessions/{sid}", headers=auth(key)).status_code in (204, 404)
 
 
 def test_every_route_but_healthz_needs_a_key(http: httpx.Client) -> None:
@@ -76,9 +97,9 @@ def test_every_route_but_healthz_needs_a_key(http: httpx.Client) -> None:
 
 
 def test_another_key_cannot_read_delete_or_stream_into_a_session(
-    http: httpx.Client, url: str
+    http: httpx.Client, url: str, new_session: NewSession
 ) -> None:
-    sid = new_session(http, ALICE)
+    sid = new_session(ALICE)
     missing = http.get("/sessions/never-existed-at-all", headers=auth(BOB))
     for r in (
         http.get(f"/sessions/{sid}", headers=auth(BOB)),
@@ -110,8 +131,10 @@ def test_another_key_cannot_read_delete_or_stream_into_a_session(
     assert http.delete(f"/sessions/{sid}", headers=auth(ALICE)).status_code == 204
 
 
-def test_websocket_key_in_header_or_query_and_refused_without(url: str, http: httpx.Client) -> None:
-    sid = new_session(http, BOB)
+def test_websocket_key_in_header_or_query_and_refused_without(
+    url: str, http: httpx.Client, new_session: NewSession
+) -> None:
+    sid = new_session(BOB)
 
     async def main() -> None:
         async with websockets.connect(f"ws://{url}/sessions/{sid}/stream?key={BOB}") as ws:
@@ -124,12 +147,11 @@ def test_websocket_key_in_header_or_query_and_refused_without(url: str, http: ht
         assert b"API key" in info.value.response.body
 
     asyncio.run(main())
-    http.delete(f"/sessions/{sid}", headers=auth(BOB))
 
 
-def test_quotas_answer_429_with_retry_after(http: httpx.Client) -> None:
-    first = new_session(http, ALICE, 1000)
-    second = new_session(http, ALICE, 1000)
+def test_quotas_answer_429_with_retry_after(http: httpx.Client, new_session: NewSession) -> None:
+    first = new_session(ALICE, 1000)
+    second = new_session(ALICE, 1000)
     r = http.post("/sessions", json={"map": "paper_office", "particles": 500}, headers=auth(ALICE))
     assert r.status_code == 429 and int(r.headers["retry-after"]) >= 1
     assert "quota of 2 sessions" in r.json()["message"] and r.json()["code"] == "session_quota"
@@ -141,7 +163,7 @@ def test_quotas_answer_429_with_retry_after(http: httpx.Client) -> None:
     assert r.status_code == 422 and "quota of 3000 particles" in r.json()["message"]
     http.delete(f"/sessions/{first}", headers=auth(ALICE))
 
-    sid = new_session(http, SLOW, 200)  # two frames a second, one second of burst
+    sid = new_session(SLOW, 200)  # two frames a second, one second of burst
     codes = [
         http.post(f"/sessions/{sid}/frames", json={}, headers=auth(SLOW)).status_code
         for _ in range(4)
@@ -150,17 +172,15 @@ def test_quotas_answer_429_with_retry_after(http: httpx.Client) -> None:
     r = http.post(f"/sessions/{sid}/frames", json={}, headers=auth(SLOW))
     assert r.status_code == 429 and r.headers["retry-after"] == "1"
     assert r.json()["code"] == "rate_limited" and "2 frames per second" in r.json()["message"]
-    http.delete(f"/sessions/{sid}", headers=auth(SLOW))
 
 
 def test_rate_quota_over_websocket_is_an_error_message_and_the_stream_stays(
-    url: str, http: httpx.Client
+    url: str, new_session: NewSession
 ) -> None:
-    sid = new_session(http, SLOW, 200)
-    time.sleep(1.1)  # the key's bucket refills (an earlier test may have emptied it)
+    sid = new_session(SLOW_WS, 200)  # a key of its own: its bucket is full
 
     async def main() -> list[dict]:
-        async with websockets.connect(f"ws://{url}/sessions/{sid}/stream?key={SLOW}") as ws:
+        async with websockets.connect(f"ws://{url}/sessions/{sid}/stream?key={SLOW_WS}") as ws:
             for _ in range(4):
                 await ws.send("{}")
             return [json.loads(await ws.recv()) for _ in range(4)]
@@ -169,7 +189,6 @@ def test_rate_quota_over_websocket_is_an_error_message_and_the_stream_stays(
     errors = [r["error"] for r in replies if "error" in r]
     assert errors and all(e["code"] == "rate_limited" and e["retry_after_s"] > 0 for e in errors)
     assert any("seq" in r for r in replies)
-    http.delete(f"/sessions/{sid}", headers=auth(SLOW))
 
 
 @pytest.mark.parametrize(
@@ -182,8 +201,10 @@ def test_rate_quota_over_websocket_is_an_error_message_and_the_stream_stays(
         ("null", False),
     ],
 )
-def test_websocket_origins(url: str, http: httpx.Client, origin: str | None, allowed: bool) -> None:
-    sid = new_session(http, BOB)
+def test_websocket_origins(
+    url: str, new_session: NewSession, origin: str | None, allowed: bool
+) -> None:
+    sid = new_session(BOB)
     headers = {} if origin is None else {"Origin": f"http://{url}" if origin == "SAME" else origin}
 
     async def main() -> None:
@@ -200,7 +221,6 @@ def test_websocket_origins(url: str, http: httpx.Client, origin: str | None, all
             assert b"origin" in info.value.response.body
 
     asyncio.run(main())
-    http.delete(f"/sessions/{sid}", headers=auth(BOB))
 
 
 def test_cors_for_allowed_origins_only(http: httpx.Client) -> None:

@@ -60,7 +60,10 @@ def test_frame_result_matches_the_contract(client: TestClient, session_id: str) 
     assert res["converged"] is False  # one detection cannot localize anyone
     assert 1 <= len(res["hypotheses"]) <= 3
     assert set(res["hypotheses"][0]) == {"x", "y", "theta_deg", "weight", "region", "level"}
-    assert set(res["feedback"]) == {"text", "items"}
+    assert set(res["feedback"]) == {"text", "items", "suggestion"}
+    # Not located through a 360-degree camera: walking helps, and it is said.
+    assert res["feedback"]["suggestion"] == "walk"
+    assert "Walk a few steps" in res["feedback"]["text"]
     assert "not certain" in res["feedback"]["text"]
     got = client.get(f"/sessions/{session_id}").json()
     assert got["frames"] == 1 and got["last_result"]["seq"] == 1

@@ -22,6 +22,7 @@ from app.experiments.integrity import (
     run_scenario,
     scenarios,
 )
+from app.maps.prepare import ensure_prepared
 
 
 def fake(err: list[float], conv: list[bool], prot: list[float] | None = None) -> IntegrityRun:
@@ -51,7 +52,7 @@ def test_metrics_by_hand() -> None:
 def test_every_map_has_free_start_and_kidnap_poses() -> None:
     for name in BUILDERS:
         hm = hard_map(name)
-        fs = hm.map.free_space
+        fs = ensure_prepared(hm.map).free_space
         xs = [p[0] for p in hm.path] + [hm.kidnap_pose[0]]
         ys = [p[1] for p in hm.path] + [hm.kidnap_pose[1]]
         assert fs.is_free(np.array(xs), np.array(ys)).all(), name

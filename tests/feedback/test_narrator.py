@@ -7,7 +7,7 @@ import math
 import pytest
 
 from app.feedback import FeedbackOptions, Narrator
-from app.localization.types import Detection, Estimate, Hypothesis
+from app.localization.types import Detection, Estimate, Hypothesis, Odometry
 from app.maps.model import parse_map
 from tests.helpers import paper_office
 
@@ -191,3 +191,47 @@ def test_hedging_when_the_protection_radius_is_wide() -> None:
         replace(located(7, 2.5), protection_m=0.3), [Detection("door", 0.0)], timestamp_s=0
     )
     assert "about 3 metres" in fb.text
+
+
+def test_while_lost_it_suggests_turning_then_walking_and_says_so_every_10_s() -> None:
+    """A phone camera (66 deg): turn on the spot until it has looked all around, then
+    walk; after a few metres, look around again. Spoken at most once every 10 s; no
+    suggestion once located."""
+    n = Narrator(TWO_OFFICES)
+    turn = Odometry(0.0, 0.0, math.radians(9.0))  # 90 deg/s at 10 frames/s
+    said_at, suggestions = [], []
+    for k in range(60):  # 6 s of turning: 540 degrees
+        fb = n.update(
+            lost((3, 2.5, 0.5), (13, 2.5, 0.5)),
+            [],
+            timestamp_s=0.1 * k,
+            fov_deg=66.0,
+            odometry=turn,
+        )
+        suggestions.append(fb.suggestion)
+        if "Turn slowly" in fb.text or "Walk a few steps" in fb.text:
+            said_at.append(round(0.1 * k, 1))
+    assert set(suggestions[:39]) == {"turn"}  # under a full turn
+    assert set(suggestions[41:]) == {"walk"}
+    assert said_at == [0.0]  # the switch to "walk" waits for the 10 s to pass
+    step = Odometry(0.04, 0.0, 0.0)  # 2.4 m in 6 s
+    for k in range(60, 120):
+        fb = n.update(
+            lost((3, 2.5, 0.5), (13, 2.5, 0.5)),
+            [],
+            timestamp_s=0.1 * k,
+            fov_deg=66.0,
+            odometry=step,
+        )
+        if "Walk a few steps" in fb.text:
+            said_at.append(round(0.1 * k, 1))
+    assert said_at == [0.0, 10.0]
+    assert fb.suggestion == "walk"
+    fb = n.update(lost((3, 2.5, 1.0)), [], timestamp_s=12.0, fov_deg=66.0, odometry=Odometry(1.0))
+    assert fb.suggestion == "turn"  # walked over 3 m: look around again
+    fb = n.update(located(7, 2.5), [], timestamp_s=12.5, fov_deg=66.0, odometry=step)
+    assert fb.suggestion is None and "Turn" not in fb.text
+    # A 360-degree camera has nothing more to see by turning.
+    fresh = Narrator(TWO_OFFICES)
+    fb = fresh.update(lost((3, 2.5, 1.0)), [], timestamp_s=0.0, fov_deg=360.0, odometry=turn)
+    assert fb.suggestion == "walk" and "Walk a few steps" in fb.text

@@ -15,6 +15,7 @@ from app.guidance import (
     guide,
     plan_for,
 )
+from app.guidance.planner import CACHE_SIZE
 from app.maps.check import load_map
 from app.maps.geometry import segments_cross_walls
 from app.maps.model import SemanticMap, parse_map
@@ -157,6 +158,19 @@ def test_names_are_matched_without_case_and_plans_are_cached() -> None:
     a = plan_for(SUITE, DestinationSpec("label", "Main Entrance"))
     b = plan_for(SUITE, DestinationSpec("label", "main entrance"))
     assert a is b and a.target.name == "main entrance"
+
+
+def test_a_map_keeps_its_latest_plans_only() -> None:
+    """Plans are kept with their map (another map plans anew), the latest CACHE_SIZE:
+    one more distinct destination and the least recently asked is built again."""
+    m, other = _two_rooms((1.0, 3.0)), _two_rooms((1.0, 3.0))
+    points = [DestinationSpec("point", x=1.0 + 0.25 * i, y=1.0) for i in range(CACHE_SIZE)]
+    first = [plan_for(m, p) for p in points]
+    assert plan_for(other, points[0]) is not first[0]
+    assert all(plan_for(m, p) is plan for p, plan in zip(points, first, strict=True))
+    plan_for(m, DestinationSpec("point", x=10.0, y=3.0))  # points[0] is now the oldest
+    assert plan_for(m, points[0]) is not first[0]
+    assert plan_for(m, points[-1]) is first[-1]
 
 
 def test_a_pose_far_from_any_walkable_place_is_unreachable() -> None:

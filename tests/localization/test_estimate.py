@@ -4,15 +4,14 @@ from __future__ import annotations
 
 import numpy as np
 
-from app.localization.estimate import (
-    DEFAULT_CLUSTERING,
+from app.localization.convergence import (
     PROTECTION_FLOOR_M,
     PROTECTION_PROBABILITY,
     PROTECTION_SAMPLE,
     PROTECTION_SCALE,
-    estimate_pose,
     protection_radius,
 )
+from app.localization.estimate import DEFAULT_CLUSTERING, estimate_pose
 from app.localization.types import Estimate
 from app.maps.geometry import wrap_angle
 

@@ -24,6 +24,8 @@ def test_warm_up_compiles_every_kernel_a_step_calls() -> None:
         # The step's kernels outside the engine: the angle wrap, the visibility rows and
         # the narrator's match.
         outside = ["app.maps.geometry", "app.maps.visibility", "app.feedback.narrator"]
+        # The map check's enclosure test runs when a map is loaded, never in a step.
+        not_in_a_step = {"app.maps.geometry._enclosed_points"}
         for module_name in names + outside:
             module = importlib.import_module(module_name)
             for name, obj in vars(module).items():
@@ -32,7 +34,7 @@ def test_warm_up_compiles_every_kernel_a_step_calls() -> None:
                 if obj.targetoptions.get("inline") == "always":
                     continue  # inlined into its callers, never called on its own
                 kernels += 1
-                if not obj.signatures:
+                if not obj.signatures and f"{module.__name__}.{name}" not in not_in_a_step:
                     cold.append(f"{module.__name__}.{name}")
         print(kernels, ",".join(cold))
         """

@@ -127,7 +127,7 @@ def test_a_bad_file_is_skipped_and_the_others_are_served(tmp_path: Path) -> None
         assert any(p.source.endswith(f"{refused}.json") for p in problems)
     assert any("broken symbolic link" in p.message for p in problems)
     assert any(p.field == "(directory)" for p in problems)
-    assert maps["good"].prepared_or_none is not None  # prepared at load
+    assert maps["good"].prepared  # prepared at load
     assert np.count_nonzero(maps["good"].free_space.mask) > 0
 
 

@@ -12,6 +12,7 @@ import pytest
 from app.maps.check import check_data, check_file
 from app.maps.levels import LEVEL_GAP_M
 from app.maps.model import MapError, parse_map
+from app.maps.prepare import ensure_prepared
 from app.resources import bundled_maps_dir
 from app.simulation.venue import venue_spec
 
@@ -46,7 +47,7 @@ def test_the_venue_passes_every_check_and_lists_its_levels_and_connectors() -> N
 
 
 def test_levels_lie_side_by_side_in_the_plane_and_come_back() -> None:
-    m = parse_map(VENUE)
+    m = ensure_prepared(parse_map(VENUE))
     layout = m.layout
     assert layout.pitch_m == pytest.approx(24.0 + LEVEL_GAP_M)
     # An object on the First Floor lies one pitch east of its file position.

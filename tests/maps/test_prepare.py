@@ -3,11 +3,12 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from app.maps.check import load_map
 from app.maps.geometry import point_segment_distance, segments_cross_walls
-from app.maps.model import WALL_CLEARANCE_M, SemanticMap, parse_map
-from app.maps.prepare import build, content_key, grid_frame, prepare
+from app.maps.model import WALL_CLEARANCE_M, MapNotPrepared, SemanticMap, parse_map
+from app.maps.prepare import build, content_key, ensure_prepared, grid_frame, prepare
 from app.resources import bundled_maps_dir
 
 
@@ -100,3 +101,29 @@ def test_a_corrupt_cache_file_is_rebuilt(tmp_path) -> None:
     again = prepare(load_map(bundled_maps_dir() / "paper_office.json"), tmp_path)
     assert not again.from_cache
     assert np.array_equal(again.free_space.mask, m.free_space.mask)
+
+
+def test_preparing_is_an_explicit_step() -> None:
+    """Reading a grid builds nothing: an unprepared map says what to call; the loader and
+    ensure_prepared prepare (once: a second call keeps the same grids)."""
+    m = random_floor(5)
+    assert not m.prepared
+    with pytest.raises(MapNotPrepared, match=r"random5.*ensure_prepared"):
+        _ = m.free_space
+    with pytest.raises(MapNotPrepared, match="visibility"):
+        _ = m.visibility
+    assert ensure_prepared(m) is m and m.prepared
+    grid = m.visibility
+    ensure_prepared(m)
+    assert m.visibility is grid
+    assert load_map(bundled_maps_dir() / "paper_office.json").prepared
+
+
+def test_grids_of_another_map_are_refused() -> None:
+    small, other = (
+        random_floor(6),
+        parse_map({"name": "one", "objects": [{"class": "door", "x": 1.0, "y": 1.0}]}),
+    )
+    got = build(small)
+    with pytest.raises(ValueError, match="13 objects does not fit a map of 1"):
+        other.attach(got.free_space, got.visibility)

@@ -319,25 +319,25 @@ def test_a_restored_session_steps_exactly_as_the_original() -> None:
     """Same particles, estimates, feedback and guidance, to the bit: the checkpoints of
     the two sessions after 20 more frames are the same bytes."""
     m = manager(MemoryStore(shared=True))
-    a = m._build(SPEC)
+    a = m.build(SPEC)
     a.set_destination(plan_for(OFFICE, DestinationSpec("label", "main entrance")))
     for i in range(40):
         a.process_sync(frame(i))
     assert a.filter.estimate.converged and a.filter.n <= CHECKPOINT_PARTICLES
-    state = checkpoint.unpack(checkpoint.pack(checkpoint.capture(a)))
-    b = m._build(
+    state = checkpoint.unpack(checkpoint.pack(a.capture()))
+    b = m.build(
         checkpoint.spec_of(state),
         session_id=state["id"],
         created_at=checkpoint.created_at_of(state),
         filter_state=state["filter"],
     )
-    checkpoint.apply(b, state)
+    b.restore(state)
     for name in ("x", "y", "theta", "log_w"):
         assert np.array_equal(getattr(a.filter, name), getattr(b.filter, name))
     for i in range(40, 60):
         out_a, out_b = a.process_sync(frame(i)), b.process_sync(frame(i))
         assert out_a.estimate == out_b.estimate and out_a.feedback == out_b.feedback
-    assert checkpoint.pack(checkpoint.capture(a)) == checkpoint.pack(checkpoint.capture(b))
+    assert checkpoint.pack(a.capture()) == checkpoint.pack(b.capture())
     m.close()
 
 

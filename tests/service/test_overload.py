@@ -7,7 +7,9 @@ import asyncio
 import contextlib
 import json
 import signal
+import statistics
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import httpx
@@ -35,11 +37,30 @@ def frame(i: int) -> str:
     )
 
 
-async def flood(url: str, sid: str, rate: float, seconds: float) -> tuple[list[float], int, int]:
-    """Offer ``rate`` frames/s on one WebSocket for ``seconds``; latencies of every answer."""
+#: Longest wait for any one answer before the flood test calls it lost. Not a latency
+#: target (the worst latency is reported, not asserted): a bound so that a lost answer
+#: fails the test instead of hanging it.
+ANSWER_TIMEOUT_S = 60.0
+
+
+@dataclass
+class Flood:
+    """What one flooded connection saw: every frame's latency, in order, and its answer."""
+
+    latencies_s: list[float]
+    seqs: list[int]
+    merged: int
+    errors: int
+
+
+async def flood(url: str, sid: str, rate: float, seconds: float) -> Flood:
+    """Offer ``rate`` frames/s on one WebSocket for ``seconds``; wait for every answer.
+
+    The reader waits for an answer *or* the sender's end, so it cannot wait for an
+    answer to a frame never sent (the last answer may arrive before the sender stops).
+    """
     sent: list[float] = []
-    latencies: list[float] = []
-    merged = 0
+    report = Flood([], [], 0, 0)
     async with websockets.connect(
         f"ws://{url}/sessions/{sid}/stream", additional_headers={"Authorization": f"Bearer {KEY}"}
     ) as ws:
@@ -56,20 +77,50 @@ async def flood(url: str, sid: str, rate: float, seconds: float) -> tuple[list[f
                 await asyncio.sleep(0.001)
 
         sender = asyncio.create_task(send())
-        errors = 0
-        while not (sender.done() and len(latencies) + errors == len(sent)):
-            reply = json.loads(await asyncio.wait_for(ws.recv(), 30))
-            if "error" in reply:
-                errors += 1
+        while not (sender.done() and len(report.latencies_s) == len(sent)):
+            receiving = asyncio.ensure_future(ws.recv())
+            waiting_for = {receiving} if sender.done() else {receiving, sender}
+            done, _ = await asyncio.wait(
+                waiting_for, timeout=ANSWER_TIMEOUT_S, return_when=asyncio.FIRST_COMPLETED
+            )
+            if receiving not in done:
+                receiving.cancel()  # safe: the next recv returns the next message
+                with contextlib.suppress(asyncio.CancelledError):
+                    await receiving
+                assert sender in done, (
+                    f"no answer for {ANSWER_TIMEOUT_S:g} s: "
+                    f"{len(report.latencies_s)} of {len(sent)} frames answered"
+                )
                 continue
-            latencies.append(time.perf_counter() - sent[len(latencies) + errors])
-            merged += any("merged" in w for w in reply["warnings"])
+            reply = json.loads(receiving.result())
+            report.latencies_s.append(time.perf_counter() - sent[len(report.latencies_s)])
+            if "error" in reply:
+                report.errors += 1
+                continue
+            report.seqs.append(reply["seq"])
+            report.merged += any("merged" in w for w in reply["warnings"])
         await sender
-    return latencies, merged, errors
+    return report
 
 
-def test_a_flood_of_frames_is_merged_and_answers_stay_prompt(tmp_path: Path) -> None:
-    """The issue's case as it stands: 1,000 frames/s offered to one session for 10 s."""
+def counter(metrics: httpx.Response, name: str) -> float:
+    """One counter's value from the server's Prometheus metrics."""
+    for line in metrics.text.splitlines():
+        if line.startswith(f"{name} "):
+            return float(line.split()[1])
+    raise AssertionError(f"no {name} in /metrics")
+
+
+def test_a_flood_of_frames_is_merged_and_every_frame_is_answered_in_order(
+    tmp_path: Path,
+) -> None:
+    """The issue's case: 1,000 frames/s offered to one session for 10 s.
+
+    A check whose assertions cannot fail on timing alone: every frame answered, once, in
+    order, without an error; how long the worst answer took is printed, not asserted
+    (benchmarks/ measures latency). Merging itself is held by the deterministic fuzz in
+    tests/service/test_frame_queue_fuzz.py.
+    """
     seconds = 10
     with server_process("--api-keys", str(keys_file(tmp_path))) as server:
         r = httpx.post(
@@ -78,12 +129,21 @@ def test_a_flood_of_frames_is_merged_and_answers_stay_prompt(tmp_path: Path) -> 
             headers={"Authorization": f"Bearer {KEY}"},
         )
         sid = r.json()["id"]
-        latencies, merged, errors = asyncio.run(flood(server.url, sid, 1000, seconds))
-    latencies.sort()
-    assert errors == 0
-    assert len(latencies) >= 900 * seconds  # every frame offered was answered
-    assert merged > 0  # the filter could not keep up with 1,000 frames/s: frames were merged
-    assert latencies[-1] < 1.0, f"worst answer {latencies[-1]:.3f} s"
+        seen = asyncio.run(flood(server.url, sid, 1000, seconds))
+        metrics = httpx.get(
+            f"http://{server.url}/metrics", headers={"Authorization": f"Bearer {KEY}"}
+        )
+    sent = len(seen.latencies_s)
+    print(
+        f"\n{sent} frames, {seen.merged} answers merged, worst answer "
+        f"{max(seen.latencies_s):.3f} s, median {statistics.median(seen.latencies_s):.4f} s"
+    )
+    assert seen.errors == 0
+    assert seen.seqs == sorted(seen.seqs)  # answers in the order the frames were sent
+    # The server's own count: every message it took in got exactly one answer.
+    assert counter(metrics, "bearings_stream_messages_total") == sent
+    assert counter(metrics, "bearings_stream_answers_total") == sent
+    assert counter(metrics, "bearings_frames_accepted_total") == sent
 
 
 def test_a_one_megabyte_message_is_refused_before_it_is_buffered(tmp_path: Path) -> None:
@@ -118,10 +178,7 @@ def test_a_one_megabyte_message_is_refused_before_it_is_buffered(tmp_path: Path)
 
 def accepted(metrics: httpx.Response) -> float:
     """Frames the server has accepted so far, from its Prometheus metrics."""
-    for line in metrics.text.splitlines():
-        if line.startswith("bearings_frames_accepted_total "):
-            return float(line.split()[1])
-    raise AssertionError("no bearings_frames_accepted_total in /metrics")
+    return counter(metrics, "bearings_frames_accepted_total")
 
 
 def test_sigterm_answers_every_frame_accepted_then_closes_with_1012(tmp_path: Path) -> None:

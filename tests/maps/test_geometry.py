@@ -1,4 +1,4 @@
-"""Angle wrapping, circular statistics and segment crossings."""
+"""Angle wrapping, segment crossings, points against walls, polygons."""
 
 from __future__ import annotations
 
@@ -7,6 +7,9 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from app.maps.geometry import (
+    enclosed,
+    nearest_walls,
+    point_segment_distance,
     points_in_polygon,
     points_in_polygons,
     polygon_edges,
@@ -117,3 +120,30 @@ def test_points_in_several_polygons_at_once() -> None:
     assert np.array_equal(inside[:, 2], points_in_polygon(pts, triangle))
     assert inside[:, 0].any() and inside[:, 2].any()
     assert points_in_polygons(pts, *polygon_edges([])).shape == (500, 0)
+
+
+def test_nearest_walls_kernel_matches_the_numpy_distances() -> None:
+    """The compiled kernel against :func:`point_segment_distance` (the reference): the
+    same float64 operations in the same order, each correctly rounded (no fastmath, so
+    no fused multiply-adds), hence the same bits; the index is the reference's argmin
+    and ``near`` its comparison."""
+    rng = np.random.default_rng(4)
+    walls = rng.uniform(-1.0, 11.0, (40, 4))
+    walls[:3, 2:] = walls[:3, :2]  # degenerate walls (points) too
+    points = rng.uniform(-2.0, 12.0, (300, 2))
+    dist, index, near = nearest_walls(points, walls, tolerance=0.5)
+    ref = point_segment_distance(points, walls)
+    assert np.array_equal(dist, ref.min(axis=1))
+    assert np.array_equal(index, ref.argmin(axis=1))
+    assert np.array_equal(near, ref < 0.5)
+    none_d, none_i, none_near = nearest_walls(points, np.empty((0, 4)))
+    assert np.isinf(none_d).all() and (none_i == -1).all() and none_near.shape == (300, 0)
+
+
+def test_enclosed_needs_a_wall_on_all_four_sides() -> None:
+    box = np.array([[0, 0, 4, 0], [4, 0, 4, 3], [4, 3, 0, 3], [0, 3, 0, 0]], dtype=float)
+    pts = np.array([[2.0, 1.5], [5.0, 1.5], [2.0, -1.0], [0.5, 2.5]])
+    assert enclosed(pts, box).tolist() == [True, False, False, True]
+    open_side = box[:3]  # no west wall: nothing is enclosed
+    assert not enclosed(pts, open_side).any()
+    assert enclosed(pts, np.empty((0, 4))).all()  # a map without walls: everywhere

@@ -10,6 +10,7 @@ import pytest
 
 from app.maps.check import load_map, load_map_dir
 from app.maps.model import MapError, parse_map
+from app.maps.prepare import ensure_prepared
 from app.resources import bundled_maps_dir
 from tests.helpers import paper_office
 
@@ -102,7 +103,7 @@ def test_line_of_sight_blocks_through_walls_but_not_own_wall() -> None:
 
 
 def test_free_space_is_inside_walls_and_clear_of_them() -> None:
-    m = parse_map(ROOM)
+    m = ensure_prepared(parse_map(ROOM))
     fs = m.free_space
     assert fs.is_free([1.0, 3.0], [1.5, 2.5]).all()
     assert not fs.is_free([-0.5, 5.0, 2.0, 0.05], [1.0, 1.0, 1.0, 1.5]).any()

@@ -1,0 +1,131 @@
+"""The phone suite: the metrics by hand, the frames as the service takes them, and the
+quick run end to end through `bearings experiments --suite phone --quick`."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from app.experiments import cli
+from app.experiments.phone import (
+    CONDITIONS,
+    MAPS,
+    QUICK,
+    PhoneRun,
+    Scenario,
+    frame_input,
+    frame_input_fields,
+    metrics,
+    pinhole_camera,
+    reliability,
+    scenarios,
+    suite_map,
+    walk_of,
+)
+from app.simulation.phone import PhoneEffects, simulate_phone, vio_phone
+
+
+def fake(err: list[float], conv: list[bool], prot: list[float]) -> PhoneRun:
+    n = len(err)
+    return PhoneRun(
+        Scenario("office_suite", "vio-360"), 0, np.arange(n) * 0.2, np.array(err),
+        np.array(conv), np.array(prot), np.zeros(n), False,
+    )  # fmt: skip
+
+
+def test_metrics_by_hand() -> None:
+    r = fake(
+        [3.0, 2.0, 0.1, 0.1, 0.2, 0.1, 1.5, 0.1, 0.4],
+        [False, True, True, False, True, True, True, False, True],
+        [math.nan, 5.0, 0.5, math.nan, 0.1, 0.5, 0.5, math.nan, 0.5],
+    )
+    m = metrics([r])
+    assert m["frames"] == 9 and m["converged_frames"] == 6
+    assert m["wrong_frames"] == 2  # 2.0 and 1.5 m while converged
+    # Beyond protection: 0.2 > 0.1 and 1.5 > 0.5 (2.0 is within its 5 m).
+    assert m["beyond_protection_share"] == pytest.approx(2 / 9)
+    assert m["coverage"] == pytest.approx(4 / 6)
+    # Within 0.5 m: frames 2, 3, 4, 5, 7, 8; converged among them: 2, 4, 5, 8.
+    assert m["availability"] == pytest.approx(4 / 6)
+    assert m["converged_share"] == pytest.approx(6 / 9)
+    # Flips within 0.3 m: frame 3 (0.1 m) and frame 7 (0.1 m).
+    assert m["flips_per_min"] == pytest.approx(2 / ((1.6 + 0.2) / 60.0))
+    # The last third: frames 6, 7, 8 -> errors 1.5, 0.1, 0.4.
+    assert m["tail_err_p95_m"] == pytest.approx(np.percentile([1.5, 0.1, 0.4], 95))
+    assert m["median_frames_to_converge"] == 2.0
+    rows = reliability([r])
+    assert sum(row["frames"] for row in rows) == 6
+    small = next(row for row in rows if row["radius_from_m"] == 0.0)
+    assert small["frames"] == 1 and small["covered"] == 0.0  # 0.2 m against 0.1 m
+
+
+def test_scenarios_cover_the_issue() -> None:
+    todo = scenarios()
+    names = {(s.map_name, s.condition) for s in todo}
+    for m in MAPS:
+        for c in ("vio-360", "vio-180", "vio-pinhole66", "pdr-360", "pdr-pinhole66"):
+            assert (m, c) in names
+    assert ("door_corridor", "vio-missed30-270") in names
+    assert ("paper_office", "known-start-pinhole66") in names
+    assert sum(c.startswith("only-") for _, c in names) == 12
+    assert sum("-without-" in c for _, c in names) == 9
+    assert len(todo) == len(names)
+    assert scenarios(select="door_corridor") == [s for s in todo if s.map_name == "door_corridor"]
+    with pytest.raises(ValueError, match="unknown map"):
+        scenarios(select="nowhere")
+    with pytest.raises(ValueError, match="unknown condition"):
+        scenarios(select="*/nothing")
+    assert pinhole_camera().fov_deg == pytest.approx(66.0)
+
+
+def test_frames_reach_the_service_with_or_without_the_age_field() -> None:
+    semantic_map, _ = suite_map("office_suite")
+    walk = walk_of(Scenario("office_suite", "vio-360"), max_s=3.0)
+    frames = simulate_phone(semantic_map, walk, vio_phone(), np.random.default_rng(0))
+    f = next(f for f in frames if f.detections)
+    assert f.detections_age_s is not None
+    # A service without the field: the age is left out, the rest goes through.
+    without = frame_input(f, frozenset())
+    assert tuple(without.detections) == tuple(f.detections)  # type: ignore[attr-defined]
+    assert getattr(without, "detections_age_s", None) in (None, 0.0)
+    served = frame_input(f, frame_input_fields())
+    if "detections_age_s" in frame_input_fields():
+        assert served.detections_age_s == f.detections_age_s  # type: ignore[attr-defined]
+    # The known start stands still for its 20 s.
+    stand = walk_of(Scenario("paper_office", "known-start-pinhole66"))
+    cond = CONDITIONS["known-start-pinhole66"]
+    assert cond.known_start is not None and stand.path == ((6.5, 3.5),)
+    still = simulate_phone(
+        suite_map("paper_office")[0], stand, PhoneEffects(), np.random.default_rng(0),
+        facing_deg=cond.known_start.theta_deg,
+    )  # fmt: skip
+    assert len(still) == 101
+    seen = {d.cls for d in still[0].detections}
+    assert {"door", "table", "window"} <= seen
+
+
+def test_quick_suite_end_to_end(tmp_path: Path) -> None:
+    args = argparse.Namespace(
+        suite="phone", quick=True, seeds=10, particles=1000, workers=1, out=tmp_path,
+        scenarios=None,
+    )  # fmt: skip
+    assert cli.run(args) == 0
+    summary = json.loads((tmp_path / "phone.json").read_text())
+    rows = {(r["map"], r["condition"]): r for r in summary["scenarios"]}
+    assert set(rows) == set(QUICK)
+    for row in rows.values():
+        assert row["seeds"] == 2
+        assert 0.0 <= row["wrong_share"] <= 1.0 and 0.0 <= row["converged_share"] <= 1.0
+        assert row["tail_err_p95_m"] >= 0.0
+    # The ideal phone on a non-symmetric suite: located, and right.
+    ideal = rows[("office_suite", "ideal-360")]
+    assert ideal["converged_share"] > 0.5 and ideal["wrong_frames"] == 0
+    assert ideal["tail_err_p95_m"] < 0.5
+    text = (tmp_path / "phone.md").read_text()
+    assert "--suite phone --quick" in text and "Reliability" in text
+    assert (tmp_path / "phone.png").stat().st_size > 10_000
