@@ -114,6 +114,16 @@ class BearingGeometry:
                 t + odometry.turn_rad,
             )
 
+    def shift_x(self, dx_m: float) -> None:
+        """The person rode to another level (:mod:`app.localization.floors`): the carried
+        fix and the recent frames move with them by ``dx_m`` in the filter's plane,
+        unchanged relative to the level's map."""
+        if self._fix is not None:
+            x, y, t = self._fix
+            self._fix = (x + dx_m, y, t)
+        self._frames = deque(((fx + dx_m, fy, rows) for fx, fy, rows in self._frames), WINDOW)
+        self._last_xy = (self._last_xy[0] + dx_m, self._last_xy[1])
+
     def radius_m(self, x: float, y: float, theta: float) -> float:
         """The 99 % radius around the estimate (x, y, theta) within which the truth lies
         (m): the smaller of the recent geometry's bound and the carried fix's (the

@@ -310,10 +310,10 @@ class ParticleFilter:
         odometry: Odometry | None,
         detections: Sequence[Detection],
         heading: CompassReading | None = None,
+        altitude: AltitudeReading | None = None,
         *,
         detections_age_s: float = 0.0,
         frame_s: float | None = None,
-        altitude: AltitudeReading | None = None,
     ) -> Estimate:
         """One full filter step: predict, correct, estimate, resample when due.
 
@@ -321,9 +321,9 @@ class ParticleFilter:
         (:mod:`~app.localization.compass`); ``altitude``, the barometer's, moves
         particles between levels (:mod:`~app.localization.floors`). ``detections_age_s``:
         how long before the end of this frame's ``odometry`` (lasting ``frame_s``, None:
-        not known) the detections were captured; the particles stand for the pose at that
-        moment (:mod:`~app.localization.latency`), and the estimate returned is moved on
-        to the frame's end (:attr:`estimate` stays at the capture).
+        not known) the detections were captured; the particles stand for the pose at
+        that moment (:mod:`~app.localization.latency`), and the estimate returned is
+        moved on to the frame's end (:attr:`estimate` stays at the capture).
 
         The estimate summarizes the weighted particles before resampling: resampling
         only adds noise to what they say (and to what the injected particles say).
@@ -340,7 +340,7 @@ class ParticleFilter:
         odometry: Odometry | None,
         detections: Sequence[Detection],
         heading: CompassReading | None,
-        altitude: AltitudeReading | None,
+        altitude: AltitudeReading | None = None,
     ) -> None:
         """:meth:`step` in capture time: ``odometry`` is the motion between captures."""
         self.predict(odometry)
@@ -352,10 +352,13 @@ class ParticleFilter:
             )
             if contradicted:
                 self._restart_global()
-            elif self.floors.changed and self.evidence is not None:
-                # The alternatives were carried by the walk's odometry, not the ride:
-                # none of them rode along. The next search looks afresh.
-                self.evidence.reset()
+            elif self.floors.changed:
+                # The fix the bearings' geometry gave rides along with the person.
+                self.geometry.shift_x(self.floors.shift_x_m)
+                if self.evidence is not None:
+                    # The alternatives were carried by the walk's odometry, not the ride:
+                    # none of them rode along. The next search looks afresh.
+                    self.evidence.reset()
         inject, w = self._correct(detections)
         if heading is not None:
             self.log_w = self.log_w + compass_log_likelihood(self.theta, heading)

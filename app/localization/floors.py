@@ -40,16 +40,13 @@ from __future__ import annotations
 from collections import deque
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from app.maps.geometry import first_polygon, polygon_edges
 from app.maps.model import SemanticMap
-
-if TYPE_CHECKING:
-    from app.localization.filter import ParticleFilter
 
 #: Readings averaged for the level-change test (at 5 frames/s: one second).
 SMOOTH_FRAMES = 5
@@ -145,9 +142,11 @@ class FloorTracker:
         #: The level the barometer carries a confirmed fix to (None: none confirmed,
         #: or the chain broke: a frame without altitude, a contradiction).
         self.carried_level: int | None = None
-        #: Whether the last frame came without altitude, and whether it changed level.
+        #: Whether the last frame came without altitude, whether it changed level, and
+        #: how far the heaviest particle that changed moved in the plane (metres).
         self.blind = False
         self.changed = False
+        self.shift_x_m = 0.0
 
     # ------------------------------------------------------------ the particles
     def stop_of(self, x: NDArray[np.float64], y: NDArray[np.float64]) -> NDArray[np.int64]:
@@ -185,6 +184,7 @@ class FloorTracker:
         than ``CONTRADICTED_SHARE`` of the weight could make it)."""
         self.blind = altitude is None
         self.changed = False
+        self.shift_x_m = 0.0
         if altitude is None:
             self.carried_level = None
             self.in_transit = False
@@ -225,6 +225,10 @@ class FloorTracker:
             frm = self.layout.level_of_plane_x(x[moved])
             rise = self._elevation[to[landed]] - self._elevation[frm]
             w = prior[moved]
+            top = int(np.argmax(w))
+            self.shift_x_m = float(
+                self.layout.offsets(to[landed][top]) - self.layout.offsets(frm[top])
+            )
             self.anchor_m += float(np.sum(w * rise) / max(float(np.sum(w)), 1e-300))
             self.carried_level = self._carry(frm, to[landed], w)
         else:
@@ -335,9 +339,14 @@ class FloorTracker:
         self.blind = bool(state["blind"])
 
 
-def spread_over_levels(pf: ParticleFilter, levels: tuple[int, ...]) -> None:
-    """Deal a known start's particles (drawn on ``levels[0]``) evenly over ``levels``:
+def spread_over_levels(
+    x: NDArray[np.float64],
+    semantic_map: SemanticMap,
+    levels: tuple[int, ...],
+    rng: np.random.Generator,
+) -> NDArray[np.float64]:
+    """A known start's particles' x (drawn on ``levels[0]``) dealt evenly over ``levels``:
     a position known on the floor plan, its floor not (the same x and y on each)."""
-    layout = pf.map.layout
-    pick = np.asarray(levels, dtype=np.int64)[pf.rng.integers(len(levels), size=pf.n)]
-    pf.x = pf.x + layout.offsets(pick) - layout.offsets(levels[0])
+    layout = semantic_map.layout
+    pick = np.asarray(levels, dtype=np.int64)[rng.integers(len(levels), size=x.shape[0])]
+    return x + layout.offsets(pick) - layout.offsets(levels[0])

@@ -21,7 +21,7 @@ from __future__ import annotations
 import re
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Literal
+from typing import Literal, Protocol
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -29,9 +29,6 @@ from pydantic import Field, field_validator, model_validator
 
 from app.maps.freespace import MapError
 from app.validation import Finite, Integer, StrictInput
-
-if TYPE_CHECKING:
-    from app.maps.model import MapFile, ObjectSpec, RegionSpec, WallSpec
 
 #: A level or connector id: letters, digits, '_', '-' or '.', starting with a letter or digit.
 ID_PATTERN = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]*$")
@@ -102,7 +99,62 @@ class ConnectorSpec(StrictInput):
 
 
 # ------------------------------------------------------------------ references
-def reference_problems(spec: MapFile) -> list[tuple[str, str]]:
+class _OnLevel(Protocol):
+    """A wall, object or region of a map file (:mod:`app.maps.model`)."""
+
+    @property
+    def level(self) -> str | None: ...
+
+
+class _Point(Protocol):
+    @property
+    def x(self) -> float: ...
+
+    @property
+    def y(self) -> float: ...
+
+
+class _Wall(_OnLevel, Protocol):
+    @property
+    def x1(self) -> float: ...
+
+    @property
+    def y1(self) -> float: ...
+
+    @property
+    def x2(self) -> float: ...
+
+    @property
+    def y2(self) -> float: ...
+
+
+class _Object(_OnLevel, _Point, Protocol): ...
+
+
+class MapSpec(Protocol):
+    """What this module reads of a map file (:class:`app.maps.model.MapFile`; the model
+    imports this module, so it is named by what it holds)."""
+
+    @property
+    def name(self) -> str: ...
+
+    @property
+    def walls(self) -> Sequence[_Wall]: ...
+
+    @property
+    def objects(self) -> Sequence[_Object]: ...
+
+    @property
+    def regions(self) -> Sequence[_OnLevel]: ...
+
+    @property
+    def levels(self) -> Sequence[LevelSpec] | None: ...
+
+    @property
+    def connectors(self) -> Sequence[ConnectorSpec]: ...
+
+
+def reference_problems(spec: MapSpec) -> list[tuple[str, str]]:
     """Every (field, reason) where levels and the elements naming them disagree.
 
     With ``levels``: ids and ordinals unique, every wall, object and region on a listed
@@ -111,7 +163,7 @@ def reference_problems(spec: MapFile) -> list[tuple[str, str]]:
     there are no connectors.
     """
     out: list[tuple[str, str]] = []
-    elements: tuple[tuple[str, Sequence[WallSpec | ObjectSpec | RegionSpec]], ...] = (
+    elements: tuple[tuple[str, Sequence[_OnLevel]], ...] = (
         ("walls", spec.walls),
         ("objects", spec.objects),
         ("regions", spec.regions),
@@ -254,7 +306,7 @@ class LevelLayout:
         pitch_m: the plane distance from one level to the next (0 with one level).
     """
 
-    def __init__(self, spec: MapFile) -> None:
+    def __init__(self, spec: MapSpec) -> None:
         problems = reference_problems(spec)
         if problems:
             raise MapError(f"{spec.name}: " + "; ".join(f"{f}: {m}" for f, m in problems), problems)

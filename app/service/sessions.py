@@ -316,7 +316,7 @@ class SessionManager:
             state=filter_state,
         )
         if filter_state is None and len(levels) > 1:
-            spread_over_levels(pf, levels)
+            pf.x = spread_over_levels(pf.x, semantic_map, levels, pf.rng)
         narrator = Narrator(semantic_map, request.feedback)
         return Session(
             id=session_id or secrets.token_urlsafe(24),  # 192 random bits

@@ -193,15 +193,19 @@ def test_a_venue_is_shown_one_level_at_a_time_the_persons_or_the_chosen_one() ->
             assert s.last_outcome is not None and s.last_outcome.level is not None
             assert s.last_outcome.level.id == "L2"
             view.watch(s.id)
-            assert view.refresh()
+            view.refresh()  # (the view's own thread may have drawn it first)
             # The person's level: the Second Floor alone, framed from above.
             assert [g.visible for g in scene.level_groups] == [False, False, True]
             look = np.asarray(view.server.initial_camera.look_at)  # type: ignore[union-attr]
             assert look[0] == pytest.approx(12.0 + 2 * venue.layout.pitch_m)
             # A level chosen in the panel is shown whatever the person's.
             view.choose_level("Ground Floor")
-            assert view.refresh()
+            view.refresh()
             assert [g.visible for g in scene.level_groups] == [True, False, False]
+            # Back to following the person: the Second Floor again.
+            view.choose_level("(the person's level)")
+            view.refresh()
+            assert [g.visible for g in scene.level_groups] == [False, False, True]
         finally:
             view.stop()
             manager.close()
