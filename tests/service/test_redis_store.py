@@ -131,10 +131,12 @@ def test_writes_need_the_lease(
     assert store.load("s1")[0] == b"ckpt-2"
     # An entry that would leave a gap is not written.
     assert append("s1", b"5|{}", "w1", f) == GAP
-    # Two writes overtaking each other: the older checkpoint does not replace the newer.
+    # Two writes overtaking each other: the older checkpoint does not replace the newer,
+    # and an entry the stored checkpoint covers is not written again.
     assert append("s1", b"4|{}", "w1", f) == HELD
     assert save([("s1", b"ckpt-4", 4, f)], "w1") == [True]
     assert save([("s1", b"ckpt-3", 3, f)], "w1") == [True]
+    assert append("s1", b"4|{}", "w1", f) == HELD
     assert store.load("s1") == (b"ckpt-4", [])
 
 

@@ -140,7 +140,10 @@ class MemoryStore:
             hold = self._hold(session_id, owner, fence, lease_s, ttl_s)
             if hold == Hold.LOST:
                 return hold
-            if self._last_frame(session_id) != entry_seq(entry) - 1:
+            last = self._last_frame(session_id)
+            if entry_seq(entry) <= last:
+                return Hold.HELD  # stored already (a checkpoint overtook it)
+            if last != entry_seq(entry) - 1:
                 return Hold.GAP  # a checkpoint must come first
             journal = self._get(f"{session_id}:journal") or []
             self._put(f"{session_id}:journal", [*journal, entry], ttl_s)  # type: ignore[misc]

@@ -86,8 +86,9 @@ class SessionStore(Protocol):
         self, session_id: str, entry: bytes, owner: str, fence: int, lease_s: float, ttl_s: float
     ) -> Hold:
         """Add a journal entry (on the event loop) if the stored frames end right
-        before it: HELD once it is stored (the lease maybe taken back), GAP when it
-        would leave a gap and was not written, LOST when another owner has the session."""
+        before it: HELD once it is stored (the lease maybe taken back) or if the stored
+        frames cover it already, GAP when it would leave a gap and was not written,
+        LOST when another owner has the session."""
         ...
 
     def delete(self, session_id: str, ttl_s: float) -> None:

@@ -100,7 +100,8 @@ return out
 )
 
 # KEYS: base per entry; ARGV: token, lease_ms, ttl_ms, then (fence, entry) each. An
-# entry is written only if the stored frames end right before it (else 3: a gap).
+# entry is written only if the stored frames end right before it; one they already
+# cover (a checkpoint packed after its step landed first) needs no writing; else 3, a gap.
 APPEND = (
     _HOLD
     + """
@@ -113,13 +114,15 @@ for i, base in ipairs(KEYS) do
     local last = tonumber(redis.call('GET', ckpt .. ':frames') or '-1')
     local tail = redis.call('LINDEX', journal, -1)
     if tail then last = math.max(last, tonumber(string.match(tail, '^(%d+)|'))) end
-    if last == tonumber(string.match(entry, '^(%d+)|')) - 1 then
+    local seq = tonumber(string.match(entry, '^(%d+)|'))
+    if last == seq - 1 then
       redis.call('RPUSH', journal, entry)
       redis.call('PEXPIRE', journal, ARGV[3])
       redis.call('PEXPIRE', ckpt, ARGV[3])
       redis.call('PEXPIRE', ckpt .. ':frames', ARGV[3])
       redis.call('PEXPIRE', base .. ':fence', ARGV[3])
       out[i] = 1
+    elseif seq <= last then out[i] = 1  -- stored already (a checkpoint overtook it)
     else out[i] = 3 end
   end
 end
