@@ -10,7 +10,7 @@ from app.service.store.group_commit import JOURNAL_GAP_S
 from app.service.store.protocol import Hold, StoreUnavailable
 from app.service.store.scripts import ACQUIRE, RELEASE, RENEW, base_key, ms, session_keys
 from app.service.store.urls import redacted
-from app.service.store.writer import LoopWriter, no_retries
+from app.service.store.writer import LoopWriter, one_retry
 
 #: How long a journal write may wait for Redis's reply (seconds) before its frames are
 #: answered without it: a Redis that stopped (SIGSTOP, a stalled disk) holds answers at
@@ -34,8 +34,9 @@ class RedisStore:
 
     The blocking methods (leases, loads, deletes) go through a redis-py client, on the
     session manager's threads; the writes made while sessions are served (journal
-    entries, checkpoints) from the event loop (:class:`LoopWriter`). No call is retried
-    by redis-py itself (see :func:`~app.service.store.writer.no_retries`); every
+    entries, checkpoints) from the event loop (:class:`LoopWriter`). redis-py retries a
+    call once, at once, and only if its connection failed
+    (:func:`~app.service.store.writer.one_retry`); every
     failure to reach Redis is raised as :class:`StoreUnavailable`.
     """
 
@@ -60,7 +61,7 @@ class RedisStore:
                 url,
                 socket_timeout=timeout_s,
                 socket_connect_timeout=timeout_s,
-                retry=no_retries(),
+                retry=one_retry(on_loop=False),
             )
             self._redis.ping()
         except (redis.RedisError, ValueError) as exc:

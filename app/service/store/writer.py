@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import asyncio
+from typing import Any
 
 from app.service.store.connection import Connection, pack
 from app.service.store.group_commit import JOURNAL_GAP_S, Entry, GroupCommit
@@ -10,15 +11,23 @@ from app.service.store.protocol import Hold
 from app.service.store.scripts import APPEND, SAVE, base_key
 
 
-def no_retries() -> object:
-    """redis-py's retry policy for the store's clients: none. redis-py 6 and later retry
-    a failed call up to 10 times with growing waits (about 5 s in all), which would
+def one_retry(*, on_loop: bool) -> Any:
+    """redis-py's retry policy for the store's clients (``on_loop``: its asyncio
+    client's, else its blocking one's): one retry at once, and only of a connection that
+    failed (a pooled connection Redis closed when it restarted). redis-py 6 and later
+    retry a failed call up to 10 times with growing waits (about 5 s in all), which would
     hold a frame's answer that long while Redis is down; the session manager has its own
     answer to an unreachable store (serve from memory, try again with backoff)."""
     from redis.backoff import NoBackoff
+    from redis.exceptions import ConnectionError
+
+    if on_loop:
+        from redis.asyncio.retry import Retry as LoopRetry
+
+        return LoopRetry(NoBackoff(), 1, supported_errors=(ConnectionError,))
     from redis.retry import Retry
 
-    return Retry(NoBackoff(), 0)
+    return Retry(NoBackoff(), 1, supported_errors=(ConnectionError,))
 
 
 class LoopWriter:
@@ -55,7 +64,7 @@ class LoopWriter:
             timeout=timeout_s,
             socket_timeout=timeout_s,
             socket_connect_timeout=timeout_s,
-            retry=no_retries(),
+            retry=one_retry(on_loop=True),
         )
         self.client = redis.asyncio.Redis(connection_pool=self.pool)
         self._append = self.client.register_script(APPEND)
