@@ -56,6 +56,7 @@ from app.service.backlog import Backlog
 from app.service.clock import SYSTEM, Clock
 from app.service.errors import SessionNotFound, SessionUnavailable, log_event
 from app.service.host import SessionHost
+from app.service.renewal import LeaseRenewal
 from app.service.session import Session
 from app.service.store import Hold, SessionStore, StoreHealth, StoreUnavailable
 from app.service.types import FrameInput
@@ -111,17 +112,25 @@ class SessionSharing:
         #: lease thread as a copy (``dict.copy`` is atomic).
         self._fences: dict[str, int] = {}
         self.backlog = Backlog()
-        # What the lease thread found, for the keeper (under _found_lock).
-        self._found_lock = threading.Lock()
-        self._lost: set[str] = set()  # taken by another worker
-        self._retaken: set[str] = set()  # lease taken back: checkpoint at once
+        self.renewal = LeaseRenewal(
+            store,
+            self.owner,
+            lease_s=lease_s,
+            ttl_s=idle_timeout_s,
+            held=self._held,
+            health=self.health,
+            failed=self._failed,
+            answered=self._answered,
+            found=self._wake_keeper,
+        )
+        self._recovered_lock = threading.Lock()
         self._recovered_at: float | None = None  # the store answered again, then
         self._recovering_since: float | None = None  # catching up after an outage
         self._wake: asyncio.Event | None = None  # set to run the keeper at once
         self._loop: asyncio.AbstractEventLoop | None = None
         self._deletes: set[str] = set()  # deleted here, not yet in the store
         self._saved: dict[str, int] = {}  # session id -> version last checkpointed
-        self._saved_at = clock.monotonic()
+        self._saved_at = time.monotonic()
         #: Seconds from one round of checkpoints to the next: a little less than the
         #: interval, since the event loop may wake the keeper late and a round takes a
         #: while to pack.
@@ -148,9 +157,16 @@ class SessionSharing:
             return
         self.host.metrics.store_up.set(1)
         log_event("store_up", down_s=round(down_s, 2))
-        with self._found_lock:
+        with self._recovered_lock:
             self._recovered_at = self.clock.monotonic()
         self._wake_keeper()
+
+    def _held(self) -> list[tuple[str, int]]:
+        """(id, fencing token) of every session held here, for the lease thread: those
+        served, and those being resumed (a slow restore must not lose its lease)."""
+        fences = self._fences.copy()  # (atomic: the loop changes it meanwhile)
+        ids = dict.fromkeys([*self.host.live_ids(), *self._resuming])
+        return [(sid, fences[sid]) for sid in ids if sid in fences]
 
     def _wake_keeper(self) -> None:
         loop, wake = self._loop, self._wake
@@ -495,64 +511,18 @@ class SessionSharing:
             self._deletes.add(session_id)
 
     # ------------------------------------------------------------------- keeper
-    def _renew_forever(self, stop: threading.Event) -> None:
-        """Thread: renew the leases of the sessions in memory, five times per lease;
-        while the store fails, try it again with backoff.
-
-        On a thread of its own, so a busy event loop cannot delay it; what it finds
-        (leases lost or taken back, the store answering again) goes to the keeper.
-        """
-        period = self.lease_s / 5
-        wait = period
-        while not stop.wait(wait):
-            wait = period
-            fences = self._fences.copy()
-            # Sessions being resumed too: a slow restore must not lose its lease.
-            ids = [
-                sid
-                for sid in dict.fromkeys([*self.host.live_ids(), *self._resuming])
-                if sid in fences
-            ]
-            try:
-                if ids:
-                    items = [(sid, fences[sid]) for sid in ids]
-                    holds = self.store.renew(items, self.owner, self.lease_s, self.idle_timeout_s)
-                else:
-                    holds = []
-                    if not self.health.up:
-                        self.store.ping()
-            except StoreUnavailable as exc:
-                self._failed("lease", exc)
-                wait = min(period, self.health.retry_in_s())
-                continue
-            except Exception:  # a bug: say so, and go on renewing
-                log.exception("lease renewal failed")
-                continue
-            lost = [sid for sid, h in zip(ids, holds, strict=True) if h == Hold.LOST]
-            retaken = [sid for sid, h in zip(ids, holds, strict=True) if h == Hold.RETAKEN]
-            if lost or retaken:
-                with self._found_lock:
-                    self._lost.update(lost)
-                    self._retaken.update(retaken)
-                self._wake_keeper()
-            self._answered()
-
     async def run_keeper(self) -> None:
         """Forever: renew leases (a thread), checkpoint what changed, let idle sessions go."""
         self._loop = asyncio.get_running_loop()
         self._wake = asyncio.Event()
-        stop = threading.Event()
-        renewer = threading.Thread(
-            target=self._renew_forever, args=(stop,), name="lease-renewal", daemon=True
-        )
-        renewer.start()
+        self.renewal.start()
         tick = max(0.05, min(self.lease_s / 3, self.checkpoint_interval_s / 2))
         try:
             while True:
                 # Every tick, and in time for the next checkpoint (a fixed tick of 0.4 s
                 # checkpointed every 1.2 s where the interval says 1 s); at once when the
                 # lease thread found something.
-                due_in = self._saved_at + self._round_every - self.clock.monotonic()
+                due_in = self._saved_at + self._round_every - time.monotonic()
                 with contextlib.suppress(TimeoutError):
                     await asyncio.wait_for(self._wake.wait(), max(0.01, min(tick, due_in)))
                 self._wake.clear()
@@ -565,15 +535,14 @@ class SessionSharing:
                     log.exception("session store upkeep failed; retrying")
                     await asyncio.sleep(tick)  # not at once, however overdue
         finally:
-            stop.set()
+            self.renewal.stop()
 
     async def keep(self) -> None:
         """One round: drop what was lost, catch up what lags, checkpoint what changed,
         let idle sessions go. Raises :class:`StoreUnavailable` if the store fails."""
         host = self.host
-        with self._found_lock:
-            lost, self._lost = self._lost, set()
-            retaken, self._retaken = self._retaken, set()
+        lost, retaken = self.renewal.take_found()
+        with self._recovered_lock:
             recovered_at, self._recovered_at = self._recovered_at, None
         for sid in lost:
             session = host.live(sid)
@@ -622,7 +591,8 @@ class SessionSharing:
 
     async def _catch_up_all(self) -> None:
         """Checkpoint every session behind, a chunk at a time (``RECOVERY_CHUNK``)."""
-        behind = [s for s in self.host.sessions() if s.id in self.backlog.behind()]
+        waiting = self.backlog.behind()
+        behind = [s for s in self.host.sessions() if s.id in waiting]
         for start in range(0, len(behind), RECOVERY_CHUNK):
             chunk = [s for s in behind[start : start + RECOVERY_CHUNK] if self.host.live(s.id)]
             for session in await self.save(chunk):
