@@ -463,9 +463,8 @@ class SessionSharing:
         if not self.health.up or self.backlog.lags(session_id):
             return
         self._releasing.add(session_id)
-        fence = self._fences.get(session_id, 0)
         try:
-            self._drop(session, None)
+            self.host.forget(session)  # (its fencing token is needed to write)
             try:
                 lost = await self.save([session])
                 if not lost:
@@ -473,9 +472,10 @@ class SessionSharing:
             except StoreUnavailable as exc:
                 if self.health.up:
                     self._failed("release", exc)
-                self._fences[session_id] = fence  # kept here until the store answers
-                self.host.adopt(session)
+                self.host.adopt(session)  # kept here until the store answers
                 self._fall_behind(session_id)
+                return
+            self._drop(session, None)
         finally:
             self._releasing.discard(session_id)
 

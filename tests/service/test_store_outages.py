@@ -233,7 +233,9 @@ def test_a_worker_superseded_while_it_stalled_stops_serving_the_session(
         await asyncio.sleep(0.4)  # A stalls past its 0.3 s lease
         assert (await b.process(sid, frame(3))).seq == 4
         assert b.sharing is not None
-        await b.sharing.let_go(sid)  # B is done with it: nobody holds the lease now
+        await b.sharing.let_go(sid)  # B is done with it: stored, and nobody holds it
+        assert stored_frames(r.url, sid) == 4
+        assert not redis.Redis.from_url(r.url).exists(f"{base_key(sid)}:lease")
         # A's copy is stale, and even a free lease is not A's to take back.
         with pytest.raises(Exception, match="another worker"):
             await a.process(sid, frame(3))
