@@ -24,6 +24,7 @@ It reports:
   answer was lost with the connection), and the next answer's ``seq`` follows.
 
     python -m benchmarks.store_outage --sessions 120 --rate 10 --outage 5
+    python -m benchmarks.store_outage --sessions 120 --rate 10 --outage 0  # fail-over only
 
 Load goes to 127.0.0.1 only; the run lasts ``--warmup + --outage + --settle +
 --after`` seconds (plus start-up), and every process it started is stopped at the end.
@@ -234,12 +235,14 @@ async def run(args: argparse.Namespace, store: Redis, workers: list[str]) -> dic
     tasks = [asyncio.create_task(stream(p, workers, frames, args)) for p in people]
     await asyncio.sleep(args.warmup)
     t_kill = time.perf_counter()
-    store.kill()
-    async with httpx.AsyncClient(timeout=5) as http:
-        await asyncio.sleep(min(1.0, args.outage / 2))
-        health = (await http.get(f"http://{workers[0]}/healthz")).json()
-    await asyncio.sleep(max(0.0, t_kill + args.outage - time.perf_counter()))
-    await asyncio.to_thread(store.start)
+    health = None
+    if args.outage > 0:  # (0: no outage, the fail-over alone, to compare)
+        store.kill()
+        async with httpx.AsyncClient(timeout=5) as http:
+            await asyncio.sleep(min(1.0, args.outage / 2))
+            health = (await http.get(f"http://{workers[0]}/healthz")).json()
+        await asyncio.sleep(max(0.0, t_kill + args.outage - time.perf_counter()))
+        await asyncio.to_thread(store.start)
     t_back = time.perf_counter()
     due = {p.sid: p.answered for p in people}
     client = redis.Redis(port=store.port)
@@ -299,7 +302,9 @@ def main() -> None:
         "--stagger", type=float, default=5.0, help="people start within this many seconds"
     )
     parser.add_argument("--warmup", type=float, default=25.0, help="seconds before Redis dies")
-    parser.add_argument("--outage", type=float, default=5.0, help="seconds Redis stays down")
+    parser.add_argument(
+        "--outage", type=float, default=5.0, help="seconds Redis stays down (0: not killed)"
+    )
     parser.add_argument(
         "--settle", type=float, default=5.0, help="seconds from Redis's restart to the kill"
     )
