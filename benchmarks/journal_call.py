@@ -1,6 +1,6 @@
 """What one journal write costs the worker's CPU: one call of the append script.
 
-Times ``time.thread_time()`` around ``_OnLoop._write(batch)`` (the group commit's one
+Times ``time.thread_time()`` around ``LoopWriter._write(batch)`` (the group commit's one
 call per batch) for batches of 1, 4 and 12 entries of 900 bytes, on uvloop as
 ``bearings serve`` runs, and prints the median over the calls. The time the loop spends
 idle waiting for Redis is not CPU and does not count; Redis's own CPU does not count.
@@ -29,12 +29,15 @@ import time
 import numpy as np
 import uvloop
 
-from app.service.store import _APPEND, Entry, _keys, _OnLoop
+from app.service.store import Hold
+from app.service.store.group_commit import Entry
+from app.service.store.scripts import APPEND, base_key
+from app.service.store.writer import LoopWriter
 
-_APPEND_SHA = hashlib.sha1(_APPEND.encode()).hexdigest()
+_APPEND_SHA = hashlib.sha1(APPEND.encode()).hexdigest()
 
 
-class _RedisPyJournal(_OnLoop):
+class _RedisPyJournal(LoopWriter):
     """The journal's call as it was made through redis-py: its asyncio connection (held
     by the group commit), the command packed by hiredis."""
 
@@ -54,7 +57,7 @@ class _RedisPyJournal(_OnLoop):
             except NoScriptError:
                 if attempt:
                     raise
-                await self.client.script_load(_APPEND)
+                await self.client.script_load(APPEND)
             except BaseException as exc:
                 self._redis_py_conn = None
                 await conn.disconnect()
@@ -65,51 +68,68 @@ class _RedisPyJournal(_OnLoop):
         raise AssertionError("unreachable")
 
 
-async def _calls(writer: _OnLoop, batch: list[Entry], n: int, between: int) -> list[float]:
+def _batches(sessions: int, calls: int) -> list[list[Entry]]:
+    """``calls`` batches of one entry per session, the frames numbered on from 1 (the
+    store writes an entry only right after the stored frames)."""
+    payload = b"x" * 900
+    return [
+        [(f"bench{i}", b"%d|" % seq + payload, "bench", 1, 60_000, 60_000) for i in range(sessions)]
+        for seq in range(1, calls + 1)
+    ]
+
+
+async def _calls(writer: LoopWriter, sessions: int, n: int, between: int) -> list[float]:
     out = []
     scratch = np.ones(between // 8)
-    for _ in range(n):
+    for batch in _batches(sessions, n):
         if between:
             scratch *= 1.0000001  # other work between writes: the caches go cold
         t = time.thread_time()
-        ok = await writer._write(batch)
+        holds = await writer._write(batch)
         out.append(time.thread_time() - t)
-        assert all(ok), "an append was refused: its lease is missing"
+        assert all(h == Hold.HELD for h in holds), f"an append was refused: {holds}"
     return out
 
 
 async def main(args: argparse.Namespace) -> None:
     loop = asyncio.get_running_loop()
-    writers: dict[str, _OnLoop] = {"store": _OnLoop(args.store, 5.0, loop)}
+    writers: dict[str, LoopWriter] = {"store": LoopWriter(args.store, 5.0, loop)}
     if args.redis_py:
         writers["redis-py"] = _RedisPyJournal(args.store, 5.0, loop)
-    entry = b"5|" + b"x" * 900
-    batches = {
-        n: [(f"bench{i}", entry, "bench", 60_000, 60_000) for i in range(n)] for n in args.batch
-    }
     client = writers["store"].client
     sessions = max(args.batch)
-    for i in range(sessions):
-        await client.set(_keys(f"bench{i}")[0], "bench", px=600_000)
+    for i in range(sessions):  # the lease, its fencing token, a checkpoint of frame 0
+        base = base_key(f"bench{i}")
+        await client.set(f"{base}:lease", "bench", px=600_000)
+        await client.set(f"{base}:fence", 1, px=600_000)
+        await client.set(f"{base}:ckpt:frames", 0, px=600_000)
     times: dict[tuple[str, int], list[float]] = {}
     try:
         for writer in writers.values():  # warm up: connect, load the script
-            await _calls(writer, batches[1], 20, 0)
+            await _calls(writer, 1, 20, 0)
+            await client.delete(f"{base_key('bench0')}:journal")
         for _ in range(args.rounds):
-            for n, batch in batches.items():
+            for n in args.batch:
                 for name, writer in writers.items():
                     times.setdefault((name, n), []).extend(
-                        await _calls(writer, batch, args.calls, args.between)
+                        await _calls(writer, n, args.calls, args.between)
                     )
-                    # keep the journal short (RPUSH on a long list costs Redis, not us)
-                    await client.delete(*[_keys(f"bench{i}")[2] for i in range(n)])
+                    # keep the journal short (RPUSH on a long list costs Redis, not us),
+                    # and numbered on from the checkpoint's frame 0 again
+                    await client.delete(*[f"{base_key(f'bench{i}')}:journal" for i in range(n)])
     finally:
-        await client.delete(*[k for i in range(sessions) for k in _keys(f"bench{i}")])
+        await client.delete(
+            *[
+                f"{base_key(f'bench{i}')}:{k}"
+                for i in range(sessions)
+                for k in ("lease", "fence", "ckpt:frames", "journal")
+            ]
+        )
         for writer in writers.values():
             await writer.aclose()
     print(f"CPU per call (median of {args.rounds} x {args.calls} calls), us")
     print(f"{'batch':>6} " + " ".join(f"{name:>10}" for name in writers))
-    for n in batches:
+    for n in args.batch:
         row = [1e6 * statistics.median(times[name, n]) for name in writers]
         print(f"{n:>6} " + " ".join(f"{v:>10.1f}" for v in row))
 

@@ -26,7 +26,7 @@ from dataclasses import replace
 import numpy as np
 import uvloop
 
-import app.service.store as store_module
+import app.service.store.writer as writer_module
 from app.api.convert import frame_input
 from app.api.schemas import Frame
 from app.config import Settings
@@ -34,7 +34,8 @@ from app.maps.check import load_map
 from app.resources import bundled_maps_dir
 from app.service.metrics import Metrics
 from app.service.sessions import SessionManager
-from app.service.store import open_store
+from app.service.store import Hold, open_store
+from app.service.store.group_commit import Entry
 from app.service.types import FrameInput, SessionSpec
 from app.simulation.scenarios import PAPER_PATH, paper_config
 from app.simulation.simulator import simulate
@@ -60,16 +61,14 @@ async def run(args: argparse.Namespace) -> None:
     )
     writes = {"calls": 0, "entries": 0}
     if args.store != "memory":  # count the journal's writes (and their entries)
-        write = store_module._OnLoop._write
+        write = writer_module.LoopWriter._write
 
-        async def counted(
-            self: store_module._OnLoop, batch: list[store_module.Entry]
-        ) -> list[bool]:
+        async def counted(self: writer_module.LoopWriter, batch: list[Entry]) -> list[Hold]:
             writes["calls"] += 1
             writes["entries"] += len(batch)
             return await write(self, batch)
 
-        store_module._OnLoop._write = counted  # type: ignore[method-assign]
+        writer_module.LoopWriter._write = counted  # type: ignore[method-assign]
     manager = SessionManager({"paper_office": office}, settings, Metrics(), open_store(args.store))
     keeper = asyncio.create_task(manager.sharing.run_keeper()) if manager.sharing else None
     sessions = [

@@ -505,3 +505,17 @@ class SpeechRequest(StrictInput):
         pattern=r"[^\s\x1c-\x1f\x85\ufeff]",
         description="text to speak: 1 to 2000 characters, not only white space",
     )
+
+
+class Health(_Out):
+    """``GET /healthz``: alive; ``degraded`` when the worker serves but does not store."""
+
+    status: Literal["ok", "degraded"] = Field(
+        description="ok, or degraded: the worker answers every frame, but something it "
+        "relies on fails (the reasons say what)"
+    )
+    reasons: list[str] = Field(
+        default_factory=list,
+        description="why degraded, in words (e.g. the session store unreachable for how "
+        "long, and how many sessions are not stored meanwhile); empty when ok",
+    )

@@ -15,9 +15,10 @@ import hmac
 import math
 import re
 import threading
-import time
 from dataclasses import dataclass
 from pathlib import Path
+
+from app.service.clock import SYSTEM, Clock
 
 #: Fewer characters than this cannot be a random secret worth the name.
 MIN_KEY_CHARS = 16
@@ -176,19 +177,21 @@ def load_keys(
 
 
 class TokenBucket:
-    """``rate`` tokens a second, holding at most ``capacity``; thread-safe."""
+    """``rate`` tokens a second, holding at most ``capacity``; thread-safe; time read
+    from ``clock``."""
 
-    def __init__(self, rate: float, capacity: float | None = None) -> None:
+    def __init__(self, rate: float, capacity: float | None = None, clock: Clock = SYSTEM) -> None:
         self.rate = rate
         self.capacity = max(1.0, rate if capacity is None else capacity)
+        self._clock = clock
         self._tokens = self.capacity
-        self._at = time.monotonic()
+        self._at = clock.monotonic()
         self._lock = threading.Lock()
 
     def take(self, n: float = 1.0) -> float:
         """Take ``n`` tokens and return 0, or take none and return the seconds until there are."""
         with self._lock:
-            now = time.monotonic()
+            now = self._clock.monotonic()
             self._tokens = min(self.capacity, self._tokens + (now - self._at) * self.rate)
             self._at = now
             if self._tokens >= n:

@@ -58,6 +58,39 @@ class Metrics:
             "WebSocket answers sent (results and errors, one per message taken in)",
             registry=self.registry,
         )
+        self.store_up = Gauge(
+            "bearings_store_up",
+            "1 while the shared session store answers (or none is used), 0 while it fails",
+            registry=self.registry,
+        )
+        self.store_up.set(1)
+        self.store_failures = Counter(
+            "bearings_store_failures",
+            "Operations on the shared session store that failed (each is tried again)",
+            ["op"],
+            registry=self.registry,
+        )
+        self.frames_not_persisted = Counter(
+            "bearings_frames_not_persisted",
+            "Frames answered from memory without being stored (state_not_persisted)",
+            registry=self.registry,
+        )
+        self.sessions_behind = Gauge(
+            "bearings_sessions_behind",
+            "Sessions whose stored state lags what this worker holds (awaiting a checkpoint)",
+            registry=self.registry,
+        )
+        self.sessions_retaken = Counter(
+            "bearings_sessions_retaken",
+            "Leases taken back after they vanished from the store (nobody else took them)",
+            registry=self.registry,
+        )
+        self.store_recovery_seconds = Gauge(
+            "bearings_store_recovery_seconds",
+            "After the latest store outage: seconds from the store answering again to "
+            "every live session being checkpointed",
+            registry=self.registry,
+        )
         self.frames_refused = Counter(
             "bearings_frames_refused",
             "Frames refused by a key's rate quota",

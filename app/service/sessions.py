@@ -40,6 +40,7 @@ from app.localization.types import InitialPose
 from app.maps.model import SemanticMap
 from app.maps.prepare import ensure_prepared
 from app.service.access import OPEN, Principal, TokenBucket
+from app.service.backlog import STATE_NOT_PERSISTED
 from app.service.errors import (
     CapacityReached,
     InvalidSessionSpec,
@@ -456,13 +457,11 @@ class SessionManager:
                 )
                 try:
                     result, entry = await job
-                    # With a shared store the answer leaves once the frame is journalled.
+                    # With a shared store the answer leaves once the frame is journalled
+                    # (or says it is not: the store fails; raises if the session moved).
                     if entry is not None and not await self.sharing.journal(session, entry):  # type: ignore[union-attr]
-                        raise SessionUnavailable(
-                            "another worker serves this session now; reconnect to go on",
-                            "session_moved",
-                            0.5,
-                        )
+                        warnings = (*result.warnings, STATE_NOT_PERSISTED)
+                        result = replace(result, warnings=warnings)
                 except Exception as exc:
                     for w in item.waiters:
                         if not w.done():

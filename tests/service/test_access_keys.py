@@ -3,11 +3,11 @@
 from __future__ import annotations
 
 import asyncio
-import time
 
 import pytest
 
 from app.service.access import KeyFileError, TokenBucket, parse_keys
+from app.service.clock import ManualClock
 from app.service.scheduler import FairStepper
 
 DEFAULTS = {"default_sessions": 10, "default_particles": 100_000, "default_frames_per_s": 50.0}
@@ -55,11 +55,14 @@ def test_bad_key_files_name_the_line_and_the_reason(text: str, message: str) -> 
 
 
 def test_token_bucket_allows_a_burst_then_the_rate() -> None:
-    bucket = TokenBucket(rate=20.0)
-    assert all(bucket.take() == 0 for _ in range(20))
+    clock = ManualClock()
+    bucket = TokenBucket(rate=16.0, clock=clock)  # (times exact in binary)
+    assert all(bucket.take() == 0 for _ in range(16))
     wait = bucket.take()
-    assert 0 < wait <= 1 / 20 + 1e-6
-    time.sleep(wait + 0.01)
+    assert wait == 1 / 16
+    clock.advance(wait / 2)
+    assert bucket.take() == pytest.approx(wait / 2)  # half a token came back: not enough
+    clock.advance(wait / 2)
     assert bucket.take() == 0
 
 

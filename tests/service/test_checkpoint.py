@@ -400,10 +400,10 @@ def test_a_stepping_session_is_checkpointed_at_least_once_an_interval() -> None:
         times: list[float] = []
         save = store.save
 
-        async def timed_save(items: Any, owner: str, ttl_s: float) -> list[bool]:
+        async def timed_save(items: Any, owner: str, lease_s: float, ttl_s: float) -> list[bool]:
             if any(item[0] == sid for item in items):
                 times.append(asyncio.get_running_loop().time())
-            return await save(items, owner, ttl_s)
+            return await save(items, owner, lease_s, ttl_s)
 
         store.save = timed_save  # type: ignore[method-assign]
         keeper = asyncio.create_task(a.sharing.run_keeper())

@@ -3,7 +3,8 @@
 ``python -m app.cli serve --store redis://...`` twice, ``haproxy -f deploy/haproxy.cfg``
 (the shipped config, addresses from the environment), a private ``redis-server``.
 Twenty clients stream a simulated walk over WebSocket through the proxy at 10 Hz. One
-worker is killed with SIGKILL, then every worker is restarted with SIGTERM in turn; each
+worker is killed with SIGKILL, then every worker is restarted with SIGTERM in turn, then
+Redis is killed with SIGKILL and restarted empty (and a worker killed after that); each
 client reconnects when its connection drops, and every session must go on where it was:
 answered within 2 s of reconnecting, its frame count continuing, still converged, and
 its pose error within 0.1 m of what it was before.
@@ -40,7 +41,8 @@ from app.maps.check import load_map
 from app.resources import bundled_maps_dir
 from app.simulation.scenarios import PAPER_PATH, paper_config
 from app.simulation.simulator import simulate
-from tests.helpers import free_port, need_binary, redis_server, wait_for_port
+from tests.helpers import free_port, need_binary, wait_for_port
+from tests.service.redis_process import RedisProcess, redis_process
 
 ROOT = Path(__file__).resolve().parents[2]
 SESSIONS = 20
@@ -113,13 +115,15 @@ class Worker:
 class Cluster:
     url: str
     workers: list[Worker]
+    redis: RedisProcess
 
 
 @pytest.fixture(scope="module")
 def cluster(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Cluster]:
     haproxy = need_binary("haproxy")
     logs = tmp_path_factory.mktemp("workers")
-    with redis_server() as store_url:
+    with redis_process(tmp_path_factory.mktemp("redis")) as store:
+        store_url = store.url
         workers = [Worker(store_url, logs), Worker(store_url, logs)]
         proxy_port = free_port()
         env = {
@@ -140,7 +144,7 @@ def cluster(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Cluster]:
                 stdout=subprocess.DEVNULL,
             )
             wait_for_port(proxy_port)
-            yield Cluster(f"127.0.0.1:{proxy_port}", workers)
+            yield Cluster(f"127.0.0.1:{proxy_port}", workers, store)
         finally:
             if proxy is not None:
                 proxy.terminate()
@@ -168,6 +172,8 @@ class Client:
     #: (answers before the drop, seconds from reconnecting to the next answer).
     resumes: list[tuple[int, float]] = field(default_factory=list)
     errors: list[str] = field(default_factory=list)
+    #: Answers that said the session store did not take their frame.
+    not_persisted: int = 0
     stop: bool = False
 
     async def create(self, http: httpx.AsyncClient) -> None:
@@ -200,6 +206,8 @@ class Client:
                             if "error" in reply:
                                 self.errors.append(reply["error"]["code"])
                                 raise ConnectionError(reply["error"]["message"])
+                            if any(w.startswith("state_not_persisted") for w in reply["warnings"]):
+                                self.not_persisted += 1
                             if reply["seq"] != i + 1:  # one step per frame of the walk
                                 self.errors.append(f"frame {i + 1} answered as seq {reply['seq']}")
                             now = time.monotonic()
@@ -229,7 +237,7 @@ async def stream_through(cluster: Cluster, disrupt) -> list[Client]:  # type: ig
             assert time.monotonic() < deadline, "not every session converged in 30 s"
             await asyncio.sleep(0.2)
         await asyncio.sleep(1.0)
-        await disrupt()
+        await disrupt(clients)
         await asyncio.sleep(3.0)
     finally:
         for c in clients:
@@ -274,7 +282,7 @@ def check_nothing_lost(clients: list[Client], expect_drops: int) -> None:
 def test_kill_one_worker_every_session_goes_on(cluster: Cluster) -> None:
     victim = cluster.workers[0]
 
-    async def disrupt() -> None:
+    async def disrupt(_: list[Client]) -> None:
         victim.kill()
         await asyncio.sleep(3.0)
         await asyncio.to_thread(victim.start)  # back in the pool; nobody notices
@@ -285,7 +293,7 @@ def test_kill_one_worker_every_session_goes_on(cluster: Cluster) -> None:
 
 
 def test_restart_every_worker_all_sessions_go_on(cluster: Cluster) -> None:
-    async def disrupt() -> None:
+    async def disrupt(_: list[Client]) -> None:
         for worker in cluster.workers:
             # uvicorn exits by re-raising the SIGTERM it handled
             assert await asyncio.to_thread(worker.stop) in (0, -signal.SIGTERM)
@@ -296,3 +304,36 @@ def test_restart_every_worker_all_sessions_go_on(cluster: Cluster) -> None:
     check_nothing_lost(clients, expect_drops=SESSIONS)
     # Each SIGTERM closed its WebSockets: every session was moved at least once.
     assert all(c.resumes for c in clients)
+
+
+def test_redis_restarted_empty_under_load_costs_no_answer_then_a_worker_dies(
+    cluster: Cluster,
+) -> None:
+    """Redis killed (kill -9) for 3 s and restarted without persistence, under load: no
+    connection drops and no frame goes unanswered (the workers answer from memory and say
+    state_not_persisted), /healthz says degraded meanwhile; then a worker is killed and
+    every session it had resumes on the other one, where it was: the workers had stored
+    them all again."""
+    health: list[dict] = []
+    drops_before_kill: list[int] = []
+
+    async def disrupt(clients: list[Client]) -> None:
+        cluster.redis.kill()
+        await asyncio.sleep(3.0)
+        async with httpx.AsyncClient(timeout=5) as http:
+            for w in cluster.workers:
+                health.append((await http.get(f"http://127.0.0.1:{w.port}/healthz")).json())
+        cluster.redis.start()  # empty
+        await asyncio.sleep(3.0)  # (the contract says within 2 s: benchmarks measure it)
+        drops_before_kill.append(sum(len(c.resumes) for c in clients))
+        victim = cluster.workers[0]
+        victim.kill()
+        await asyncio.sleep(3.0)
+        await asyncio.to_thread(victim.start)
+
+    clients = asyncio.run(stream_through(cluster, disrupt))
+    assert [h["status"] for h in health] == ["degraded", "degraded"], health
+    assert all("session store unreachable" in h["reasons"][0] for h in health)
+    assert drops_before_kill == [0]  # Redis's restart closed no connection
+    assert all(c.not_persisted > 0 for c in clients)
+    check_nothing_lost(clients, expect_drops=1)

@@ -16,16 +16,17 @@ import pytest
 import redis
 
 from app.config import Settings
+from app.service.clock import ManualClock
 from app.service.store import (
     JOURNAL_GAP_S,
-    Entry,
+    Hold,
     MemoryStore,
-    RedisStore,
     SessionStore,
     StoreUnavailable,
-    _GroupCommit,
     open_store,
 )
+from app.service.store.group_commit import Entry, GroupCommit
+from app.service.store.redis_store import RedisStore
 from tests.helpers import free_port, redis_server
 
 
@@ -42,10 +43,17 @@ def runner() -> Iterator[asyncio.Runner]:
         yield r
 
 
+@pytest.fixture
+def clock() -> ManualClock:
+    return ManualClock()
+
+
 @pytest.fixture(params=["redis", "memory"])
-def store(request: pytest.FixtureRequest, runner: asyncio.Runner) -> Iterator[SessionStore]:
+def store(
+    request: pytest.FixtureRequest, runner: asyncio.Runner, clock: ManualClock
+) -> Iterator[SessionStore]:
     if request.param == "memory":
-        yield MemoryStore(shared=True)
+        yield MemoryStore(shared=True, clock=clock)
         return
     url = request.getfixturevalue("url")
     redis.Redis.from_url(url).flushdb()
@@ -56,85 +64,151 @@ def store(request: pytest.FixtureRequest, runner: asyncio.Runner) -> Iterator[Se
 
 
 @pytest.fixture
-def append(store: SessionStore, runner: asyncio.Runner) -> Callable[..., bool]:
+def elapse(store: SessionStore, clock: ManualClock) -> Callable[[float], None]:
+    """Let ``seconds`` pass for the store: the memory store's clock moves, Redis's
+    own clock is waited for."""
+    return clock.advance if isinstance(store, MemoryStore) else time.sleep
+
+
+@pytest.fixture
+def forget(store: SessionStore, request: pytest.FixtureRequest) -> Callable[[], None]:
+    """The store loses every key, as after a restart without persistence."""
+    if isinstance(store, MemoryStore):
+        return store.forget_everything
+    return redis.Redis.from_url(request.getfixturevalue("url")).flushall
+
+
+@pytest.fixture
+def append(store: SessionStore, runner: asyncio.Runner) -> Callable[..., Hold]:
     """``store.append`` run to completion on the test's event loop."""
-    return lambda *args: runner.run(store.append(*args))
+    return lambda sid, entry, owner, fence, lease_s=5, ttl_s=60: runner.run(
+        store.append(sid, entry, owner, fence, lease_s, ttl_s)
+    )
 
 
 @pytest.fixture
 def save(store: SessionStore, runner: asyncio.Runner) -> Callable[..., list[bool]]:
     """``store.save`` run to completion on the test's event loop."""
-    return lambda *args: runner.run(store.save(*args))
+    return lambda items, owner, lease_s=5, ttl_s=60: runner.run(
+        store.save(items, owner, lease_s, ttl_s)
+    )
 
 
-def test_one_lease_at_a_time_and_it_runs_out(store: SessionStore) -> None:
-    assert store.acquire("s1", "w1", 0.3)
-    assert store.acquire("s1", "w1", 0.3)  # the holder keeps it
-    assert not store.acquire("s1", "w2", 0.3)
-    assert store.renew(["s1", "s2"], "w1", 0.3) == [True, False]
+HELD, LOST, RETAKEN, GAP = Hold.HELD, Hold.LOST, Hold.RETAKEN, Hold.GAP
+
+
+def test_one_lease_at_a_time_and_it_runs_out(
+    store: SessionStore, elapse: Callable[[float], None]
+) -> None:
+    f1 = store.acquire("s1", "w1", 0.3, 60)
+    assert f1 is not None
+    assert store.acquire("s1", "w1", 0.3, 60) == f1  # the holder keeps it, and its token
+    assert store.acquire("s1", "w2", 0.3, 60) is None
+    assert store.renew([("s1", f1)], "w1", 0.3, 60) == [HELD]
     store.release(["s1"], "w2")  # not w2's to release
-    assert not store.acquire("s1", "w2", 0.3)
-    time.sleep(0.4)
-    assert store.acquire("s1", "w2", 0.3)
-    assert store.renew(["s1"], "w1", 0.3) == [False]
+    assert store.acquire("s1", "w2", 0.3, 60) is None
+    elapse(0.4)
+    f2 = store.acquire("s1", "w2", 0.3, 60)
+    assert f2 is not None and f2 > f1  # a new tenure, a new fencing token
+    assert store.renew([("s1", f1)], "w1", 0.3, 60) == [LOST]
     store.release(["s1"], "w2")
-    assert store.acquire("s1", "w1", 0.3)
+    assert store.acquire("s1", "w1", 0.3, 60) == f2 + 1
 
 
 def test_writes_need_the_lease(
-    store: SessionStore, append: Callable[..., bool], save: Callable[..., list[bool]]
+    store: SessionStore, append: Callable[..., Hold], save: Callable[..., list[bool]]
 ) -> None:
-    assert save([("s1", b"ckpt", 0)], "w1", 60) == [False]
-    assert not append("s1", b"1|{}", "w1", 60, 5)
-    assert store.load("s1") == (None, [])
-    assert store.acquire("s1", "w1", 5)
-    assert save([("s1", b"ckpt-0", 0)], "w1", 60) == [True]
-    stored = [append("s1", b"%d|{}" % i, "w1", 60, 5) for i in (1, 2, 3)]
-    assert stored == [True] * 3
+    f = store.acquire("s1", "w1", 5, 60)
+    assert f is not None
+    assert save([("s1", b"ckpt-0", 0, f)], "w1") == [True]
+    assert [append("s1", b"%d|{}" % i, "w1", f) for i in (1, 2, 3)] == [HELD] * 3
     assert store.load("s1") == (b"ckpt-0", [b"1|{}", b"2|{}", b"3|{}"])
     # A checkpoint covering frame 2 drops the entries it covers, keeps the rest.
-    assert save([("s1", b"ckpt-2", 2)], "w1", 60) == [True]
+    assert save([("s1", b"ckpt-2", 2, f)], "w1") == [True]
     assert store.load("s1") == (b"ckpt-2", [b"3|{}"])
-    assert save([("s1", b"other", 9)], "w2", 60) == [False]
+    assert save([("s1", b"other", 9, f)], "w2") == [False]  # w2 holds no lease
+    assert save([("s1", b"other", 9, f + 1)], "w1") == [False]  # nor a later token
     assert store.load("s1")[0] == b"ckpt-2"
-    # Two writes overtaking each other: the older checkpoint does not replace the newer.
-    assert append("s1", b"4|{}", "w1", 60, 5)
-    assert save([("s1", b"ckpt-4", 4)], "w1", 60) == [True]
-    assert save([("s1", b"ckpt-3", 3)], "w1", 60) == [True]
+    # An entry that would leave a gap is not written.
+    assert append("s1", b"5|{}", "w1", f) == GAP
+    # Two writes overtaking each other: the older checkpoint does not replace the newer,
+    # and an entry the stored checkpoint covers is not written again.
+    assert append("s1", b"4|{}", "w1", f) == HELD
+    assert save([("s1", b"ckpt-4", 4, f)], "w1") == [True]
+    assert save([("s1", b"ckpt-3", 3, f)], "w1") == [True]
+    assert append("s1", b"4|{}", "w1", f) == HELD
     assert store.load("s1") == (b"ckpt-4", [])
 
 
-def test_a_lapsed_lease_is_taken_back_only_if_nobody_went_on(
-    store: SessionStore, append: Callable[..., bool], save: Callable[..., list[bool]]
+def test_a_lapsed_lease_is_taken_back_only_if_nobody_took_the_session(
+    store: SessionStore,
+    append: Callable[..., Hold],
+    save: Callable[..., list[bool]],
+    elapse: Callable[[float], None],
 ) -> None:
-    assert store.acquire("s1", "w1", 0.2)
-    assert save([("s1", b"ckpt-2", 2)], "w1", 60) == [True]
-    assert append("s1", b"3|{}", "w1", 60, 0.2)
-    time.sleep(0.3)  # w1 stalled: its lease ran out, nobody took the session
-    assert append("s1", b"4|{}", "w1", 60, 5)  # frames end at 3: ok
-    assert not store.acquire("s1", "w2", 5)  # and w1 holds the lease again
+    f1 = store.acquire("s1", "w1", 0.2, 60)
+    assert f1 is not None
+    assert save([("s1", b"ckpt-2", 2, f1)], "w1", 0.2) == [True]
+    assert append("s1", b"3|{}", "w1", f1, 0.2) == HELD
+    elapse(0.3)  # w1 stalled: its lease ran out, nobody took the session
+    assert append("s1", b"4|{}", "w1", f1) == HELD  # taken back with the same token
+    assert store.acquire("s1", "w2", 5, 60) is None  # and w1 holds the lease again
     store.release(["s1"], "w1")
-    assert store.acquire("s1", "w2", 5)
-    assert append("s1", b"5|{}", "w2", 60, 5)
-    store.release(["s1"], "w2")
-    # w1 comes back with a copy that missed frame 5: refused, no fork.
-    assert not append("s1", b"5|{}", "w1", 60, 5)
-    assert store.load("s1")[1] == [b"3|{}", b"4|{}", b"5|{}"]
+    f2 = store.acquire("s1", "w2", 5, 60)
+    assert f2 is not None
+    store.release(["s1"], "w2")  # w2 took it and let it go without a frame
+    # w1 comes back: its token is older than the session's latest; refused everywhere.
+    assert append("s1", b"5|{}", "w1", f1) == LOST
+    assert save([("s1", b"stale", 9, f1)], "w1") == [False]
+    assert store.renew([("s1", f1)], "w1", 5, 60) == [LOST]
+    assert store.load("s1") == (b"ckpt-2", [b"3|{}", b"4|{}"])
+
+
+def test_a_lease_that_vanished_with_the_store_is_taken_back_by_its_holder(
+    store: SessionStore,
+    append: Callable[..., Hold],
+    save: Callable[..., list[bool]],
+    forget: Callable[[], None],
+) -> None:
+    """The store restarted empty: the worker still holding the session takes its lease
+    back, learns that the stored frames are gone (GAP), and a checkpoint stores it."""
+    f = store.acquire("s1", "w1", 5, 60)
+    g = store.acquire("s2", "w1", 5, 60)
+    assert f is not None and g is not None
+    assert save([("s1", b"ckpt-0", 0, f), ("s2", b"ckpt-0", 0, g)], "w1") == [True, True]
+    assert append("s1", b"1|{}", "w1", f) == HELD
+    forget()
+    assert store.renew([("s1", f)], "w1", 5, 60) == [RETAKEN]
+    assert store.renew([("s1", f)], "w1", 5, 60) == [HELD]
+    assert store.acquire("s1", "w2", 5, 60) is None  # held again
+    assert append("s1", b"2|{}", "w1", f) == GAP  # frame 1 is gone from the store
+    assert append("s2", b"1|{}", "w1", g) == GAP  # taken back by the entry itself
+    assert save([("s1", b"ckpt-2", 2, f)], "w1") == [True]
+    assert append("s1", b"3|{}", "w1", f) == HELD
+    assert store.load("s1") == (b"ckpt-2", [b"3|{}"])
+    # A later tenure still gets a later token than the one taken back.
+    store.release(["s1"], "w1")
+    assert store.acquire("s1", "w2", 5, 60) == f + 1
 
 
 def test_journal_entries_from_many_sessions_in_one_round_trip(
     store: SessionStore, runner: asyncio.Runner
 ) -> None:
     ids = [f"s{i}" for i in range(50)]
-    for sid in ids:
-        assert store.acquire(sid, "w1", 5)
+    fences = {sid: store.acquire(sid, "w1", 5, 60) for sid in ids}
+    saved = runner.run(store.save([(sid, b"c", 0, f) for sid, f in fences.items()], "w1", 5, 60))
+    assert all(saved)
 
-    async def all_at_once() -> list[bool]:
+    async def all_at_once() -> list[Hold]:
         return await asyncio.gather(
-            *(store.append(sid, b"1|x", "w1", 60, 5) for sid in ids for _ in range(3))
+            *(
+                store.append(sid, b"%d|x" % seq, "w1", fences[sid], 5, 60)  # type: ignore[arg-type]
+                for sid in ids
+                for seq in (1, 2, 3)
+            )
         )
 
-    assert all(runner.run(all_at_once()))
+    assert runner.run(all_at_once()) == [HELD] * 150
     assert all(len(store.load(sid)[1]) == 3 for sid in ids)
 
 
@@ -144,13 +218,13 @@ def test_journal_writes_keep_a_gap_and_what_arrives_within_it_goes_together() ->
     call (each call is a round trip and wakes the worker's loop)."""
     batches: list[list[str]] = []
 
-    async def write(batch: list[Entry]) -> list[bool]:
+    async def write(batch: list[Entry]) -> list[Hold]:
         batches.append([sid for sid, *_ in batch])
-        return [True] * len(batch)
+        return [HELD] * len(batch)
 
     async def scenario() -> None:
-        commit = _GroupCommit(write, gap_s=0.3)
-        entry = lambda sid: commit.submit((sid, b"1|x", "w1", 60_000, 5_000))  # noqa: E731
+        commit = GroupCommit(write, gap_s=0.3)
+        entry = lambda sid: commit.submit((sid, b"1|x", "w1", 1, 5_000, 60_000))  # noqa: E731
         loop = asyncio.get_running_loop()
         started = loop.time()
         await asyncio.wait_for(entry("a"), 5)  # written at once
@@ -158,7 +232,7 @@ def test_journal_writes_keep_a_gap_and_what_arrives_within_it_goes_together() ->
         b = entry("b")
         await asyncio.sleep(0.05)  # written alone, were there no gap to keep
         c, d = entry("c"), entry("d")
-        assert await asyncio.gather(b, c, d) == [True] * 3
+        assert await asyncio.gather(b, c, d) == [HELD] * 3
         assert loop.time() - started >= 0.3
 
     asyncio.run(scenario())
@@ -177,7 +251,7 @@ def test_the_journal_gap_is_a_setting(url: str) -> None:
         Settings(journal_gap_s=-0.01)
 
 
-async def _commit_of(store: SessionStore) -> _GroupCommit:
+async def _commit_of(store: SessionStore) -> GroupCommit:
     assert isinstance(store, RedisStore)
     commit = store._on_loop().commit
     await store.aclose()
@@ -199,9 +273,11 @@ def journal_through(url: str, runner: asyncio.Runner) -> None:
     """A store at ``url`` takes a lease, journals three frames and reads them back."""
     store = RedisStore(url)
     try:
-        assert store.acquire("s1", "w1", 5)
+        f = store.acquire("s1", "w1", 5, 60)
+        assert f is not None
+        assert runner.run(store.save([("s1", b"c", 0, f)], "w1", 5, 60)) == [True]
         for seq in (1, 2, 3):
-            assert runner.run(store.append("s1", b"%d|{}" % seq, "w1", 60, 5))
+            assert runner.run(store.append("s1", b"%d|{}" % seq, "w1", f, 5, 60)) == HELD
         assert store.load("s1")[1] == [b"1|{}", b"2|{}", b"3|{}"]
     finally:
         runner.run(store.aclose())
@@ -219,7 +295,9 @@ def test_the_journal_logs_in_and_picks_the_database_the_url_names(
         journal_through(f"redis://:pw1@127.0.0.1:{port}/3", loops)
         journal_through(f"redis://bearings:pw2@127.0.0.1:{port}/5", loops)
         sizes = [redis.Redis(port=port, password="pw1", db=db).dbsize() for db in (0, 3, 5)]
-        assert sizes == [0, 2, 2]  # a lease and a journal in each of the URLs' databases
+        # a lease, a fencing token, a checkpoint (with its frame count) and a journal in
+        # each of the URLs' databases
+        assert sizes == [0, 5, 5]
 
 
 def test_the_journal_reaches_redis_through_a_unix_socket(
@@ -239,11 +317,13 @@ def test_the_journal_goes_on_after_redis_forgets_its_script_or_drops_it(
     r = redis.Redis.from_url(url)
     r.flushdb()
     store = RedisStore(url)
+    f = store.acquire("s1", "w1", 5, 60)
+    assert f is not None
 
-    async def killed_while_it_waits(seq: int) -> bool:
+    async def killed_while_it_waits(seq: int) -> Hold:
         r.client_pause(10_000, all=False)  # the script waits in Redis
         try:
-            pending = asyncio.ensure_future(store.append("s1", b"%d|{}" % seq, "w1", 60, 5))
+            pending = asyncio.ensure_future(store.append("s1", b"%d|{}" % seq, "w1", f, 5, 60))
             await asyncio.sleep(0.1)
             r.client_kill_filter(_type="normal", skipme=True)
             await asyncio.sleep(0.1)
@@ -252,16 +332,16 @@ def test_the_journal_goes_on_after_redis_forgets_its_script_or_drops_it(
         return await pending
 
     try:
-        assert store.acquire("s1", "w1", 5)
-        append = lambda seq: loops.run(store.append("s1", b"%d|{}" % seq, "w1", 60, 5))  # noqa: E731
-        assert append(1)
+        assert loops.run(store.save([("s1", b"c", 0, f)], "w1", 5, 60)) == [True]
+        append = lambda seq: loops.run(store.append("s1", b"%d|{}" % seq, "w1", f, 5, 60))  # noqa: E731
+        assert append(1) == HELD
         r.script_flush()
-        assert append(2)
+        assert append(2) == HELD
         r.client_kill_filter(_type="normal", skipme=True)
-        assert append(3)
-        assert loops.run(killed_while_it_waits(4))
+        assert append(3) == HELD
+        assert loops.run(killed_while_it_waits(4)) == HELD
         r.script_flush()
-        assert loops.run(killed_while_it_waits(5))  # both in one write
+        assert loops.run(killed_while_it_waits(5)) == HELD  # both in one write
         assert store.load("s1")[1] == [b"%d|{}" % seq for seq in (1, 2, 3, 4, 5)]
     finally:
         loops.run(store.aclose())
@@ -271,29 +351,31 @@ def test_the_journal_goes_on_after_redis_forgets_its_script_or_drops_it(
 def test_a_journal_write_without_a_reply_fails_in_time_and_its_connection_goes(
     url: str, loops: asyncio.Runner
 ) -> None:
-    """A Redis that does not answer: the write fails after the store's timeout (the
-    frames waiting for it are answered with an error), and its late reply is never
-    taken for the next write's."""
+    """A Redis that does not answer: the write fails after the journal's timeout (the
+    frames waiting for it are answered without it), and its late reply is never taken
+    for the next write's."""
     r = redis.Redis.from_url(url)
     r.flushdb()
-    store = RedisStore(url, timeout_s=0.3)
+    store = RedisStore(url, journal_timeout_s=0.3)
+    f = store.acquire("s1", "w1", 5, 60)
+    assert f is not None
 
-    async def next_write_then_unpause() -> bool:
-        pending = asyncio.ensure_future(store.append("s1", b"2|{}", "w1", 60, 5))
+    async def next_write_then_unpause() -> Hold:
+        pending = asyncio.ensure_future(store.append("s1", b"2|{}", "w1", f, 5, 60))
         await asyncio.sleep(0.1)  # written, behind the first one if on its connection
         r.client_unpause()
         return await pending
 
     try:
-        assert store.acquire("s1", "w1", 5)
-        assert loops.run(store.append("s1", b"1|{}", "w1", 60, 5))
+        assert loops.run(store.save([("s1", b"c", 0, f)], "w1", 5, 60)) == [True]
+        assert loops.run(store.append("s1", b"1|{}", "w1", f, 5, 60)) == HELD
         r.client_pause(10_000, all=False)  # scripts wait; CLIENT UNPAUSE does not
         start = time.monotonic()
         with pytest.raises(StoreUnavailable, match=r"no reply from Redis in 0\.3 s"):
-            # s2 has no lease: Redis refuses this entry, when it runs it
-            loops.run(store.append("s2", b"1|{}", "w1", 60, 5))
+            # s2 has no checkpoint: Redis refuses this entry (a gap), when it runs it
+            loops.run(store.append("s2", b"1|{}", "w1", 1, 5, 60))
         assert time.monotonic() - start < 2.0
-        assert loops.run(next_write_then_unpause())
+        assert loops.run(next_write_then_unpause()) == HELD
         assert store.load("s1")[1] == [b"1|{}", b"2|{}"]
     finally:
         r.client_unpause()
@@ -307,32 +389,45 @@ def test_a_burst_of_checkpoints_waits_for_connections_rather_than_failing(
     """Many sessions created at once each write a checkpoint at once (more than the
     client's pool of connections holds)."""
     ids = [f"s{i}" for i in range(150)]
-    for sid in ids:
-        assert store.acquire(sid, "w1", 60)
+    fences = {sid: store.acquire(sid, "w1", 60, 60) for sid in ids}
 
     async def burst() -> list[list[bool]]:
-        return await asyncio.gather(*(store.save([(sid, b"ckpt", 0)], "w1", 60) for sid in ids))
+        return await asyncio.gather(
+            *(store.save([(sid, b"ckpt", 0, f)], "w1", 60, 60) for sid, f in fences.items())  # type: ignore[list-item]
+        )
 
     assert runner.run(burst()) == [[True]] * len(ids)
     assert all(store.load(sid) == (b"ckpt", []) for sid in ids)
 
 
 def test_checkpoints_expire_after_the_idle_timeout(
-    store: SessionStore, append: Callable[..., bool], save: Callable[..., list[bool]]
+    store: SessionStore,
+    append: Callable[..., Hold],
+    save: Callable[..., list[bool]],
+    elapse: Callable[[float], None],
 ) -> None:
-    assert store.acquire("s1", "w1", 5)
-    assert save([("s1", b"ckpt", 0)], "w1", 0.3) == [True]
-    assert append("s1", b"1|{}", "w1", 0.3, 5)
-    time.sleep(0.45)
+    f = store.acquire("s1", "w1", 5, 0.3)
+    assert save([("s1", b"ckpt", 0, f)], "w1", 5, 0.3) == [True]
+    assert append("s1", b"1|{}", "w1", f, 5, 0.3) == HELD
+    elapse(0.2)
+    assert store.load("s1") == (b"ckpt", [b"1|{}"])
+    elapse(0.25)
     assert store.load("s1") == (None, [])
 
 
-def test_delete_forgets_everything(store: SessionStore, save: Callable[..., list[bool]]) -> None:
-    assert store.acquire("s1", "w1", 5)
-    save([("s1", b"ckpt", 0)], "w1", 60)
-    store.delete("s1")
+def test_delete_forgets_everything_and_its_holder_cannot_take_it_back(
+    store: SessionStore, append: Callable[..., Hold], save: Callable[..., list[bool]]
+) -> None:
+    f = store.acquire("s1", "w1", 5, 60)
+    assert save([("s1", b"ckpt", 0, f)], "w1") == [True]
+    store.delete("s1", 60)
     assert store.load("s1") == (None, [])
-    assert store.acquire("s1", "w2", 5)
+    # The worker that held it (and missed the deletion) is told it lost the session.
+    assert store.renew([("s1", f)], "w1", 5, 60) == [LOST]
+    assert append("s1", b"1|{}", "w1", f) == LOST
+    assert save([("s1", b"ckpt", 1, f)], "w1") == [False]
+    assert store.load("s1") == (None, [])
+    assert store.acquire("s1", "w2", 5, 60) is not None
 
 
 def test_an_unreachable_store_says_where_it_looked() -> None:
