@@ -271,7 +271,8 @@ def summarize(runs: list[IntegrityRun]) -> dict[str, object]:
     return {"scenarios": rows, "total": metrics(runs)}
 
 
-def _f(v: object, fmt: str) -> str:
+def format_cell(v: object, fmt: str) -> str:
+    """A table cell: ``v`` formatted, "-" for a NaN (no such frame), "never" for inf."""
     if isinstance(v, float) and not np.isfinite(v):
         return "-" if np.isnan(v) else "never"
     return format(v, fmt)
@@ -279,6 +280,7 @@ def _f(v: object, fmt: str) -> str:
 
 def markdown_table(summary: dict[str, object]) -> str:
     """The per-scenario table (also pasted into the README)."""
+    cell = format_cell
     lines = [
         "| map | condition | confidently wrong | availability | flips / min | first fix (s) "
         "| tail error p95 (m) | protection coverage |",
@@ -291,10 +293,11 @@ def markdown_table(summary: dict[str, object]) -> str:
     for row in rows:
         lines.append(
             f"| {row['map']} | {row['condition']} "
-            f"| {row['wrong_frames']} / {row['frames']} ({_f(100 * row['wrong_share'], '.2f')} %) "
-            f"| {_f(row['availability'], '.2f')} | {_f(row['flips_per_min'], '.2f')} "
-            f"| {_f(row['median_first_fix_s'], '.1f')} | {_f(row['tail_err_m'], '.3f')} "
-            f"| {_f(row['coverage'], '.3f')} |"
+            f"| {row['wrong_frames']} / {row['frames']} "
+            f"({cell(100 * row['wrong_share'], '.2f')} %) "
+            f"| {cell(row['availability'], '.2f')} | {cell(row['flips_per_min'], '.2f')} "
+            f"| {cell(row['median_first_fix_s'], '.1f')} | {cell(row['tail_err_m'], '.3f')} "
+            f"| {cell(row['coverage'], '.3f')} |"
         )
     return "\n".join(lines)
 

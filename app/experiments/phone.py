@@ -40,7 +40,7 @@ from pathlib import Path
 import numpy as np
 
 from app.experiments.hard_maps import hard_map
-from app.experiments.integrity import FLIP_M, RIGHT_M, WRONG_M
+from app.experiments.integrity import FLIP_M, RIGHT_M, WRONG_M, format_cell
 from app.experiments.runner import map_jobs
 from app.localization.camera import Camera
 from app.localization.types import InitialPose
@@ -442,14 +442,9 @@ def summarize(runs: list[PhoneRun]) -> dict[str, object]:
     return {"scenarios": rows, "total": metrics(runs), "reliability": reliability(runs)}
 
 
-def _f(v: object, fmt: str) -> str:
-    if isinstance(v, float) and not math.isfinite(v):
-        return "-" if math.isnan(v) else "never"
-    return format(v, fmt)
-
-
 def markdown_table(summary: dict[str, object]) -> str:
     """One row per scenario, and the total."""
+    cell = format_cell
     lines = [
         "| map | condition | confidently wrong (> 1 m) | beyond protection | availability "
         "| converged | flips / min | tail p95 (m) | coverage | frames to converge |",
@@ -461,11 +456,12 @@ def markdown_table(summary: dict[str, object]) -> str:
     for row in [*scenario_rows, dict(total, map="**all**", condition="")]:
         lines.append(
             f"| {row['map']} | {row['condition']} "
-            f"| {row['wrong_frames']} / {row['frames']} ({_f(100 * row['wrong_share'], '.2f')} %) "
-            f"| {_f(100 * row['beyond_protection_share'], '.2f')} % "
-            f"| {_f(row['availability'], '.2f')} | {_f(row['converged_share'], '.2f')} "
-            f"| {_f(row['flips_per_min'], '.2f')} | {_f(row['tail_err_p95_m'], '.3f')} "
-            f"| {_f(row['coverage'], '.3f')} | {_f(row['median_frames_to_converge'], '.0f')} |"
+            f"| {row['wrong_frames']} / {row['frames']} "
+            f"({cell(100 * row['wrong_share'], '.2f')} %) "
+            f"| {cell(100 * row['beyond_protection_share'], '.2f')} % "
+            f"| {cell(row['availability'], '.2f')} | {cell(row['converged_share'], '.2f')} "
+            f"| {cell(row['flips_per_min'], '.2f')} | {cell(row['tail_err_p95_m'], '.3f')} "
+            f"| {cell(row['coverage'], '.3f')} | {cell(row['median_frames_to_converge'], '.0f')} |"
         )
     return "\n".join(lines)
 
