@@ -29,6 +29,7 @@ from app.localization.compass import CompassReading
 from app.localization.floors import AltitudeReading
 from app.localization.types import Detection, InitialPose, Odometry, Pose
 from app.maps.geometry import wrap_deg
+from app.maps.levels import LevelLayout
 from app.service.session import Session
 from app.service.types import FrameInput, FrameOutcome, LevelRef, SensorSpec, SessionSpec
 
@@ -143,19 +144,29 @@ def _round(value: float, digits: int) -> float:
 def destination_spec(body: DestinationIn) -> DestinationSpec:
     """The service's description of a destination request."""
     if body.label is not None:
-        return DestinationSpec("label", body.label)
+        return DestinationSpec("label", body.label, level=body.level, step_free=body.step_free)
     if body.cls is not None:
-        return DestinationSpec("class", body.cls)
+        return DestinationSpec("class", body.cls, level=body.level, step_free=body.step_free)
     if body.region is not None:
-        return DestinationSpec("region", body.region)
-    return DestinationSpec("point", x=float(body.x), y=float(body.y))  # type: ignore[arg-type]
+        return DestinationSpec("region", body.region, level=body.level, step_free=body.step_free)
+    return DestinationSpec(
+        "point",
+        x=float(body.x),  # type: ignore[arg-type]
+        y=float(body.y),  # type: ignore[arg-type]
+        level=body.level,
+        step_free=body.step_free,
+    )
 
 
-def destination_out(target: Target) -> DestinationOut:
+def destination_out(target: Target, layout: LevelLayout) -> DestinationOut:
+    """The resolved destination, its points in their levels' frames (as in the map file)."""
+    xy, level = layout.from_plane(target.points)
     return DestinationOut(
         target=target.name,
         kind=target.kind,
-        points=[(round(float(x), 4), round(float(y), 4)) for x, y in target.points],
+        points=[(round(float(x), 4), round(float(y), 4)) for x, y in xy],
+        levels=[layout.levels[int(k)].id for k in level] if layout.has_levels else None,
+        step_free=target.step_free,
     )
 
 
@@ -171,6 +182,21 @@ def _guidance_data(g: Guidance | None) -> dict[str, Any] | None:
             "distance_m": float(g.next.distance_m),
             "then_clock": clock_from_bearing_deg(g.next.then_deg),
         }
+    connector = None
+    if g.connector is not None:
+        c = g.connector
+        connector = {
+            "id": c.id,
+            "kind": c.kind,
+            "label": c.label,
+            "direction": c.direction,
+            "to_level": {
+                "id": c.to_level.id,
+                "name": c.to_level.name,
+                "ordinal": c.to_level.ordinal,
+            },
+            "at_stop": bool(c.at_stop),
+        }
     return {
         "target": g.target,
         "clock": clock_from_bearing_deg(g.bearing_deg),
@@ -179,6 +205,7 @@ def _guidance_data(g: Guidance | None) -> dict[str, Any] | None:
         "path_m": float(g.path_m),
         "next": turn,
         "arrived": bool(g.arrived),
+        "connector": connector,
     }
 
 

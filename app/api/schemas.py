@@ -280,6 +280,17 @@ class DestinationIn(StrictInput):
     region: str | None = Field(None, min_length=1, max_length=200, description="a region's name")
     x: Finite | None = Field(None, description="a point, metres (with y)")
     y: Finite | None = Field(None, description="a point, metres (with x)")
+    level: str | None = Field(
+        None,
+        min_length=1,
+        max_length=64,
+        description="addition: the level (its id) the destination is on; a point on a map "
+        "with levels needs it, a label, class or region is then looked for on that level only",
+    )
+    step_free: bool = Field(
+        False,
+        description="addition: a way without steps: lifts and ramps only, no stairs or escalators",
+    )
 
     @model_validator(mode="after")
     def _one_target(self) -> DestinationIn:
@@ -352,6 +363,15 @@ class NextTurnOut(_Out):
     )
 
 
+class GuidanceConnectorOut(_Out):
+    id: str = Field(description="the connector's id in the map file")
+    kind: Literal["elevator", "stairs", "escalator", "ramp"]
+    label: str | None = Field(description="the connector's label in the map file, or null")
+    direction: Literal["up", "down"] = Field(description="the way the ride goes")
+    to_level: LevelOut = Field(description="the level the ride ends on")
+    at_stop: bool = Field(description="the person is at the connector: time to take it")
+
+
 class GuidanceOut(_Out):
     target: str = Field(description="the destination as spoken")
     clock: int = Field(description="clock direction 1..12 of the target")
@@ -362,6 +382,11 @@ class GuidanceOut(_Out):
         description="the next turn of the path; null when the target is in a straight line"
     )
     arrived: bool = Field(description="within 1 m of the target (walking distance)")
+    connector: GuidanceConnectorOut | None = Field(
+        None,
+        description="while the way changes level next: the connector it takes (the "
+        "directions above then lead to it); null otherwise",
+    )
 
 
 class DestinationOut(_Out):
@@ -370,6 +395,10 @@ class DestinationOut(_Out):
     points: list[tuple[float, float]] = Field(
         description="candidate end points (x, y) in metres; empty for a region"
     )
+    levels: list[str] | None = Field(
+        None, description="addition: the level (id) of each point; null on a map without levels"
+    )
+    step_free: bool = Field(False, description="addition: lifts and ramps only")
 
 
 class FrameResult(_Out):

@@ -37,8 +37,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         default="tables",
         help="tables: the paper's Tables I-IV (default); integrity: the hard-cases suite "
         "(--quick: five scenarios, 2 seeds); building: a walk through the bundled two-wing "
-        "floor (global start, 180 deg camera, clutter, kidnap between wings); venue: three "
-        "floors by lift, stairs and escalators, with and without a drifting barometer",
+        "floor (global start, 180 deg camera, clutter, kidnap between wings); phone: walks "
+        "as a real phone sends them (docs/results/phone.md); venue: three floors by lift, "
+        "stairs and escalators, with and without a drifting barometer",
     )
     parser.add_argument(
         "--scenarios",

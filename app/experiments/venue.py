@@ -104,7 +104,7 @@ def run_condition(condition: str, seed: int, particles: int) -> VenueRun:
     for i, vf in enumerate(frames):
         f = vf.frame
         started = time.perf_counter()
-        est = pf.step(f.odometry, f.detections, None, vf.altitude if barometer else None)
+        est = pf.step(f.odometry, f.detections, altitude=vf.altitude if barometer else None)
         step_ms[i] = (time.perf_counter() - started) * 1e3
         est_level[i] = int(m.layout.level_of_plane_x(np.array(est.x)))
         err[i] = float(np.hypot(est.x - f.truth.x, est.y - f.truth.y))

@@ -9,6 +9,11 @@ seconds while the person walks; once on
 arrival ("You have arrived at main entrance."). While the filter has not converged no
 direction is given, since it would rest on a position that is not known: the person
 hears "Finding where you are before guiding you." instead.
+
+When the way changes level next, the directions lead to the connector and name it,
+"The escalator up to the First Floor: go to 1 o'clock, 5 metres.", and once the person
+stands at it: "Take the escalator up to the First Floor." Each is said as soon as it
+applies (a new connector, or arriving at one), at most every ``MIN_GAP_S`` seconds.
 """
 
 from __future__ import annotations
@@ -24,7 +29,7 @@ from app.feedback.phrasing import (
     clock_from_bearing_deg,
     direction_phrase,
 )
-from app.guidance import Guidance
+from app.guidance import ConnectorStep, Guidance
 
 #: Repeat the directions this often while the person walks (seconds).
 REPEAT_S = 10.0
@@ -58,19 +63,42 @@ def _towards(bearing_deg: float, style: Style) -> str:
     return direction_phrase(bearing_deg, style)
 
 
+def level_phrase(name: str) -> str:
+    """'the First Floor', but 'Level 2' and '2nd floor'... as they are."""
+    words = name.split()
+    bare = name[:1].isdigit() or (words and words[0].casefold() in ("level", "floor", "the"))
+    return name if bare else f"the {name}"
+
+
+def connector_phrase(step: ConnectorStep) -> str:
+    """'the escalator up to the First Floor'."""
+    return f"the {step.kind} {step.direction} to {level_phrase(step.to_level.name)}"
+
+
 def directions(g: Guidance, style: Style = "clock", units: Units = "metric") -> str:
     """The sentence for one set of directions (see the module docstring)."""
     if g.arrived:
         return f"You have arrived at {g.target}."
+    where = g.target
+    if g.connector is not None:
+        if g.connector.at_stop:
+            return f"Take {connector_phrase(g.connector)}."
+        where = connector_phrase(g.connector)
     if g.next is None:
         return (
-            f"{capitalize(g.target)}: go {_towards(g.bearing_deg, style)}, "
+            f"{capitalize(where)}: go {_towards(g.bearing_deg, style)}, "
             f"{_distance(g.distance_m, units)}."
         )
     return (
-        f"{capitalize(g.target)}: go {_towards(g.next.bearing_deg, style)}, "
+        f"{capitalize(where)}: go {_towards(g.next.bearing_deg, style)}, "
         f"{_distance(g.next.distance_m, units)}, then {_towards(g.next.then_deg, style)}."
     )
+
+
+def _step_key(g: Guidance) -> tuple[str, int, bool] | None:
+    """What must be said anew when it changes: the connector ahead and being at it."""
+    c = g.connector
+    return None if c is None else (c.id, c.to_level.index, c.at_stop)
 
 
 @dataclass
@@ -84,18 +112,22 @@ class GuidanceSpeaker:
     _where: tuple[float, float] | None = None
     _finding_at: float | None = None
     _arrived: bool = False
+    _step: tuple[str, int, bool] | None = None
 
     def reset(self) -> None:
         """A new destination (or none): start afresh."""
         self._said_at = self._clock = self._where = self._finding_at = None
         self._arrived = False
+        self._step = None
 
-    def no_way(self, target: str, now: float) -> str:
-        """Located, but no walkable way leads from here to ``target`` (said now and then)."""
+    def no_way(self, target: str, now: float, step_free: bool = False) -> str:
+        """Located, but no walkable way (no step-free one, with ``step_free``) leads from
+        here to ``target`` (said now and then)."""
         self._said_at = self._clock = self._where = None
         if self._finding_at is None or not 0 <= now - self._finding_at < FINDING_REPEAT_S:
             self._finding_at = now
-            return f"I cannot find a way from here to {target}."
+            way = "a step-free way" if step_free else "a way"
+            return f"I cannot find {way} from here to {target}."
         return ""
 
     def update(
@@ -127,17 +159,21 @@ class GuidanceSpeaker:
             and ((x - self._where[0]) ** 2 + (y - self._where[1]) ** 2) ** 0.5 >= WALKING_M
         )
         since = None if self._said_at is None else now - self._said_at
+        step = _step_key(guidance)
         due = (
             since is None
             or self._clock is None
             or (
                 not 0 <= since < MIN_GAP_S  # (a clock going backwards counts as due)
                 and (
-                    clock_distance_hours(self._clock, clock) >= 1 or (walked and since >= REPEAT_S)
+                    step != self._step
+                    or clock_distance_hours(self._clock, clock) >= 1
+                    or (walked and since >= REPEAT_S)
                 )
             )
         )
         if not due:
             return ""
         self._said_at, self._clock, self._where = now, clock, (x, y)
+        self._step = step
         return directions(guidance, self.style, self.units)

@@ -2,15 +2,17 @@
 
 Depends only on the map model (app.maps.model): :mod:`~app.guidance.targets`
 resolves what was asked for, :mod:`~app.guidance.planner` plans the walk once per map
-and target, :mod:`~app.guidance.guide` turns a pose and a plan into directions.
+and target (across levels through :mod:`~app.guidance.levels`),
+:mod:`~app.guidance.guide` turns a pose and a plan into directions.
 """
 
-from app.guidance.guide import ARRIVED_M, Guidance, NextTurn, guide
+from app.guidance.guide import ARRIVED_M, ConnectorStep, Guidance, NextTurn, guide
 from app.guidance.planner import Plan, Route, Unreachable, plan_for
 from app.guidance.targets import DestinationSpec, Target, UnknownDestination, resolve
 
 __all__ = [
     "ARRIVED_M",
+    "ConnectorStep",
     "DestinationSpec",
     "Guidance",
     "NextTurn",

@@ -13,6 +13,13 @@ the nearest such cell in sight, for an estimate close to a wall) and
 straightens the staircase of cells into the few straight legs a person would walk
 (a leg goes on as long as the straight line stays walkable), so the first leg's end
 is the next turn. No search runs per frame.
+
+A venue with several levels has them side by side in the free space's plane
+(:mod:`app.maps.levels`); :mod:`~app.guidance.levels` joins them at the connectors'
+stops, so the same search crosses levels, escalators only their way, lifts and ramps
+only for a step-free plan. A route then ends at the first connector it rides, and says
+which (:attr:`Route.ride`); once the person is on the next level, the route from there
+goes on.
 """
 
 from __future__ import annotations
@@ -26,6 +33,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
+from app.guidance.levels import Ride, StopNode, entry_edges, ride_edges, stop_nodes
 from app.guidance.targets import DestinationSpec, Target, resolve
 from app.maps.geometry import points_in_polygon, segments_cross_walls, wrap_deg
 from app.maps.model import SemanticMap
@@ -56,14 +64,18 @@ class Route:
     """The straightened shortest path from a pose to the target.
 
     Attributes:
-        points: the pose, each turn, and the end point, shape (P, 2), metres.
+        points: the pose, each turn, and the end point, shape (P, 2), metres, in the
+            map's plane (a level's own frame shifted, see app.maps.levels).
         length_m: walking length of the polyline, metres.
-        end_object: the map object reached (-1 for a point or a region).
+        end_object: the map object reached (-1 for a point, a region or a connector).
+        ride: the change of level the polyline leads to (it ends at the middle of that
+            connector's stop), or None when it leads to the target.
     """
 
     points: NDArray[np.float64]
     length_m: float
     end_object: int
+    ride: Ride | None = None
 
 
 @dataclass(frozen=True)
@@ -72,8 +84,9 @@ class _Layer:
 
     ``node[cell]`` is the graph node of a grid cell (-1 when not walkable); for each
     node, ``dist`` its walking distance to the target, ``pred`` the next node towards it
-    and ``source`` the virtual node (target point) it leads to; nodes ``n`` and above are
-    the target's virtual nodes.
+    and ``source`` the virtual node (target point) it leads to; nodes ``n`` to
+    ``first_target`` are connector stops (:mod:`app.guidance.levels`), the rest the
+    target's virtual nodes.
     """
 
     walkable: NDArray[np.bool_]  # flat, one per grid cell
@@ -83,6 +96,7 @@ class _Layer:
     pred: NDArray[np.int32]
     source: NDArray[np.int32]
     n: int
+    first_target: int
 
     def reaches(self, cell: int) -> bool:
         k = self.node[cell]
@@ -99,6 +113,8 @@ class Plan:
     def __init__(self, semantic_map: SemanticMap, target: Target) -> None:
         self.map = ensure_prepared(semantic_map)  # its free space, built now if need be
         self.target = target
+        #: Connector stops as graph nodes (none on a map without levels).
+        self.stops: list[StopNode] = stop_nodes(semantic_map.layout, target.step_free)
         fs = semantic_map.free_space
         self.res = fs.resolution_m
         self.origin = np.array([fs.origin_x, fs.origin_y])
@@ -150,26 +166,40 @@ class Plan:
             src.append(np.arange(n)[ok])
             dst.append(node[rr[ok] * cols + cc[ok]])
             wt.append(np.full(int(ok.sum()), self.res * float(np.hypot(dr, dc))))
+        # Nodes n .. n + S - 1 are connector stops, each tied to the cells inside it.
+        layout = self.map.layout
+        stops = len(self.stops)
+        in_cell, in_stop, in_w = entry_edges(self.stops, layout, self._centres(cells))
+        src.append(in_cell)
+        dst.append(in_stop + n)
+        wt.append(in_w)
         seeds, seed_w, seed_src = self._seeds(cells)
+        first = n + stops
         k = max(len(self.target.points), 1)
-        # Node n + j is target point j (a region has one virtual node, n).
-        src.append(seed_src + n)
+        # Node first + j is target point j (a region has one virtual node, first).
+        src.append(seed_src + first)
         dst.append(node[seeds])
         wt.append(seed_w)
         s = np.concatenate(src)
         d = np.concatenate(dst)
         w = np.concatenate(wt) + 1e-9  # csgraph treats an explicit 0 as no edge
-        graph = coo_matrix((np.r_[w, w], (np.r_[s, d], np.r_[d, s])), shape=(n + k, n + k))
+        # Walking goes both ways; a ride only its way. The search runs from the target
+        # outwards, so a ride from stop a to stop b is the edge b -> a.
+        ride_a, ride_b, ride_w = ride_edges(self.stops, layout)
+        rows = np.r_[s, d, ride_b + n]
+        cols_ = np.r_[d, s, ride_a + n]
+        size = first + k
+        graph = coo_matrix((np.r_[w, w, ride_w], (rows, cols_)), shape=(size, size))
         dist, pred, source = dijkstra(
             graph.tocsr(),
             directed=True,
-            indices=np.arange(n, n + k),
+            indices=np.arange(first, first + k),
             return_predecessors=True,
             min_only=True,
         )
         if not np.isfinite(dist[:n]).any():
             raise Unreachable(f"nothing walkable reaches {self.target.name}")
-        return _Layer(walkable.reshape(-1), node, cells, dist, pred, source, n)
+        return _Layer(walkable.reshape(-1), node, cells, dist, pred, source, n, first)
 
     def _seeds(
         self, cells: NDArray[np.int64]
@@ -239,13 +269,29 @@ class Plan:
         seen = np.flatnonzero(~blocked)
         return int(flat[order[seen[0]]]) if seen.size else None
 
-    def route(self, x: float, y: float) -> Route:
-        """The straightened shortest path from (x, y) to the target.
+    def route(self, x: float, y: float, level: int | str | None = None) -> Route:
+        """The straightened shortest path from (x, y) to the target, or to the first
+        connector it rides (:attr:`Route.ride`).
+
+        Args:
+            x, y: the person's position, metres: in the frame of ``level`` when one is
+                given (its index in ordinal order or its id), else in the map's plane
+                (the file's frame for a map without levels).
 
         Raises:
             Unreachable: no cell that leads to the target is within ``MAX_SNAP_M`` in
                 sight (outside the building, or in a walled-off part).
+            KeyError: ``level`` is no level of the map.
         """
+        if level is not None:
+            layout = self.map.layout
+            k = layout.level_index(level) if isinstance(level, str) else int(level)
+            if not layout.has_levels and k == 0:
+                pass  # one level: the plane is the file's frame
+            elif not 0 <= k < len(layout.levels):
+                raise KeyError(f"level index {k} is not a level of map {self.map.name!r}")
+            else:
+                x, y = (float(v) for v in layout.to_plane([x, y], k)[0])
         start = np.array([x, y], dtype=np.float64)
         flat = self._cell_of(x, y)
         for layer in self.layers:
@@ -258,22 +304,50 @@ class Plan:
                 relax = float(np.hypot(*(self._centres(np.array([cell]))[0] - start))) + self.res
             assert cell is not None  # reached, or snapped onto a reachable cell above
             return self._route(layer, start, int(cell), relax)
-        raise Unreachable(f"no walkable path from here to {self.target.name}")
+        way = "step-free path (lifts and ramps only)" if self.target.step_free else "walkable path"
+        raise Unreachable(f"no {way} from here to {self.target.name}")
 
     def _route(self, layer: _Layer, start: NDArray[np.float64], cell: int, relax: float) -> Route:
         chain = [int(layer.node[cell])]
-        while chain[-1] < layer.n and layer.pred[chain[-1]] >= 0:
+        while chain[-1] < layer.first_target and layer.pred[chain[-1]] >= 0:
             chain.append(int(layer.pred[chain[-1]]))
-        cell_nodes = np.array([c for c in chain if c < layer.n], dtype=np.int64)
+        cut, ride = self._first_ride(layer, chain)
+        cell_nodes = np.array([c for c in chain[:cut] if c < layer.n], dtype=np.int64)
         pts = self._centres(layer.cells[cell_nodes])
         end_object = -1
-        if self.target.kind != "region":
-            j = int(layer.source[int(cell_nodes[0])]) - layer.n  # which target point
+        if ride is None and self.target.kind != "region":
+            j = int(layer.source[int(cell_nodes[0])]) - layer.first_target  # which point
             pts = np.vstack([pts, self.target.points[j]])
             end_object = int(self.target.objects[j])
-        legs = self._straighten(layer, start, pts, end_object, relax)
-        legs = self._merge_small_bends(layer, legs, end_object, relax)
-        return Route(legs, _length(legs), end_object)
+        if ride is not None:
+            # The stop's middle is a region's end: the person walks onto it, no wall between.
+            legs = self._straighten(layer, start, pts, -1, relax, special_end=False)
+        else:
+            legs = self._straighten(layer, start, pts, end_object, relax)
+        legs = self._merge_small_bends(layer, legs, end_object, relax, special_end=ride is None)
+        return Route(legs, _length(legs), end_object, ride)
+
+    def _first_ride(self, layer: _Layer, chain: list[int]) -> tuple[int, Ride | None]:
+        """Where the chain's walk on this level ends (an index into it) and the ride
+        that follows; (len(chain), None) when it reaches the target without one.
+
+        A run of stop nodes whose first and last lie on one level is no ride (a path
+        that only crossed a stop): its nodes are passed over."""
+        if not self.stops:
+            return len(chain), None  # one level: nothing to ride
+        k = 0
+        while k < len(chain):
+            if not layer.n <= chain[k] < layer.first_target:
+                k += 1
+                continue
+            end = k
+            while end + 1 < len(chain) and layer.n <= chain[end + 1] < layer.first_target:
+                end += 1
+            first, last = self.stops[chain[k] - layer.n], self.stops[chain[end] - layer.n]
+            if first.level != last.level:
+                return k, Ride(first.connector, first.level, last.level)
+            k = end + 1
+        return len(chain), None
 
     def _clear(
         self, layer: _Layer, a: NDArray[np.float64], b: NDArray[np.float64], relax_m: float
@@ -296,7 +370,12 @@ class Plan:
         )
 
     def _merge_small_bends(
-        self, layer: _Layer, points: NDArray[np.float64], end_object: int, relax_m: float
+        self,
+        layer: _Layer,
+        points: NDArray[np.float64],
+        end_object: int,
+        relax_m: float,
+        special_end: bool = True,
     ) -> NDArray[np.float64]:
         """Drop inner points where the path bends by less than ``MIN_TURN_DEG`` (no turn
         worth a word), where the straight line past them stays walkable too."""
@@ -307,7 +386,7 @@ class Plan:
             out = _heading_deg(points[k], points[k + 1])
             if abs(wrap_deg(out - into)) < MIN_TURN_DEG:
                 relax = relax_m if len(keep) == 1 else 0.0
-                if k + 1 == last and self.target.kind != "region":
+                if k + 1 == last and special_end and self.target.kind != "region":
                     clear = self._sees_end(layer, keep[-1], points[k + 1], end_object, relax)
                 else:
                     clear = self._clear(layer, keep[-1], points[k + 1], relax)
@@ -324,6 +403,7 @@ class Plan:
         chain: NDArray[np.float64],
         end_object: int,
         relax_m: float = 0.0,
+        special_end: bool | None = None,
     ) -> NDArray[np.float64]:
         """Legs from ``start`` along ``chain``: each goes on while the line stays clear.
 
@@ -334,7 +414,8 @@ class Plan:
         out = [start]
         anchor = start
         i, last = 0, chain.shape[0] - 1
-        special_end = self.target.kind != "region"
+        if special_end is None:
+            special_end = self.target.kind != "region"
         while i < last:
             stop = last - 1 if special_end else last
             args = self._grid_args(layer, relax_m)

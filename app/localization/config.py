@@ -49,6 +49,17 @@ class FilterConfig:
     #: that ``converged`` means no other place explains the walk nearly as well
     #: (:mod:`~app.localization.evidence`).
     evidence: bool = True
+    #: Share of the alternatives' summed log-likelihood ratios that counts when their
+    #: probability is taken (gating ``converged``): 1 for a detector whose errors are
+    #: independent from frame to frame (the simulator's); less for a real one, whose
+    #: errors repeat (a box's bias, an object moved since the map was drawn), so that
+    #: many frames of the same small misfit do not add up to certainty. The service
+    #: uses ``REAL_DETECTOR_TEMPER``.
+    evidence_temper: float = 1.0
+    #: A steady bearing error (degrees) the check of how well the estimate explains the
+    #: detections allows for besides the noise (a box's centre is not the object's): 0 for
+    #: the simulator's detector; the service uses ``REAL_DETECTOR_FIT_BIAS_DEG``.
+    fit_bias_deg: float = 0.0
     #: Adaptive particle count: all ``particles`` while lost, KLD-sampling (at least
     #: ``min_particles``) once converged. 2,000 rather than fewer: on the paper's walks
     #: 500 cost 1.0 mm of mean error against a fixed 10,000, 2,000 cost none measurable
@@ -83,6 +94,16 @@ class FilterConfig:
         base = cls(visibility=False, clutter=False, recovery=False, adaptive=False, evidence=False)
         return replace(base, **overrides)
 
+
+#: FilterConfig.evidence_temper for a real phone's detector (the service's; measured on
+#: the phone suite, docs/results/phone.md).
+REAL_DETECTOR_TEMPER = 0.25
+#: A real detector's steady bearing error per object (degrees): about a third of the
+#: half-width of a 1 m wide object 2-3 m away, or an object drawn 0.2 m off seen from 4 m.
+#: The protection radius allows for it (app.localization.dilution), and so does the
+#: service's fit check (FilterConfig.fit_bias_deg).
+STEADY_BIAS_DEG = 3.0
+REAL_DETECTOR_FIT_BIAS_DEG = STEADY_BIAS_DEG
 
 #: Motion noise by odometry source (docs/API.md, ``SessionCreate.odometry``): the share of
 #: each motion (translation, turn) the noise may reach. VIO and an unknown source keep

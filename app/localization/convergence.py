@@ -90,8 +90,8 @@ class ConvergenceGate:
     #: The radius systematic bearing errors can reach (:mod:`~app.localization.dilution`)
     #: at most this to gain, and this to hold (m): a fix that geometry pins no closer is no
     #: location to tell a person, however tight the cloud.
-    gain_geometry_m: float = 2.0
-    hold_geometry_m: float = 4.0
+    gain_geometry_m: float = 3.0
+    hold_geometry_m: float = 5.0
     #: Frames in a row the cluster may stay lighter than ``hold_mass`` (a frame with a
     #: single detection can lend freshly injected particles a passing share).
     hold_light_frames: int = 3

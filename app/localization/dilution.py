@@ -41,15 +41,13 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from app.localization.config import FilterConfig
+from app.localization.config import STEADY_BIAS_DEG, FilterConfig
 from app.localization.sensor import Observation
 from app.localization.types import Odometry
 from app.maps.model import SemanticMap
 
-#: Systematic bearing error per object assumed on top of the noise (degrees): about a
-#: third of the half-width of a 1 m wide object 2-3 m away, or an object drawn 0.2 m off
-#: seen from 4 m.
-BIAS_DEG = 3.0
+#: Systematic bearing error per object assumed on top of the noise (degrees).
+BIAS_DEG = STEADY_BIAS_DEG
 #: Frames with detections whose geometry is pooled.
 WINDOW = 20
 #: A detection further than this many stds from every visible object of its class is

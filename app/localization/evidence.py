@@ -423,7 +423,10 @@ class EvidenceTracker:
         """Each alternative's probability under the whole belief, shape (A,)."""
         if not self.count:
             return np.empty(0)
-        ev = self.evidence
+        # Tempered: a real detector's errors repeat from frame to frame (a box's bias, a
+        # stale object), so a log-ratio summed over frames overstates the evidence
+        # (FilterConfig.evidence_temper).
+        ev = self.config.evidence_temper * self.evidence
         top = max(0.0, float(ev.max()))
         e = np.exp(ev - top)
         return e / (np.exp(-top) + e.sum())

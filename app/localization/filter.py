@@ -99,6 +99,10 @@ class ParticleFilter:
         self._gate = ConvergenceGate()
         margin = 2.0 * FIT_FOV_MARGIN_STDS * self.config.bearing_std_deg
         self._fit_config = replace(self.config, fov_deg=min(360.0, self.config.fov_deg + margin))
+        #: Residuals in the noise's stds, rescaled to the noise plus a real detector's
+        #: steady bias (``config.fit_bias_deg``) when the fit is judged.
+        std = self.config.bearing_std_deg
+        self._fit_scale = std / float(np.hypot(std, self.config.fit_bias_deg))
         #: Alternative places and their evidence (None with ``config.evidence`` off).
         self.evidence = (
             EvidenceTracker(semantic_map, self.config, self._vis, rng)
@@ -306,10 +310,10 @@ class ParticleFilter:
         odometry: Odometry | None,
         detections: Sequence[Detection],
         heading: CompassReading | None = None,
-        altitude: AltitudeReading | None = None,
         *,
         detections_age_s: float = 0.0,
         frame_s: float | None = None,
+        altitude: AltitudeReading | None = None,
     ) -> Estimate:
         """One full filter step: predict, correct, estimate, resample when due.
 
@@ -317,9 +321,9 @@ class ParticleFilter:
         (:mod:`~app.localization.compass`); ``altitude``, the barometer's, moves
         particles between levels (:mod:`~app.localization.floors`). ``detections_age_s``:
         how long before the end of this frame's ``odometry`` (lasting ``frame_s``, None:
-        not known) the detections were captured; the particles stand for the pose at
-        that moment (:mod:`~app.localization.latency`), and the estimate returned is
-        moved on to the frame's end (:attr:`estimate` stays at the capture).
+        not known) the detections were captured; the particles stand for the pose at that
+        moment (:mod:`~app.localization.latency`), and the estimate returned is moved on
+        to the frame's end (:attr:`estimate` stays at the capture).
 
         The estimate summarizes the weighted particles before resampling: resampling
         only adds noise to what they say (and to what the injected particles say).
@@ -336,7 +340,7 @@ class ParticleFilter:
         odometry: Odometry | None,
         detections: Sequence[Detection],
         heading: CompassReading | None,
-        altitude: AltitudeReading | None = None,
+        altitude: AltitudeReading | None,
     ) -> None:
         """:meth:`step` in capture time: ``odometry`` is the motion between captures."""
         self.predict(odometry)
@@ -373,7 +377,7 @@ class ParticleFilter:
             raw, w, ess = self._weigh_alternatives(odometry, raw, w, ess, heading)
             share, searched_ago = self.evidence.alternative_share, self.evidence.searched_ago
             confirmed = self.evidence.confirmed_share
-            if searched_ago is None and self.evidence.prior_confines:
+            if self.evidence.prior_confines:
                 searched_ago = 0  # a tight known start rules out every other place
         self._update_fit(raw)
         moved = 1.0 if odometry is None else float(np.hypot(odometry.forward_m, odometry.left_m))
@@ -558,6 +562,8 @@ class ParticleFilter:
             self.unseen.update(raw.x, raw.y, raw.theta_rad, obs, row)
         self.geometry.add(raw.x, raw.y, raw.theta_rad, obs, row)
         r = normalized_residuals(raw.x, raw.y, raw.theta_rad, obs, self.map, self._fit_config, row)
+        if self._fit_scale != 1.0:
+            r = r * self._fit_scale
         if self.config.clutter:
             g = obs.det_group
             cutoff = np.sqrt(2.0 * (obs.group_log_keep[g] - obs.group_log_floor[g]))

@@ -20,13 +20,20 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     check.add_argument("files", nargs="+", type=Path, metavar="FILE")
     imp = sub.add_parser(
         "import",
-        help="make a map file from a ROS occupancy grid (+ objects CSV) or a GeoJSON floor",
+        help="make a map file from a ROS occupancy grid (+ objects CSV), a GeoJSON floor, "
+        "or an IMDF venue (levels, connectors and all)",
     )
     src = imp.add_mutually_exclusive_group(required=True)
     src.add_argument(
         "--occupancy", type=Path, metavar="MAP.yaml", help="ROS map_server YAML (+ its image)"
     )
     src.add_argument("--geojson", type=Path, metavar="FLOOR.geojson", help="GeoJSON floor")
+    src.add_argument(
+        "--imdf",
+        type=Path,
+        metavar="DIR_OR_ZIP",
+        help="an IMDF venue (Apple's Indoor Mapping Data Format): its folder or .zip",
+    )
     imp.add_argument(
         "--objects",
         type=Path,
@@ -50,6 +57,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         type=float,
         default=DEFAULT_SNAP_M,
         help=f"move objects this close to a wall onto it (default {DEFAULT_SNAP_M} m)",
+    )
+    imp.add_argument(
+        "--storey-m",
+        type=float,
+        default=None,
+        metavar="METRES",
+        help="with --imdf: the height of a storey, for the levels' elevation_m (IMDF gives "
+        "ordinals only; default 4.0)",
     )
     imp.add_argument("--description", default="", help="the map's description")
     imp.add_argument(
@@ -93,6 +108,10 @@ def import_map(args: argparse.Namespace) -> dict[str, object]:
     from app.maps.importers.common import MapImportError, map_dict, read_objects_csv, snap_objects
 
     name = args.out.stem
+    if args.imdf is not None:
+        return _import_imdf(args)
+    if args.storey_m is not None:
+        raise MapImportError("--storey-m goes with --imdf only")
     regions: list[dict[str, object]] = []
     if args.occupancy is not None:
         from app.maps.importers.occupancy import (
@@ -134,6 +153,29 @@ def import_map(args: argparse.Namespace) -> dict[str, object]:
     )
     description = args.description or f"imported from {source}"
     return map_dict(name, np.asarray(walls), objects, regions, description)
+
+
+def _import_imdf(args: argparse.Namespace) -> dict[str, object]:
+    """The IMDF venue's map (objects already snapped per level); prints the summary."""
+    from app.maps.importers.common import MapImportError
+    from app.maps.importers.imdf import DEFAULT_STOREY_M, import_imdf
+
+    for flag, value in (("--objects", args.objects), ("--regions", args.regions)):
+        if value is not None:
+            raise MapImportError(f"{flag} does not go with --imdf (the venue has its own)")
+    if args.origin:
+        raise MapImportError("--origin does not go with --imdf (the venue places itself)")
+    storey_m = DEFAULT_STOREY_M if args.storey_m is None else args.storey_m
+    data, summary = import_imdf(
+        args.imdf,
+        args.out.stem,
+        storey_m=storey_m,
+        description=args.description,
+        snap_m=args.snap_m,
+    )
+    for line in summary.lines():
+        print(line)
+    return data
 
 
 def run_import(args: argparse.Namespace) -> int:

@@ -172,8 +172,10 @@ def decode_frame(entry: bytes) -> tuple[int, FrameInput, int]:
     if isinstance(body, dict):
         return int(seq), from_plain(FrameInput, body["frame"]), int(body["merged"])
     merged, *values = body
-    # (entries written before detections had an age hold one value less, and entries
-    # without a barometer reading one less again: their defaults)
+    # Entries written before detections had an age hold the first six values only;
+    # the altitude is there only when the frame had one.
+    if len(values) not in (len(ENTRY_FIELDS) - 2, len(ENTRY_FIELDS) - 1, len(ENTRY_FIELDS)):
+        raise ValueError(f"a journal entry of {len(values)} values is no frame")
     plain = dict(zip(ENTRY_FIELDS[: len(values)], values, strict=True))
     plain["detections"] = [
         {"cls": c, "bearing_rad": b, "score": s} for c, b, s in plain["detections"]

@@ -94,6 +94,23 @@ class Session:
     destination: Plan | None = None
     speaker: GuidanceSpeaker = field(default_factory=GuidanceSpeaker)
     last_guidance: Guidance | None = None
+
+    def _levels_of(self, estimate: Estimate) -> dict[str, Any]:
+        """The estimate's level, each hypothesis's and the level's probability (a map
+        with levels only: empty otherwise)."""
+        floors = self.filter.floors
+        if floors is None:
+            return {}
+        refs = level_refs(self.map)
+        layout = self.map.layout
+        xs = np.array([estimate.x, *(h.x for h in estimate.hypotheses)])
+        levels = layout.level_of_plane_x(xs)
+        return {
+            "level": refs[int(levels[0])],
+            "hypothesis_levels": tuple(refs[int(k)] for k in levels[1:]),
+            "level_probability": floors.level_probability,
+        }
+
     queue: FrameQueue = field(init=False)
     #: The task feeding queued frames to the filter (None: idle).
     pump: asyncio.Task[None] | None = None
@@ -118,7 +135,8 @@ class Session:
             guidance = guide(self.destination, estimate.x, estimate.y, estimate.theta_rad)
         except Unreachable as exc:
             warnings.append(f"guidance: {exc}")
-            return None, self.speaker.no_way(self.destination.target.name, now)
+            target = self.destination.target
+            return None, self.speaker.no_way(target.name, now, target.step_free)
         return guidance, self.speaker.update(guidance, True, now, estimate.x, estimate.y)
 
     def __post_init__(self) -> None:
@@ -132,22 +150,6 @@ class Session:
     def busy(self) -> bool:
         """A step is running or frames are waiting."""
         return self.pump is not None
-
-    def _levels_of(self, estimate: Estimate) -> dict[str, Any]:
-        """The estimate's level, each hypothesis's and the level's probability (a map
-        with levels only: empty otherwise)."""
-        floors = self.filter.floors
-        if floors is None:
-            return {}
-        refs = level_refs(self.map)
-        layout = self.map.layout
-        xs = np.array([estimate.x, *(h.x for h in estimate.hypotheses)])
-        levels = layout.level_of_plane_x(xs)
-        return {
-            "level": refs[int(levels[0])],
-            "hypothesis_levels": tuple(refs[int(k)] for k in levels[1:]),
-            "level_probability": floors.level_probability,
-        }
 
     def process_sync(self, frame: FrameInput, merged: int = 1) -> FrameOutcome:
         """Run one frame (``merged`` frames merged into one) through the filter and narrator."""
@@ -174,9 +176,9 @@ class Session:
                 frame.odometry,
                 detections,
                 frame.heading,
-                frame.altitude,
                 detections_age_s=frame.detections_age_s,
                 frame_s=frame_s,
+                altitude=frame.altitude,
             )
             feedback = self.narrator.update(
                 estimate,

@@ -25,8 +25,13 @@ import numpy as np
 from app.config import Settings
 from app.feedback import Narrator
 from app.feedback.guidance import GuidanceSpeaker
-from app.guidance import DestinationSpec, Target, plan_for
-from app.localization.config import ODOMETRY_NOISE, FilterConfig
+from app.guidance import DestinationSpec, Plan, plan_for
+from app.localization.config import (
+    ODOMETRY_NOISE,
+    REAL_DETECTOR_FIT_BIAS_DEG,
+    REAL_DETECTOR_TEMPER,
+    FilterConfig,
+)
 from app.localization.filter import ParticleFilter
 from app.localization.floors import spread_over_levels
 from app.localization.types import InitialPose
@@ -296,6 +301,8 @@ class SessionManager:
             fov_deg=sensor.fov_deg if camera is None else camera.fov_deg,
             fov_centre_deg=0.0 if camera is None else camera.fov_centre_deg,
             class_error=sensor.class_error,
+            evidence_temper=REAL_DETECTOR_TEMPER,
+            fit_bias_deg=REAL_DETECTOR_FIT_BIAS_DEG,
             trans_noise_frac=ODOMETRY_NOISE[request.odometry_source][0],
             rot_noise_frac=ODOMETRY_NOISE[request.odometry_source][1],
         )
@@ -393,8 +400,9 @@ class SessionManager:
 
     async def set_destination(
         self, session_id: str, spec: DestinationSpec, owner: Principal | None = None
-    ) -> Target:
-        """Guide the session to ``spec`` (the plan is built off the event loop).
+    ) -> Plan:
+        """Guide the session to ``spec`` (the plan is built off the event loop); the plan
+        (its target, and the map it was resolved on).
 
         Raises:
             SessionNotFound, UnknownDestination (nothing by that name: says what the
@@ -404,7 +412,7 @@ class SessionManager:
         plan = await asyncio.to_thread(plan_for, session.map, spec)
         session.set_destination(plan)
         log_event("destination_set", tag=session.tag, kind=spec.kind)
-        return plan.target
+        return plan
 
     async def clear_destination(self, session_id: str, owner: Principal | None = None) -> None:
         """Stop guiding the session."""

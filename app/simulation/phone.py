@@ -9,35 +9,42 @@ presets (:func:`vio_phone`, :func:`pdr_phone`, :data:`EFFECT_PRESETS`) follow pu
 orders of magnitude:
 
 1. **Latency** 100-300 ms between the camera's exposure and the end of the frame's
-   odometry: camera pipeline (tens of ms) plus on-device detector inference, which on
-   mid-range phones runs from tens to a few hundred ms for YOLO-class models (MLPerf
-   Mobile and the YOLO authors' own phone figures give that range). The frame says
-   ``detections_age_s`` when the app knows it (``latency_known``), or omits it.
+   odometry: the camera pipeline (tens of ms) plus on-device detector inference (tens
+   of ms on a phone's neural accelerator, over a hundred on its CPU, in MLPerf Mobile's
+   and the detectors' own published phone benchmarks) plus the app's queueing. The frame
+   says ``detections_age_s`` when the app knows it (``latency_known``), or omits it.
 2. **Duplicates**: a detector whose non-maximum suppression leaves two neighbouring
-   boxes on one object (a door and its frame, two halves of a long table).
+   boxes on one object (a door and its frame, two halves of a long table); 15 % of
+   true detections in the presets, a magnitude chosen here, not a published one.
 3. **Class confusion** of a few percent (the contract's default ``sensor.class_error``
    is 0.03; COCO confusion matrices of small detectors put a few percent of true
    positives in a neighbouring class).
 4. **Detection probability and score falling with distance**: far objects are small in
-   the image, and COCO's small-object recall is about half the large-object recall for
-   YOLO- and SSD-class models; here half the objects are missed at ``detect_half_m``.
+   the image, and on COCO the small-object recall and precision of YOLO- and SSD-class
+   detectors are well under those of large objects (about half or less); here half
+   the objects are missed at ``detect_half_m`` (9 m) and scores fall from about 0.95
+   near to about 0.5 at 15 m.
 5. **Box-centre bias**: the box's centre is not the object's (a door seen obliquely, a
    table's box including its chairs): each object has a fixed bias of up to
    ``box_bias_share`` (a third) of its angular half-width, so it matters for wide objects
    seen close and vanishes far away.
 6. **Dropped frames**: the app skips a frame (detector busy, thermal throttling); the
-   next frame carries the motion of both.
+   next frame carries the motion of both; 10 % of frames in the presets (chosen here).
 7. **Odometry at VIO grade** (ARKit / ARCore visual-inertial tracking: scale within
-   about 2 %, heading drift about 2 deg a minute, as in published indoor evaluations of
-   phone VIO) or **PDR grade** (pedestrian dead reckoning from steps: step-length
-   error up to about 10 % and uncorrected MEMS-gyro heading drift up to about 10 deg a
-   minute, as in the surveys of inertial pedestrian positioning; coarser per-frame
-   noise). Scale and drift rate are drawn once per walk: they are biases, not noise.
+   about 2 %, heading drift about 2 deg a minute, the order found by indoor evaluations
+   of phone VIO such as Feigl et al. 2020, "Localization limitations of ARCore, ARKit,
+   and Hololens") or **PDR grade** (pedestrian dead reckoning from steps: step-length
+   error up to about 10 % and uncorrected consumer-gyro heading drift up to about 10 deg
+   a minute, the ranges of Harle 2013, "A survey of indoor inertial positioning systems
+   for pedestrians"; coarser per-frame noise). Scale and drift rate are drawn once per
+   walk: they are biases, not noise.
 8. **Camera sway** of about +-8 deg around the walking direction at the stride
    frequency (a phone held in the hand yaws with each stride) while walking.
-9. **False detections** 0.3-1 a frame (Poisson), random class and bearing in view.
+9. **False detections** 0.3-1 a frame (Poisson; 0.5 in the presets), random class and
+   bearing in view, scores 0.3-0.7.
 10. **A stale map**: the world differs from the map the filter has: objects moved by
-    1-1.5 m, removed, or added since it was drawn (:mod:`app.simulation.stale`).
+    1-1.5 m (10 % of them), removed (5 %), or added (5 %) since it was drawn
+    (:mod:`app.simulation.stale`).
 
 The truth of a frame is the phone's pose (position and camera heading, sway included)
 at the end of its odometry; the detections describe the camera ``age`` seconds earlier.

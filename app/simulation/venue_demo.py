@@ -16,6 +16,7 @@ from app.guidance.planner import Unreachable, plan_for
 from app.guidance.targets import DestinationSpec
 from app.maps.levels import Connector
 from app.maps.model import SemanticMap
+from app.maps.prepare import ensure_prepared
 from app.simulation.venue import VENUE_NAME, venue_legs
 from app.simulation.venue_walk import Leg, Ride, Walk
 
@@ -40,8 +41,14 @@ def _path(
         if float(np.hypot(*(p - end))) < 4.0:
             continue
         a, b = (end, p) if away else (p, end)
+        # A point destination on a venue is in its level's frame, with the level.
+        file_xy, on_level = layout.from_plane(b[None])
+        level_id = layout.levels[int(on_level[0])].id
+        to = DestinationSpec(
+            "point", x=float(file_xy[0, 0]), y=float(file_xy[0, 1]), level=level_id
+        )
         try:
-            plan = plan_for(semantic_map, DestinationSpec("point", x=float(b[0]), y=float(b[1])))
+            plan = plan_for(semantic_map, to)
             route = plan.route(float(a[0]), float(a[1]))
         except (Unreachable, ValueError):
             continue
@@ -63,6 +70,7 @@ def demo_legs(semantic_map: SemanticMap, rng: np.random.Generator) -> tuple[str,
     Raises:
         ValueError: the map has no levels, or no connector can be walked to and from.
     """
+    semantic_map = ensure_prepared(semantic_map)
     layout = semantic_map.layout
     if not layout.has_levels:
         raise ValueError(f"map {semantic_map.name!r} has no levels")

@@ -143,7 +143,13 @@ def test_destination_put_and_delete(client: TestClient) -> None:
     url = f"/sessions/{sid}/destination"
     r = client.put(url, json={"label": "Main Entrance"})
     assert r.status_code == 200, r.text
-    assert r.json() == {"target": "main entrance", "kind": "label", "points": [[10.0, 5.5]]}
+    assert r.json() == {
+        "target": "main entrance",
+        "kind": "label",
+        "points": [[10.0, 5.5]],
+        "levels": None,  # a map without levels
+        "step_free": False,
+    }
     assert client.put(url, json={"class": "table"}).json()["kind"] == "class"
     assert client.put(url, json={"region": "office"}).json()["target"] == "Office"
     assert client.put(url, json={"x": 3.0, "y": 4.5}).json()["kind"] == "point"

@@ -112,7 +112,7 @@ def test_a_one_level_map_has_no_tracker_and_the_venue_checkpoint_keeps_it(
     assert one.floors is None and "floors" not in one.checkpoint()
     venue = ParticleFilter(VENUE, FilterConfig(particles=500), rng=np.random.default_rng(0))
     assert venue.floors is not None
-    venue.step(None, [], None, AltitudeReading(12.0))
+    venue.step(None, [], altitude=AltitudeReading(12.0))
     state = venue.checkpoint()
     assert state["floors"]["anchor_m"] == pytest.approx(12.0)
     again = ParticleFilter(
@@ -131,7 +131,7 @@ def test_the_venue_walk_is_never_confidently_on_a_wrong_level(seed: int) -> None
     converged = wrong = 0
     for vf in frames:
         f = vf.frame
-        est = pf.step(f.odometry, f.detections, None, vf.altitude)
+        est = pf.step(f.odometry, f.detections, altitude=vf.altitude)
         if est.converged:
             converged += 1
             wrong += int(m.layout.level_of_plane_x(np.array(est.x))) != vf.level
@@ -191,3 +191,20 @@ def test_without_a_barometer_a_pose_in_a_connector_is_between_floors() -> None:
     # With a barometer at rest, the lift car is a place like any other.
     tracker.apply(x, y, np.zeros(x.size), AltitudeReading(3.0), np.random.default_rng(0))
     assert not tracker.blind and not tracker.between_floors(1.5, 1.5)
+
+
+def test_a_ride_carries_the_bearings_geometry_fix_along() -> None:
+    from app.localization.types import InitialPose
+
+    start = InitialPose(1.5, 1.5, 0.0, 0.1, 0.1)  # a known start is a fix (in the lift car)
+    pf = ParticleFilter(
+        VENUE, FilterConfig(particles=500), rng=np.random.default_rng(0), initial_pose=start
+    )
+    before = pf.geometry.radius_m(1.5, 1.5, 0.0)
+    assert before < 1.0
+    for r in [0.0] * 10 + list(np.linspace(0.0, 4.5, 25)) + [4.5] * 10:
+        pf.step(None, [], altitude=AltitudeReading(float(r), 0.3))
+    assert pf.floors is not None and pf.floors.changes == 1
+    # The fix rode up with the person: small on the First Floor's car, not on the Ground's.
+    assert pf.geometry.radius_m(1.5 + PITCH, 1.5, 0.0) < 1.0
+    assert pf.geometry.radius_m(1.5, 1.5, 0.0) > PITCH / 2

@@ -47,7 +47,7 @@ def test_the_venue_passes_every_check_and_lists_its_levels_and_connectors() -> N
 
 
 def test_levels_lie_side_by_side_in_the_plane_and_come_back() -> None:
-    m = ensure_prepared(parse_map(VENUE))
+    m = parse_map(VENUE)
     layout = m.layout
     assert layout.pitch_m == pytest.approx(24.0 + LEVEL_GAP_M)
     # An object on the First Floor lies one pitch east of its file position.
@@ -62,7 +62,7 @@ def test_levels_lie_side_by_side_in_the_plane_and_come_back() -> None:
     # The file's JSON comes back unshifted.
     assert m.to_json()["objects"][first]["x"] == spec_obj["x"]  # type: ignore[index]
     # Each level has free space of its own; the gaps between them have none.
-    fs = m.free_space
+    fs = ensure_prepared(m).free_space
     assert fs.is_free([5.0, 5.0 + layout.pitch_m, 5.0 + 2 * layout.pitch_m], [5.0] * 3).all()
     assert not fs.is_free([24.0 + LEVEL_GAP_M / 2], [5.0]).any()
 

@@ -93,8 +93,8 @@ async def put_destination(
 ) -> DestinationOut:
     """Guide the person to an object's label, the nearest object of a class, a region or a
     point; every later ``FrameResult`` carries ``guidance`` and the feedback speaks it."""
-    target = await manager.set_destination(session_id, destination_spec(body), principal)
-    return destination_out(target)
+    plan = await manager.set_destination(session_id, destination_spec(body), principal)
+    return destination_out(plan.target, plan.map.layout)
 
 
 @router.delete(

@@ -22,34 +22,10 @@ from pathlib import Path
 
 import numpy as np
 
-from app.maps.importers.common import MapImportError
+from app.maps.importers.common import MapImportError, wgs84_projector
 
 #: Largest GeoJSON file read, bytes.
 MAX_GEOJSON_BYTES = 20_000_000
-
-
-def _projector(origin: tuple[float, float] | None):
-    if origin is None:
-        return lambda xy: np.asarray(xy, dtype=np.float64)
-    from pyproj import Transformer
-
-    lat, lon = origin
-    if not (-90.0 <= lat <= 90.0 and -180.0 <= lon <= 180.0):
-        raise MapImportError(f"--origin: {lat}, {lon} is not a latitude, longitude in degrees")
-    to_local = Transformer.from_crs(
-        "EPSG:4326",
-        f"+proj=aeqd +lat_0={lat} +lon_0={lon} +x_0=0 +y_0=0 +ellps=WGS84 +units=m",
-        always_xy=True,
-    )
-
-    def project(xy: object) -> np.ndarray:
-        arr = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
-        if np.any(np.abs(arr[:, 1]) > 90.0) or np.any(np.abs(arr[:, 0]) > 180.0):
-            raise ValueError("not longitude, latitude in degrees")
-        x, y = to_local.transform(arr[:, 0], arr[:, 1])
-        return np.column_stack([x, y])
-
-    return project
 
 
 def read_geojson(
@@ -72,7 +48,7 @@ def read_geojson(
     features = data.get("features")
     if not isinstance(features, list):
         raise MapImportError(f"{src}: features: expected a list")
-    project = _projector(origin)
+    project = wgs84_projector(origin)
     walls: list[np.ndarray] = []
     objects: list[dict[str, object]] = []
     regions: list[dict[str, object]] = []
