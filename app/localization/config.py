@@ -60,6 +60,16 @@ class FilterConfig:
     #: detections allows for besides the noise (a box's centre is not the object's): 0 for
     #: the simulator's detector; the service uses ``REAL_DETECTOR_FIT_BIAS_DEG``.
     fit_bias_deg: float = 0.0
+    #: A frame whose detections all disagree with the estimate is not taken for a kidnap
+    #: when turning the estimate's heading by up to this much (degrees) explains them: a
+    #: common shift of every bearing is a camera's latency while turning, or the hand's
+    #: sway, not another place. 0 for the simulator; the service: REAL_DETECTOR_SLACK_DEG.
+    heading_slack_deg: float = 0.0
+    #: Objects count as in clear view, for the unseen-object check, up to this share of
+    #: the farthest distance the detector has reported their class from (1 for the
+    #: simulator's detector, which sees everything in range; a real one misses far
+    #: objects more often: REAL_DETECTOR_REACH_SHARE).
+    unseen_reach_share: float = 1.0
     #: Adaptive particle count: all ``particles`` while lost, KLD-sampling (at least
     #: ``min_particles``) once converged. 2,000 rather than fewer: on the paper's walks
     #: 500 cost 1.0 mm of mean error against a fixed 10,000, 2,000 cost none measurable
@@ -104,6 +114,9 @@ REAL_DETECTOR_TEMPER = 0.25
 #: service's fit check (FilterConfig.fit_bias_deg).
 STEADY_BIAS_DEG = 3.0
 REAL_DETECTOR_FIT_BIAS_DEG = STEADY_BIAS_DEG
+#: FilterConfig.heading_slack_deg and unseen_reach_share for a real phone's detector.
+REAL_DETECTOR_SLACK_DEG = 20.0
+REAL_DETECTOR_REACH_SHARE = 0.6
 
 #: Motion noise by odometry source (docs/API.md, ``SessionCreate.odometry``): the share of
 #: each motion (translation, turn) the noise may reach. VIO and an unknown source keep

@@ -66,6 +66,8 @@ PAPER_RESIDUAL_CUTOFF = 3.0
 BAD_FRAME_FIT = 8.0
 #: ... and bad frames with detections in a row that veto converged.
 BAD_FRAMES_IN_A_ROW = 2
+#: Steps of the heading slack a bad frame is re-checked with (degrees).
+SLACK_STEP_DEG = 2.0
 #: Alternatives are searched for while the heaviest cluster is at most this wide (m).
 SEARCH_MAX_SPREAD_M = 0.5
 
@@ -310,10 +312,10 @@ class ParticleFilter:
         odometry: Odometry | None,
         detections: Sequence[Detection],
         heading: CompassReading | None = None,
+        altitude: AltitudeReading | None = None,
         *,
         detections_age_s: float = 0.0,
         frame_s: float | None = None,
-        altitude: AltitudeReading | None = None,
     ) -> Estimate:
         """One full filter step: predict, correct, estimate, resample when due.
 
@@ -321,9 +323,9 @@ class ParticleFilter:
         (:mod:`~app.localization.compass`); ``altitude``, the barometer's, moves
         particles between levels (:mod:`~app.localization.floors`). ``detections_age_s``:
         how long before the end of this frame's ``odometry`` (lasting ``frame_s``, None:
-        not known) the detections were captured; the particles stand for the pose at that
-        moment (:mod:`~app.localization.latency`), and the estimate returned is moved on
-        to the frame's end (:attr:`estimate` stays at the capture).
+        not known) the detections were captured; the particles stand for the pose at
+        that moment (:mod:`~app.localization.latency`), and the estimate returned is
+        moved on to the frame's end (:attr:`estimate` stays at the capture).
 
         The estimate summarizes the weighted particles before resampling: resampling
         only adds noise to what they say (and to what the injected particles say).
@@ -340,7 +342,7 @@ class ParticleFilter:
         odometry: Odometry | None,
         detections: Sequence[Detection],
         heading: CompassReading | None,
-        altitude: AltitudeReading | None,
+        altitude: AltitudeReading | None = None,
     ) -> None:
         """:meth:`step` in capture time: ``odometry`` is the motion between captures."""
         self.predict(odometry)
@@ -581,6 +583,8 @@ class ParticleFilter:
         # has in clear view is clutter, not a contradiction.
         missing = self.unseen is None or self.unseen.frame_contradicts
         bad_now = total >= 3.0 and clipped >= BAD_FRAME_FIT and missing
+        if bad_now and self.config.heading_slack_deg > 0.0:
+            bad_now = not self._turned_fits(raw, obs, row, score, cutoff, total)
         # One bad frame is a glitch a phone makes now and then (a burst of boxes while
         # turning, a person walking past); a kidnap stays bad.
         self._bad_run = self._bad_run + 1 if bad_now else 0
@@ -600,6 +604,27 @@ class ParticleFilter:
             unexplained = q.unexplained + a_share * (unexplained - q.unexplained)
         contradicted = self.unseen is not None and self.unseen.contradicted
         self.quality = FitQuality(fit, unexplained, bad, contradicted)
+
+    def _turned_fits(
+        self,
+        raw: Estimate,
+        obs: Observation,
+        row: NDArray[np.bool_] | None,
+        score: NDArray[np.float64],
+        cutoff: NDArray[np.float64],
+        total: float,
+    ) -> bool:
+        """Whether the estimate, its heading turned by up to ``config.heading_slack_deg``
+        (steps of ``SLACK_STEP_DEG``), explains the frame (``config.heading_slack_deg``
+        says why); runs only on a frame that would otherwise be bad."""
+        slack = self.config.heading_slack_deg
+        for turn_deg in np.arange(-slack, slack + 1e-9, SLACK_STEP_DEG):
+            theta = raw.theta_rad + np.radians(turn_deg)
+            r = normalized_residuals(raw.x, raw.y, theta, obs, self.map, self._fit_config, row)
+            r = r * self._fit_scale
+            if float(np.add.reduce(score * np.minimum(r, cutoff) ** 2) / total) < BAD_FRAME_FIT:
+                return True
+        return False
 
 
 @functools.lru_cache(maxsize=64)

@@ -142,7 +142,7 @@ class UnseenObjects:
             float(np.radians(self.config.fov_deg) / 2.0 - st.margin_rad),
             obs.det_bearing, obs.det_group, group_class, obs.group_kappa,
             st.near_m, st.min_m, st.cutoff_sigmas, st.decay, st.min_expected, st.max_seen_share,
-            self.reach_m, self.expected, self.seen,
+            self.reach_m, self.expected, self.seen, float(self.config.unseen_reach_share),
         )  # fmt: skip
 
     @property
@@ -171,7 +171,7 @@ class UnseenObjects:
 
 
 @njit(cache=True)
-def _count_frame(dx, dy, direction, theta, object_class, reported, visible_row, with_row, fov_check, fov_centre, half_fov, det_bearing, det_group, group_class, group_kappa, near_m, min_m, cutoff_sigmas, decay, min_expected, max_seen_share, reach, expected, seen):  # fmt: skip  # noqa: E501  # pragma: no cover - compiled
+def _count_frame(dx, dy, direction, theta, object_class, reported, visible_row, with_row, fov_check, fov_centre, half_fov, det_bearing, det_group, group_class, group_kappa, near_m, min_m, cutoff_sigmas, decay, min_expected, max_seen_share, reach, expected, seen, reach_share):  # fmt: skip  # noqa: E501  # pragma: no cover - compiled
     """One frame's counts at the pose (its offsets ``dx``, ``dy`` to the objects, their
     ``direction`` and the heading ``theta``), with numpy's arithmetic of the
     vectorized form it replaces, element by element (the same bits; compiled because
@@ -218,7 +218,7 @@ def _count_frame(dx, dy, direction, theta, object_class, reported, visible_row, 
     flagged = False
     for i in range(n):
         r = reach[object_class[i]]
-        clear = view[i] and dist[i] <= (r if r > 0.0 else top)
+        clear = view[i] and dist[i] <= reach_share * (r if r > 0.0 else top)
         new_expected[i] = decay * expected[i] + (1.0 if clear else 0.0)
         new_seen[i] = decay * seen[i] + (1.0 if clear and hit[i] else 0.0)
         if clear:

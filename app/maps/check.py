@@ -317,15 +317,15 @@ def _object_fixes(source: str, m: SemanticMap) -> tuple[Fixes, list[Problem]]:
 
 def _free_space_problem(
     source: str, m: SemanticMap, prepare_grids: bool, cache_dir: Path | None
-) -> tuple[FreeSpaceGrid, Problem | None, PreparedMap | None]:
+) -> tuple[Problem | None, PreparedMap | None, FreeSpaceGrid]:
     """No free space at all. With ``prepare_grids`` the map's grids are prepared here
     (read from ``cache_dir`` when there, and returned), else only the free space is
-    built."""
+    built. The free space comes back too (the levels' checks read it)."""
     prepared = prepare(m, cache_dir) if prepare_grids else None
     fs = build_free_space(m, m.grid_resolution_m) if prepared is None else prepared.free_space
     if fs.free_cells.size:
-        return fs, None, prepared
-    return fs, _no_free_space(source), None
+        return None, prepared, fs
+    return _no_free_space(source), None, fs
 
 
 def _no_free_space(source: str, where: str = "") -> Problem:
@@ -418,7 +418,7 @@ def check_data(
         for i, (x, y) in fixes.items():
             fixed["objects"][i]["x"], fixed["objects"][i]["y"] = x, y  # type: ignore[index]
         m = parse_map(fixed, source=source, expected_name=expected_name)
-    fs, empty, prepared = _free_space_problem(source, m, prepare_grids, cache_dir)
+    empty, prepared, fs = _free_space_problem(source, m, prepare_grids, cache_dir)
     if empty is not None:
         return CheckResult(source, None, [*problems, empty])
     level_errors = _level_problems(source, m, fs)

@@ -95,22 +95,6 @@ class Session:
     speaker: GuidanceSpeaker = field(default_factory=GuidanceSpeaker)
     last_guidance: Guidance | None = None
 
-    def _levels_of(self, estimate: Estimate) -> dict[str, Any]:
-        """The estimate's level, each hypothesis's and the level's probability (a map
-        with levels only: empty otherwise)."""
-        floors = self.filter.floors
-        if floors is None:
-            return {}
-        refs = level_refs(self.map)
-        layout = self.map.layout
-        xs = np.array([estimate.x, *(h.x for h in estimate.hypotheses)])
-        levels = layout.level_of_plane_x(xs)
-        return {
-            "level": refs[int(levels[0])],
-            "hypothesis_levels": tuple(refs[int(k)] for k in levels[1:]),
-            "level_probability": floors.level_probability,
-        }
-
     queue: FrameQueue = field(init=False)
     #: The task feeding queued frames to the filter (None: idle).
     pump: asyncio.Task[None] | None = None
@@ -151,6 +135,22 @@ class Session:
         """A step is running or frames are waiting."""
         return self.pump is not None
 
+    def _levels_of(self, estimate: Estimate) -> dict[str, Any]:
+        """The estimate's level, each hypothesis's and the level's probability (a map
+        with levels only: empty otherwise)."""
+        floors = self.filter.floors
+        if floors is None:
+            return {}
+        refs = level_refs(self.map)
+        layout = self.map.layout
+        xs = np.array([estimate.x, *(h.x for h in estimate.hypotheses)])
+        levels = layout.level_of_plane_x(xs)
+        return {
+            "level": refs[int(levels[0])],
+            "hypothesis_levels": tuple(refs[int(k)] for k in levels[1:]),
+            "level_probability": floors.level_probability,
+        }
+
     def process_sync(self, frame: FrameInput, merged: int = 1) -> FrameOutcome:
         """Run one frame (``merged`` frames merged into one) through the filter and narrator."""
         detections = list(frame.detections)
@@ -176,9 +176,9 @@ class Session:
                 frame.odometry,
                 detections,
                 frame.heading,
+                frame.altitude,
                 detections_age_s=frame.detections_age_s,
                 frame_s=frame_s,
-                altitude=frame.altitude,
             )
             feedback = self.narrator.update(
                 estimate,

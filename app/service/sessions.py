@@ -29,6 +29,8 @@ from app.guidance import DestinationSpec, Plan, plan_for
 from app.localization.config import (
     ODOMETRY_NOISE,
     REAL_DETECTOR_FIT_BIAS_DEG,
+    REAL_DETECTOR_REACH_SHARE,
+    REAL_DETECTOR_SLACK_DEG,
     REAL_DETECTOR_TEMPER,
     FilterConfig,
 )
@@ -303,6 +305,8 @@ class SessionManager:
             class_error=sensor.class_error,
             evidence_temper=REAL_DETECTOR_TEMPER,
             fit_bias_deg=REAL_DETECTOR_FIT_BIAS_DEG,
+            heading_slack_deg=REAL_DETECTOR_SLACK_DEG,
+            unseen_reach_share=REAL_DETECTOR_REACH_SHARE,
             trans_noise_frac=ODOMETRY_NOISE[request.odometry_source][0],
             rot_noise_frac=ODOMETRY_NOISE[request.odometry_source][1],
         )

@@ -8,6 +8,7 @@ import numpy as np
 from fastapi.testclient import TestClient
 
 from app.maps.model import parse_map
+from app.maps.prepare import ensure_prepared
 from app.resources import bundled_maps_dir
 from app.simulation.venue import VENUE_NAME, venue_spec
 from app.simulation.venue_demo import demo_legs
@@ -41,7 +42,7 @@ def test_simulated_venue_frames_carry_the_barometer_and_a_session_follows_them(
 
 def test_a_venue_without_a_known_walk_gets_one_planned_through_a_connector() -> None:
     spec = venue_spec("another_venue")
-    m = parse_map(spec)
+    m = ensure_prepared(parse_map(spec))
     start, legs = demo_legs(m, np.random.default_rng(0))
     assert start == "L0"
     first, ride, last = legs

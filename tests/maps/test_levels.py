@@ -47,7 +47,7 @@ def test_the_venue_passes_every_check_and_lists_its_levels_and_connectors() -> N
 
 
 def test_levels_lie_side_by_side_in_the_plane_and_come_back() -> None:
-    m = parse_map(VENUE)
+    m = ensure_prepared(parse_map(VENUE))
     layout = m.layout
     assert layout.pitch_m == pytest.approx(24.0 + LEVEL_GAP_M)
     # An object on the First Floor lies one pitch east of its file position.
