@@ -191,3 +191,20 @@ def test_without_a_barometer_a_pose_in_a_connector_is_between_floors() -> None:
     # With a barometer at rest, the lift car is a place like any other.
     tracker.apply(x, y, np.zeros(x.size), AltitudeReading(3.0), np.random.default_rng(0))
     assert not tracker.blind and not tracker.between_floors(1.5, 1.5)
+
+
+def test_a_ride_carries_the_bearings_geometry_fix_along() -> None:
+    from app.localization.types import InitialPose
+
+    start = InitialPose(1.5, 1.5, 0.0, 0.1, 0.1)  # a known start is a fix (in the lift car)
+    pf = ParticleFilter(
+        VENUE, FilterConfig(particles=500), rng=np.random.default_rng(0), initial_pose=start
+    )
+    before = pf.geometry.radius_m(1.5, 1.5, 0.0)
+    assert before < 1.0
+    for r in [0.0] * 10 + list(np.linspace(0.0, 4.5, 25)) + [4.5] * 10:
+        pf.step(None, [], altitude=AltitudeReading(float(r), 0.3))
+    assert pf.floors is not None and pf.floors.changes == 1
+    # The fix rode up with the person: small on the First Floor's car, not on the Ground's.
+    assert pf.geometry.radius_m(1.5 + PITCH, 1.5, 0.0) < 1.0
+    assert pf.geometry.radius_m(1.5, 1.5, 0.0) > PITCH / 2
