@@ -39,6 +39,7 @@ from collections import deque
 from typing import Any
 
 import numpy as np
+from numba import njit
 from numpy.typing import NDArray
 
 from app.localization.config import STEADY_BIAS_DEG, FilterConfig
@@ -74,6 +75,7 @@ class BearingGeometry:
         #: Per frame: (x, y) of the estimate, and its rows (K, 3): dbearing/dx, dbearing/dy
         #: and the detection's score.
         self._frames: deque[tuple[float, float, NDArray[np.float64]]] = deque(maxlen=WINDOW)
+        self._pooled: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None
         self.walked_m = 0.0
         #: The fix carried along: a pose (x, y, theta) moved by the odometry since, its
         #: radius then (m) and the distance walked then (m); None without one.
@@ -86,7 +88,7 @@ class BearingGeometry:
 
     def reset(self) -> None:
         """Forget everything (the belief started over)."""
-        self._frames.clear()
+        self.clear_frames()
         self.walked_m = 0.0
         self._fix = None
         self._fix_radius_m = math.inf
@@ -95,6 +97,7 @@ class BearingGeometry:
     def clear_frames(self) -> None:
         """Forget the frames only (the estimate moved to another place)."""
         self._frames.clear()
+        self._pooled = None
 
     def set_prior(self, pose: tuple[float, float, float], std_xy_m: float) -> None:
         """A known start (x, y, theta) with its position std: a fix to carry along."""
@@ -122,6 +125,7 @@ class BearingGeometry:
             x, y, t = self._fix
             self._fix = (x + dx_m, y, t)
         self._frames = deque(((fx + dx_m, fy, rows) for fx, fy, rows in self._frames), WINDOW)
+        self._pooled = None
         self._last_xy = (self._last_xy[0] + dx_m, self._last_xy[1])
 
     def radius_m(self, x: float, y: float, theta: float) -> float:
@@ -164,48 +168,50 @@ class BearingGeometry:
         ):
             self.clear_frames()  # the estimate went to another place: not seen here
         self._last_xy, self._last_walked_m = (x, y), self.walked_m
-        xy = self.map.object_xy
-        rows = []
-        for k in range(obs.det_bearing.size):
-            g = int(obs.det_group[k])
-            members = obs.members[obs.member_start[g] : obs.member_start[g + 1]]
-            if visible is not None:
-                members = members[visible[members]]
-            if members.size == 0:
-                continue
-            dx = xy[members, 0] - x
-            dy = xy[members, 1] - y
-            off = np.arctan2(dy, dx) - theta - obs.det_bearing[k]
-            off = np.abs((off + np.pi) % (2.0 * np.pi) - np.pi)
-            best = int(np.argmin(off))
-            std = 1.0 / math.sqrt(max(float(obs.group_kappa[g]), 1e-12))
-            if off[best] > EXPLAINED_STDS * std:
-                continue
-            d2 = float(dx[best] ** 2 + dy[best] ** 2)
-            if d2 < 1e-6:
-                continue
-            rows.append((float(dy[best]) / d2, -float(dx[best]) / d2, float(obs.det_score[k])))
-        if rows:
-            self._frames.append((x, y, np.array(rows, dtype=np.float64)))
+        rows = np.empty((obs.det_bearing.size, 3))
+        use_visible = visible is not None
+        n = _explained_rows(
+            x, y, theta, obs.det_bearing, obs.det_group, obs.det_score, obs.group_kappa,
+            obs.member_start, obs.members, self.map.object_xy.reshape(-1, 2),
+            visible if use_visible else _NO_ROW, use_visible, EXPLAINED_STDS, rows,
+        )  # fmt: skip
+        if n:
+            self._frames.append((x, y, rows[:n]))
+            self._pooled = None
+
+    def _pool(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """The frames' rows stacked (R, 3), and each row's frame position (R, 2); built
+        once per change of the frames (a step reads them at most twice)."""
+        if self._pooled is None:
+            rows = np.concatenate([r for _, _, r in self._frames])
+            where = np.repeat(
+                np.array([(fx, fy) for fx, fy, _ in self._frames]),
+                [r.shape[0] for _, _, r in self._frames],
+                axis=0,
+            )
+            self._pooled = (rows, where)
+        return self._pooled
 
     def _geometry_radius_m(self, x: float, y: float) -> float:
         """The bound of the bearings' geometry alone (module docstring)."""
         if not self._frames:
             return math.inf
-        info = np.zeros((3, 3))
-        for fx, fy, rows in self._frames:
-            a, b, w = rows[:, 0], rows[:, 1], rows[:, 2]
-            # A rotation dtheta about (x, y) moves this frame's pose by
-            # (-(fy - y), fx - x) dtheta and turns it by dtheta.
-            c = -1.0 - a * (fy - y) + b * (fx - x)
-            h = np.stack([a, b, c], axis=1)
-            info += (h * w[:, None]).T @ h
-        info /= len(self._frames)
-        # The position block of the inverse: the Schur complement of the heading.
-        if info[2, 2] <= 0.0:
+        rows, where = self._pool()
+        a, b, w = rows[:, 0], rows[:, 1], rows[:, 2]
+        # A rotation dtheta about (x, y) moves a frame's pose by (-(fy - y), fx - x)
+        # dtheta and turns it by dtheta.
+        c = -1.0 - a * (where[:, 1] - y) + b * (where[:, 0] - x)
+        wa, wb, wc = w * a, w * b, w * c
+        frames = len(self._frames)
+        add = np.add.reduce
+        aa, ab, ac = add(wa * a) / frames, add(wa * b) / frames, add(wa * c) / frames
+        bb, bc, cc = add(wb * b) / frames, add(wb * c) / frames, add(wc * c) / frames
+        # The position block of the inverse: the Schur complement of the heading, and
+        # its smaller eigenvalue (a symmetric 2 x 2, in closed form).
+        if cc <= 0.0:
             return math.inf
-        schur = info[:2, :2] - np.outer(info[:2, 2], info[2, :2]) / info[2, 2]
-        low = float(np.linalg.eigvalsh(schur)[0])
+        p, q, r = aa - ac * ac / cc, ab - ac * bc / cc, bb - bc * bc / cc
+        low = 0.5 * (p + r) - math.hypot(0.5 * (p - r), q)
         if not low > 1e-12:
             return math.inf
         return Q99_2D * self.bias_rad / math.sqrt(low)
@@ -236,3 +242,43 @@ class BearingGeometry:
             self._frames.append(
                 (float(fx), float(fy), np.asarray(rows, dtype=np.float64).reshape(-1, 3))
             )
+
+
+#: The visibility row passed when there is none (not read).
+_NO_ROW = np.zeros(1, dtype=np.bool_)
+
+
+@njit(cache=True, nogil=True)
+def _explained_rows(x, y, theta, det_bearing, det_group, det_score, group_kappa, member_start, members, obj_xy, visible, use_visible, explained_stds, out):  # fmt: skip  # noqa: E501  # pragma: no cover - compiled
+    """Each detection's Jacobian row at the pose (x, y, theta) for the visible object of
+    its class it points at most nearly, if within ``explained_stds`` of its class's
+    std: ``out[i] = (dbearing/dx, dbearing/dy, score)``; returns how many rows."""
+    n = 0
+    two_pi = 2.0 * np.pi
+    for k in range(det_bearing.shape[0]):
+        g = det_group[k]
+        best = np.inf
+        bx = 0.0
+        by = 0.0
+        for j in range(member_start[g], member_start[g + 1]):
+            o = members[j]
+            if use_visible and not visible[o]:
+                continue
+            dx = obj_xy[o, 0] - x
+            dy = obj_xy[o, 1] - y
+            off = np.arctan2(dy, dx) - theta - det_bearing[k]
+            off = abs(off - two_pi * np.round(off / two_pi))
+            if off < best:
+                best = off
+                bx = dx
+                by = dy
+        if best > explained_stds / np.sqrt(max(group_kappa[g], 1e-12)):
+            continue
+        d2 = bx * bx + by * by
+        if d2 < 1e-6:
+            continue
+        out[n, 0] = by / d2
+        out[n, 1] = -bx / d2
+        out[n, 2] = det_score[k]
+        n += 1
+    return n
