@@ -75,7 +75,9 @@ class BearingGeometry:
         #: Per frame: (x, y) of the estimate, and its rows (K, 3): dbearing/dx, dbearing/dy
         #: and the detection's score.
         self._frames: deque[tuple[float, float, NDArray[np.float64]]] = deque(maxlen=WINDOW)
-        self._pooled: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None
+        #: Per frame, the weighted sums its rows add to the information matrix
+        #: (:func:`_frame_sums`), kept beside ``_frames``.
+        self._sums: deque[tuple[float, ...]] = deque(maxlen=WINDOW)
         self.walked_m = 0.0
         #: The fix carried along: a pose (x, y, theta) moved by the odometry since, its
         #: radius then (m) and the distance walked then (m); None without one.
@@ -97,7 +99,7 @@ class BearingGeometry:
     def clear_frames(self) -> None:
         """Forget the frames only (the estimate moved to another place)."""
         self._frames.clear()
-        self._pooled = None
+        self._sums.clear()
 
     def set_prior(self, pose: tuple[float, float, float], std_xy_m: float) -> None:
         """A known start (x, y, theta) with its position std: a fix to carry along."""
@@ -125,7 +127,7 @@ class BearingGeometry:
             x, y, t = self._fix
             self._fix = (x + dx_m, y, t)
         self._frames = deque(((fx + dx_m, fy, rows) for fx, fy, rows in self._frames), WINDOW)
-        self._pooled = None
+        self._sums = deque((_frame_sums(*f) for f in self._frames), WINDOW)
         self._last_xy = (self._last_xy[0] + dx_m, self._last_xy[1])
 
     def radius_m(self, x: float, y: float, theta: float) -> float:
@@ -176,36 +178,26 @@ class BearingGeometry:
             visible if use_visible else _NO_ROW, use_visible, EXPLAINED_STDS, rows,
         )  # fmt: skip
         if n:
-            self._frames.append((x, y, rows[:n]))
-            self._pooled = None
+            self._append((x, y, rows[:n]))
 
-    def _pool(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        """The frames' rows stacked (R, 3), and each row's frame position (R, 2); built
-        once per change of the frames (a step reads them at most twice)."""
-        if self._pooled is None:
-            rows = np.concatenate([r for _, _, r in self._frames])
-            where = np.repeat(
-                np.array([(fx, fy) for fx, fy, _ in self._frames]),
-                [r.shape[0] for _, _, r in self._frames],
-                axis=0,
-            )
-            self._pooled = (rows, where)
-        return self._pooled
+    def _append(self, frame: tuple[float, float, NDArray[np.float64]]) -> None:
+        self._frames.append(frame)
+        self._sums.append(_frame_sums(*frame))
 
     def _geometry_radius_m(self, x: float, y: float) -> float:
         """The bound of the bearings' geometry alone (module docstring)."""
         if not self._frames:
             return math.inf
-        rows, where = self._pool()
-        a, b, w = rows[:, 0], rows[:, 1], rows[:, 2]
-        # A rotation dtheta about (x, y) moves a frame's pose by (-(fy - y), fx - x)
-        # dtheta and turns it by dtheta.
-        c = -1.0 - a * (where[:, 1] - y) + b * (where[:, 0] - x)
-        wa, wb, wc = w * a, w * b, w * c
-        frames = len(self._frames)
-        add = np.add.reduce
-        aa, ab, ac = add(wa * a) / frames, add(wa * b) / frames, add(wa * c) / frames
-        bb, bc, cc = add(wb * b) / frames, add(wb * c) / frames, add(wc * c) / frames
+        frames = len(self._sums)
+        aa, ab, bb, ac0, bc0, c0c0 = (
+            sum(column) / frames for column in zip(*self._sums, strict=True)
+        )
+        # A rotation dtheta about (x, y) moves a frame's pose (fx, fy) by
+        # (-(fy - y), fx - x) dtheta and turns it by dtheta: a row's third entry is
+        # c0 + a y - b x, with c0 = -1 - a fy + b fx (what _frame_sums summed).
+        ac = ac0 + y * aa - x * ab
+        bc = bc0 + y * ab - x * bb
+        cc = c0c0 + y * y * aa + x * x * bb + 2.0 * (y * ac0 - x * bc0 - x * y * ab)
         # The position block of the inverse: the Schur complement of the heading, and
         # its smaller eigenvalue (a symmetric 2 x 2, in closed form).
         if cc <= 0.0:
@@ -239,9 +231,7 @@ class BearingGeometry:
         self._fix_radius_m = float(state["fix_radius"])
         self._fix_walked_m = float(state["fix_walked"])
         for fx, fy, rows in state["frames"]:
-            self._frames.append(
-                (float(fx), float(fy), np.asarray(rows, dtype=np.float64).reshape(-1, 3))
-            )
+            self._append((float(fx), float(fy), np.asarray(rows, dtype=np.float64).reshape(-1, 3)))
 
 
 #: The visibility row passed when there is none (not read).
@@ -282,3 +272,22 @@ def _explained_rows(x, y, theta, det_bearing, det_group, det_score, group_kappa,
         out[n, 2] = det_score[k]
         n += 1
     return n
+
+
+def _frame_sums(
+    fx: float, fy: float, rows: NDArray[np.float64]
+) -> tuple[float, float, float, float, float, float]:
+    """One frame's weighted sums of its rows (a, b; weight w; c0 = -1 - a fy + b fx):
+    w a a, w a b, w b b, w a c0, w b c0, w c0 c0."""
+    a, b, w = rows[:, 0], rows[:, 1], rows[:, 2]
+    c0 = -1.0 - a * fy + b * fx
+    wa, wb = w * a, w * b
+    add = np.add.reduce
+    return (
+        float(add(wa * a)),
+        float(add(wa * b)),
+        float(add(wb * b)),
+        float(add(wa * c0)),
+        float(add(wb * c0)),
+        float(add(w * c0 * c0)),
+    )
