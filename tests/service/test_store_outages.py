@@ -247,3 +247,37 @@ def test_a_worker_superseded_while_it_stalled_stops_serving_the_session(
 
     with redis_process(tmp_path) as r:
         asyncio.run(main(r))
+
+
+def test_a_session_deleted_while_redis_is_down_stays_deleted(tmp_path: Path) -> None:
+    """DELETE while Redis is down ends the session at once; the store's copy (back from
+    the append-only file) is deleted once Redis answers, so no worker resumes it."""
+
+    async def main(r: RedisProcess) -> None:
+        a = manager(RedisStore(r.url))
+        assert a.sharing is not None
+        keeper = asyncio.create_task(a.sharing.run_keeper())
+        walkers = Walkers(a)
+        await walkers.create(1)
+        await walkers.walk_for(0.3)
+        (sid,) = walkers.ids
+        r.kill()
+        await a.delete(sid)  # no error: gone from memory now, from the store later
+        with pytest.raises(SessionNotFound):
+            a.get(sid)
+        r.start()  # the append-only file brings the session's keys back
+        assert stored_frames(r.url, sid) > 0
+        loop = asyncio.get_running_loop()
+        end = loop.time() + CAUGHT_UP_BOUND_S
+        while stored_frames(r.url, sid) >= 0:
+            assert loop.time() < end, "the deletion was not made in the store"
+            await asyncio.sleep(0.05)
+        b = manager(RedisStore(r.url))
+        with pytest.raises(SessionNotFound):
+            await b.process(sid, frame(walkers.i))
+        keeper.cancel()
+        for m in (a, b):
+            m.close()
+
+    with redis_process(tmp_path, aof=True) as r:
+        asyncio.run(main(r))

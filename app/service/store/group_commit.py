@@ -68,7 +68,7 @@ class GroupCommit:
             batch, self._pending = self._pending[:MAX_BATCH], self._pending[MAX_BATCH:]
             try:
                 results = await self._write([item for item, _ in batch])
-            except Exception as exc:  # each waiting frame gets it
+            except Exception as exc:  # each waiting frame learns it (and is answered without)
                 error = StoreUnavailable(f"journal write failed: {exc}")
                 for _, done in batch:
                     if not done.done():
