@@ -32,6 +32,8 @@ DEFAULT_FRAME_S = 0.1
 MAX_AGE_S = 2.0
 #: Recent frames kept to find the trailing motion of an age longer than one frame.
 HISTORY_FRAMES = 64
+#: No motion.
+ZERO = Odometry(0.0, 0.0, 0.0)
 
 
 def inverse(motion: Odometry) -> Odometry:
@@ -86,11 +88,11 @@ class CaptureClock:
     """
 
     def __init__(self) -> None:
-        self.back = Odometry(0.0, 0.0, 0.0)
+        self.back = ZERO
         self._recent: deque[tuple[Odometry, float]] = deque(maxlen=HISTORY_FRAMES)
 
     def reset(self) -> None:
-        self.back = Odometry(0.0, 0.0, 0.0)
+        self.back = ZERO
         self._recent.clear()
 
     def step(
@@ -103,6 +105,8 @@ class CaptureClock:
             return None
         duration = frame_s if frame_s is not None and frame_s > 0.0 else DEFAULT_FRAME_S
         self._recent.append((odometry, duration))
+        if age_s <= 0.0 and self.back == ZERO:
+            return odometry  # detections of the frame's end, as before: nothing to move
         back = self._trailing(min(max(age_s, 0.0), MAX_AGE_S))
         between = compose_odometry(compose_odometry(self.back, odometry), inverse(back))
         self.back = back
