@@ -70,8 +70,7 @@ from numpy.typing import NDArray
 from app.localization import sensor_kernel
 from app.localization.compass import CompassReading, compass_log_likelihood
 from app.localization.config import FilterConfig
-from app.localization.motion import motion_log_penalty, sample_motion
-from app.localization.recovery import sample_from_observation
+from app.localization.models import MotionModel, SensorModel
 from app.localization.resampling import systematic_resample
 from app.localization.sensor import Observation, observation_columns, observations_from_columns
 from app.localization.types import Hypothesis, InitialPose, Odometry
@@ -184,15 +183,18 @@ class EvidenceTracker:
 
     def __init__(
         self,
-        semantic_map: SemanticMap,
-        config: FilterConfig,
-        grid: VisibilityGrid | None,
+        sensor: SensorModel,
+        motion: MotionModel,
         rng: np.random.Generator,
         settings: EvidenceSettings = DEFAULT_EVIDENCE,
     ) -> None:
-        self.map = semantic_map
-        self.config = config
-        self.grid = grid
+        #: The filter's own models (:mod:`~app.localization.models`): the anchor and the
+        #: alternatives move and are weighed exactly as its particles are.
+        self.sensor = sensor
+        self.motion = motion
+        self.map = sensor.semantic_map
+        self.config = sensor.config
+        self.grid = sensor.grid
         self.rng = rng
         self.settings = settings
         #: Whether a place (x, y) may hold an alternative at all (set by the filter on
@@ -573,7 +575,7 @@ class EvidenceTracker:
         rows = a + 1 if a and weigh else 1
         # Row 0 the moved anchor, rows 1.. its copies: x, y, theta, each (rows, P).
         poses = np.empty((3, rows, p))
-        nx, ny, nt = sample_motion(x0, y0, t0, odometry, self.config, self.rng, out=poses[:, 0])
+        nx, ny, nt = self.motion.sample(x0, y0, t0, odometry, self.rng, out=poses[:, 0])
         if rows == 1:
             # Nothing to weigh (no alternative, or no evidence worth counting): the
             # anchor only has to follow the main mode (it is redrawn from the filter's
@@ -596,9 +598,11 @@ class EvidenceTracker:
             cy[1:] += shift_y
         poses[2, 1:] = wrap_angle(nt + turn)
         fx, fy, ft = (v.reshape(-1) for v in poses)
-        log_w = motion_log_penalty(starts[0].reshape(-1), starts[1].reshape(-1), fx, fy, self.map)
+        log_w, _ = self.motion.weigh_moves(
+            starts[0].reshape(-1), starts[1].reshape(-1), fx, fy, np.zeros(fx.shape[0])
+        )
         if not obs.empty:
-            log_w += sensor_kernel.log_likelihood(fx, fy, ft, obs, self.map, self.config, self.grid)
+            log_w += self.sensor.log_likelihood(fx, fy, ft, obs)
         if heading is not None:
             log_w += compass_log_likelihood(ft, heading)
         log_w = log_w.reshape(rows, p)
@@ -810,7 +814,7 @@ class EvidenceTracker:
     ) -> NDArray[np.float64]:
         """Sum of log-likelihoods over the history window, poses chained back, shape (N,)."""
         w = self.window() if window is None else window
-        return sensor_kernel.window_log_likelihood(x, y, theta, w, self.map, self.config, self.grid)
+        return self.sensor.window_log_likelihood(x, y, theta, w)
 
     def _refined(
         self,
@@ -832,9 +836,7 @@ class EvidenceTracker:
             )
             for count, std_m, std_rad in rounds
         ]
-        return sensor_kernel.window_jitter_search(
-            x, y, t, jitter, window, self.map, self.config, self.grid
-        )
+        return self.sensor.jitter_search(x, y, t, jitter, window)
 
     def _polished(
         self,
@@ -847,10 +849,9 @@ class EvidenceTracker:
         x, y and heading around each pose, moves to the best, and halves the steps.
         Every pose of a search and every round go through one compiled call."""
         st = self.settings
-        return sensor_kernel.window_pattern_search(
-            x, y, t, PATTERN, st.polish_step_m, st.polish_step_rad, st.polish_rounds,
-            window, self.map, self.config, self.grid,
-        )  # fmt: skip
+        return self.sensor.pattern_search(
+            x, y, t, PATTERN, st.polish_step_m, st.polish_step_rad, st.polish_rounds, window
+        )
 
     def _search(self, main: Hypothesis, window: sensor_kernel.ObservationWindow) -> None:
         """One global consistency search (module docstring) over ``window`` (this frame's
@@ -869,15 +870,13 @@ class EvidenceTracker:
         fs = self.map.free_space
         area = fs.free_cells.size * fs.resolution_m**2
         n = int(min(max(st.candidates_per_m2 * area, st.min_candidates), st.max_candidates))
-        cx, cy, ct = sample_from_observation(
-            n, obs, self.map, self.rng, self.config.bearing_std_rad("")
-        )
+        cx, cy, ct = self.sensor.sample_poses(n, obs, self.rng)
         away = ~_near(cx, cy, ct, main, st)
         cx, cy, ct = cx[away], cy[away], ct[away]
         picked: list[int] = []
         rx = ry = rt = np.empty(0)
         if cx.size:
-            score = sensor_kernel.log_likelihood(cx, cy, ct, obs, self.map, self.config, self.grid)
+            score = self.sensor.log_likelihood(cx, cy, ct, obs)
             k = min(st.shortlist, cx.size)
             top = np.argpartition(-score, k - 1)[:k]
             rx, ry, rt, rs = self._refined(cx[top], cy[top], ct[top], st.refine, window)

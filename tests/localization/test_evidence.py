@@ -22,6 +22,7 @@ from app.localization.evidence import (
     pattern_search_reference,
 )
 from app.localization.filter import ParticleFilter
+from app.localization.models import BearingSensorModel, OdometryMotionModel
 from app.localization.sensor import log_likelihood_reference, prepare_observation
 from app.localization.tolerances import U64, candidate_flip_mask, log_likelihood_tolerance
 from app.localization.types import Hypothesis, Odometry
@@ -122,7 +123,8 @@ def search_windows(m: SemanticMap) -> list[EvidenceTracker]:
     for seed, (name, cfg, sim_changes) in enumerate(cases):
         sim = replace(paper_config("nominal", cfg.fov_deg), duration_s=4.0, **sim_changes)
         grid = m.visibility if cfg.visibility else None
-        tracker = EvidenceTracker(m, cfg, grid, np.random.default_rng(seed))
+        models = BearingSensorModel(m, cfg, grid), OdometryMotionModel(m, cfg)
+        tracker = EvidenceTracker(*models, np.random.default_rng(seed))
         frames = [] if name == "no frames" else simulate(m, sim, np.random.default_rng(seed))
         for f in frames[:12]:
             heading = None if f.compass_rad is None else CompassReading(f.compass_rad, 0.2)
