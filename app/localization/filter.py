@@ -24,7 +24,7 @@ from app.localization.config import FilterConfig
 from app.localization.convergence import ConvergenceGate, FitQuality, protection_radius
 from app.localization.dilution import BearingGeometry
 from app.localization.estimate import estimate_pose, with_alternatives
-from app.localization.evidence import PATTERN, EvidenceTracker
+from app.localization.evidence import EvidenceTracker
 from app.localization.floors import AltitudeReading, FloorTracker
 from app.localization.kld import kld_sample_size
 from app.localization.latency import CaptureClock, moved_forward
@@ -42,6 +42,7 @@ from app.localization.resampling import (
     systematic_resample,
     weights_and_log_sum_exp,
 )
+from app.localization.search import PATTERN
 from app.localization.sensor import Observation, normalized_residuals, prepare_observation
 from app.localization.types import Detection, Estimate, InitialPose, Odometry
 from app.localization.unseen import UnseenObjects

@@ -595,7 +595,7 @@ def window_pattern_search(
     candidate in the free space if that beats its window score, keeps the larger
     score, and halves the steps (``step_m``, ``step_rad`` the first round's). The
     arithmetic is the numpy definition's,
-    :func:`app.localization.evidence.pattern_search_reference`, to the bit. Returns the
+    :func:`app.localization.search.pattern_search_reference`, to the bit. Returns the
     poses and their window scores, each shape (N,).
     """
     return pattern_search_with(
@@ -639,7 +639,7 @@ def window_jitter_search(
     copies per pose: drawn beforehand, since they do not depend on the search. A copy
     replaces its pose when it lies in the free space and beats the pose's window score.
     The arithmetic is the numpy definition's,
-    :func:`app.localization.evidence.jitter_search_reference`, to the bit. Returns the
+    :func:`app.localization.search.jitter_search_reference`, to the bit. Returns the
     poses and their window scores, each shape (N,).
     """
     return jitter_search_with(
