@@ -1,0 +1,27 @@
+"""The venue suite's availability figures (app/experiments/venue.py): like with like."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from app.experiments.venue import _availability, leg_availability
+
+
+def test_located_frames_start_at_the_later_first_fix_for_both_filters() -> None:
+    t = np.arange(10) * 0.2
+    venue = np.array([0, 0, 0, 0, 1, 1, 1, 0, 1, 1], dtype=bool)
+    one = np.array([0, 1, 1, 1, 1, 1, 1, 1, 1, 0], dtype=bool)
+    leg = leg_availability(0, t, venue, one, global_start=True)
+    assert (leg.venue_right, leg.one_right, leg.frames) == (5, 8, 10)
+    assert np.isclose(leg.venue_first_fix_s, 0.8) and np.isclose(leg.one_first_fix_s, 0.2)
+    # Frames 4..9 for both: the venue misses frame 7, the one-level map frame 9.
+    assert (leg.located_frames, leg.venue_right_located, leg.one_right_located) == (6, 5, 5)
+
+
+def test_a_leg_one_filter_never_fixes_has_no_located_frames() -> None:
+    t = np.arange(4) * 0.2
+    leg = leg_availability(1, t, np.zeros(4, bool), np.ones(4, bool), global_start=False)
+    assert leg.venue_first_fix_s == float("inf") and leg.located_frames == 0
+    a = _availability([leg])
+    assert a["frames"] == 4 and a["one_level"] == 1.0 and a["venue"] == 0.0
+    assert np.isnan(a["venue_located"])  # no frame to judge, not a perfect score
