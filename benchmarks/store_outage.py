@@ -42,7 +42,7 @@ import statistics
 import subprocess
 import tempfile
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import cast
 
@@ -51,11 +51,7 @@ import numpy as np
 import redis
 import websockets
 
-from app.maps.check import load_map
-from app.resources import bundled_maps_dir
-from app.simulation.scenarios import PAPER_PATH, paper_config
-from app.simulation.simulator import simulate
-from benchmarks.load import free_port, start_server
+from benchmarks.load import free_port, paper_walk_frames, quiet_collector, start_server
 
 NOT_PERSISTED = "state_not_persisted"
 
@@ -227,10 +223,8 @@ def recovery_metric(worker: str) -> float | None:
 
 
 async def run(args: argparse.Namespace, store: Redis, workers: list[str]) -> dict[str, object]:
-    office = load_map(bundled_maps_dir() / "paper_office.json")
-    there_and_back = PAPER_PATH + PAPER_PATH[-2::-1] + PAPER_PATH[1:]
-    config = replace(paper_config("nominal", 360), path=there_and_back)
-    frames = [f.to_contract() for f in simulate(office, config, np.random.default_rng(0))]
+    frames = paper_walk_frames()
+    quiet_collector()
     people = [Person(seed) for seed in range(args.sessions)]
     tasks = [asyncio.create_task(stream(p, workers, frames, args)) for p in people]
     await asyncio.sleep(args.warmup)

@@ -48,6 +48,10 @@ small set of **alternative hypotheses**, each with the accumulated log-likelihoo
   cluster moves to another place by itself, the ratios are re-expressed against it (or
   the old place becomes an alternative at even odds), never silently re-referenced.
 
+The module keeps the tracker; the places themselves (rigid motions, how two poses are
+told apart, the settings) are :mod:`~app.localization.alternatives`', and the search
+that finds them is :mod:`~app.localization.search`'s.
+
 While the main belief does not explain the detections nothing is searched, weighed or
 kept (converged could be neither gained nor held). The probability of the alternatives
 under the whole belief, ``e^evidence / (1 + sum e^evidence)`` summed (the main belief's
@@ -57,126 +61,33 @@ prior counted equal to each alternative's), gates ``converged`` (see
 
 from __future__ import annotations
 
-import math
-from array import array
 from collections import deque
-from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
+from collections.abc import Callable, Mapping
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from app.localization import sensor_kernel
+from app.localization.alternatives import (
+    DEFAULT_EVIDENCE,
+    EvidenceSettings,
+    Trail,
+    carry,
+    log_mean_exp_rows,
+    moves_onto,
+    near,
+    same_place,
+    wrap_one,
+)
 from app.localization.compass import CompassReading, compass_log_likelihood
-from app.localization.config import FilterConfig
-from app.localization.motion import motion_log_penalty, sample_motion
-from app.localization.recovery import sample_from_observation
+from app.localization.models import MotionModel, SensorModel
 from app.localization.resampling import systematic_resample
+from app.localization.search import PlaceSearch
 from app.localization.sensor import Observation, observation_columns, observations_from_columns
 from app.localization.types import Hypothesis, InitialPose, Odometry
-from app.maps.geometry import wrap_angle, wrap_deg
-from app.maps.model import SemanticMap
-from app.maps.visibility import VisibilityGrid
+from app.maps.geometry import wrap_angle
 from app.state import from_columns, from_plain
-
-
-@dataclass(frozen=True)
-class EvidenceSettings:
-    """Rates, sizes and thresholds of the alternative-hypothesis bookkeeping."""
-
-    #: Frames between global searches (1 s at 5 frames/s).
-    search_every: int = 5
-    #: With no alternative tracked, each search that finds none doubles the interval, up
-    #: to this many frames (5 s): a converged walk through a building without look-alikes
-    #: pays for a search every 5 s, not every second.
-    max_search_every: int = 25
-    #: Frames of history a search scores, chained back by the odometry.
-    window: int = 10
-    #: No search before this many frames: places fitted to a shorter history are often
-    #: a metre off, and lose evidence for it before they are polished onto the spot.
-    min_history: int = 6
-    #: Score every ``window_stride``-th frame of the window.
-    window_stride: int = 2
-    #: Candidate poses per square metre of free space, and the bounds of their count.
-    candidates_per_m2: float = 25.0
-    min_candidates: int = 1_000
-    max_candidates: int = 6_000
-    #: Best candidates refined and scored on the window.
-    shortlist: int = 32
-    #: Jittered copies per coarse refinement round of the shortlist: (count, position
-    #: std m, heading std rad).
-    refine: tuple[tuple[int, float, float], ...] = ((16, 0.2, float(np.radians(5.0))),)
-    #: The best ``finalists`` (distinct places) are then refined finely, and so is the
-    #: main mode: a newcomer placed 0.2 m off would start several units of evidence
-    #: behind a main mode that the filter has had time to centre.
-    finalists: int = 6
-    #: Pattern search that polishes a pose (the finalists, the main mode, every
-    #: alternative): first steps (m, rad), halved this many times. Deterministic, so
-    #: that the two sides of an exact symmetry land on exactly symmetric poses.
-    polish_step_m: float = 0.25
-    polish_step_rad: float = float(np.radians(4.0))
-    polish_rounds: int = 8
-    #: Particles of the anchor (each alternative carries a copy).
-    particles: int = 150
-    max_alternatives: int = 8
-    #: Frames an alternative is tracked before it can take ``converged`` away.
-    probation: int = 5
-    #: Frames an alternative's place is polished every frame after it appears.
-    young: int = 15
-    #: A candidate within this log-evidence of the main mode over the window is kept.
-    seed_llr: float = -6.0
-    #: An alternative whose evidence against falls below this is dropped.
-    drop_llr: float = -20.0
-    #: An alternative this much more likely than the main belief replaces it.
-    switch_llr: float = float(np.log(20.0))
-    #: Frames of the main mode's walk kept to test a newcomer against (60 s).
-    trail: int = 300
-    #: Dropped alternatives remembered (while the main mode stays the same).
-    max_graves: int = 32
-    #: Distinct from the main mode (and from each other) beyond these.
-    distinct_m: float = 1.0
-    distinct_rad: float = float(np.radians(45.0))
-
-
-DEFAULT_EVIDENCE = EvidenceSettings()
-
-
-def _log_mean_exp_rows(a: NDArray[np.float64]) -> NDArray[np.float64]:
-    """log of the mean of exp over each row, shape (A,); -inf for an all -inf row."""
-    m = a.max(axis=1)
-    safe = np.where(np.isfinite(m), m, 0.0)
-    with np.errstate(divide="ignore"):
-        return safe + np.log(np.exp(a - safe[:, None]).mean(axis=1))
-
-
-class _Trail:
-    """The main mode's last ``size`` positions (x, y), oldest first, kept as flat doubles:
-    a checkpoint (once a second) copies them as one buffer instead of walking 300
-    pairs (43 us)."""
-
-    def __init__(self, size: int) -> None:
-        self.size = size
-        self._xy = array("d")
-
-    def append(self, x: float, y: float) -> None:
-        xy = self._xy
-        xy.append(x)
-        xy.append(y)
-        if len(xy) > 4 * self.size:  # drop the oldest now and then, not at every frame
-            del xy[: len(xy) - 2 * self.size]
-
-    def clear(self) -> None:
-        del self._xy[:]
-
-    def __len__(self) -> int:
-        return min(len(self._xy) // 2, self.size)
-
-    def points(self) -> NDArray[np.float64]:
-        """The positions, shape (len, 2) (a copy)."""
-        xy = self._xy
-        kept = xy[-2 * self.size :] if len(xy) > 2 * self.size else xy
-        return np.array(kept, dtype=np.float64).reshape(-1, 2)
 
 
 class EvidenceTracker:
@@ -184,17 +95,22 @@ class EvidenceTracker:
 
     def __init__(
         self,
-        semantic_map: SemanticMap,
-        config: FilterConfig,
-        grid: VisibilityGrid | None,
+        sensor: SensorModel,
+        motion: MotionModel,
         rng: np.random.Generator,
         settings: EvidenceSettings = DEFAULT_EVIDENCE,
     ) -> None:
-        self.map = semantic_map
-        self.config = config
-        self.grid = grid
+        #: The filter's own models (:mod:`~app.localization.models`): the anchor and the
+        #: alternatives move and are weighed exactly as its particles are.
+        self.sensor = sensor
+        self.motion = motion
+        self.map = sensor.semantic_map
+        self.config = sensor.config
+        self.grid = sensor.grid
         self.rng = rng
         self.settings = settings
+        #: The global consistency search (:mod:`~app.localization.search`).
+        self.finder = PlaceSearch(sensor, settings, rng)
         #: Whether a place (x, y) may hold an alternative at all (set by the filter on
         #: a map with levels, app.localization.floors); None: anywhere.
         self.place_allowed: Callable[[float, float], bool] | None = None
@@ -214,7 +130,7 @@ class EvidenceTracker:
         #: stayed the same: found again, they are known dead, not newcomers.
         self._graves = np.empty((0, 3))
         #: The main mode's positions since it formed (the walk so far, as it believes).
-        self._trail = _Trail(self.settings.trail)
+        self._trail = Trail(self.settings.trail)
         #: The anchor cloud of the main belief, rows x, y, theta; None until drawn.
         self._anchor = None
         self._history: deque[tuple[Odometry | None, Observation, CompassReading | None]] = deque(
@@ -263,7 +179,7 @@ class EvidenceTracker:
         if p is None or start is None or not moves.shape[0]:
             return np.zeros(moves.shape[0])
         sx, sy, st = (np.array([v]) for v in start)
-        cx, cy, ct = _carry(moves, sx, sy, st)
+        cx, cy, ct = carry(moves, sx, sy, st)
 
         def d2(x: NDArray[np.float64], y: NDArray[np.float64], t: NDArray[np.float64]) -> Any:
             turn = wrap_angle(t - p.theta_rad)
@@ -274,7 +190,7 @@ class EvidenceTracker:
     def _carry_start(self, move: NDArray[np.float64]) -> None:
         """The main mode became the place ``move`` (3,) carries it onto: so did its start."""
         if self._start is not None:
-            cx, cy, ct = _carry(move[None], *(np.array([v]) for v in self._start))
+            cx, cy, ct = carry(move[None], *(np.array([v]) for v in self._start))
             self._start = (float(cx[0, 0]), float(cy[0, 0]), float(ct[0, 0]))
 
     # ---------------------------------------------------------- checkpoints
@@ -452,7 +368,7 @@ class EvidenceTracker:
     def clouds(self) -> tuple[NDArray[np.float64], ...]:
         """The alternatives' clouds (the anchor carried onto each), each shape (A, P)."""
         assert self._anchor is not None
-        return _carry(self.moves, *self._anchor)
+        return carry(self.moves, *self._anchor)
 
     def hypotheses(self) -> list[Hypothesis]:
         """One :class:`Hypothesis` per alternative, weight = its probability."""
@@ -508,7 +424,7 @@ class EvidenceTracker:
             main is not None
             and main_tight
             and self._last_main is not None
-            and _same_place(main.x, main.y, main.theta_rad, self._last_main, self.settings)
+            and same_place(main.x, main.y, main.theta_rad, self._last_main, self.settings)
         )
         if self._anchor is not None:
             # While the main belief does not explain the detections, converged can be
@@ -573,7 +489,7 @@ class EvidenceTracker:
         rows = a + 1 if a and weigh else 1
         # Row 0 the moved anchor, rows 1.. its copies: x, y, theta, each (rows, P).
         poses = np.empty((3, rows, p))
-        nx, ny, nt = sample_motion(x0, y0, t0, odometry, self.config, self.rng, out=poses[:, 0])
+        nx, ny, nt = self.motion.sample(x0, y0, t0, odometry, self.rng, out=poses[:, 0])
         if rows == 1:
             # Nothing to weigh (no alternative, or no evidence worth counting): the
             # anchor only has to follow the main mode (it is redrawn from the filter's
@@ -583,7 +499,7 @@ class EvidenceTracker:
             return
         # The copies move with the same body-frame motion: a rigid motion of the map
         # commutes with it, so the carried cloud is the moved cloud carried. The starts
-        # (x, y only: the penalty's) are carried the same way, by :func:`_carry`'s
+        # (x, y only: the penalty's) are carried the same way, by :func:`carry`'s
         # arithmetic written into the stacked rows.
         starts = np.empty((2, rows, p))
         starts[0, 0], starts[1, 0] = x0, y0
@@ -596,13 +512,15 @@ class EvidenceTracker:
             cy[1:] += shift_y
         poses[2, 1:] = wrap_angle(nt + turn)
         fx, fy, ft = (v.reshape(-1) for v in poses)
-        log_w = motion_log_penalty(starts[0].reshape(-1), starts[1].reshape(-1), fx, fy, self.map)
+        log_w, _ = self.motion.weigh_moves(
+            starts[0].reshape(-1), starts[1].reshape(-1), fx, fy, np.zeros(fx.shape[0])
+        )
         if not obs.empty:
-            log_w += sensor_kernel.log_likelihood(fx, fy, ft, obs, self.map, self.config, self.grid)
+            log_w += self.sensor.log_likelihood(fx, fy, ft, obs)
         if heading is not None:
             log_w += compass_log_likelihood(ft, heading)
         log_w = log_w.reshape(rows, p)
-        ev = _log_mean_exp_rows(log_w)
+        ev = log_mean_exp_rows(log_w)
         if not np.isfinite(ev[0]):
             self._anchor = None  # the anchor walked through a wall: draw it again
             return
@@ -649,7 +567,7 @@ class EvidenceTracker:
         mx = (w * x).sum(axis=1) / total
         my = (w * y).sum(axis=1) / total
         mt = np.arctan2((w * np.sin(t)).sum(axis=1), (w * np.cos(t)).sum(axis=1))
-        fitted = _moves_onto((float(mx[0]), float(my[0]), float(mt[0])), mx[1:], my[1:], mt[1:])
+        fitted = moves_onto((float(mx[0]), float(my[0]), float(mt[0])), mx[1:], my[1:], mt[1:])
         self.moves[fit] = fitted
 
     def _keep(self, keep: NDArray[np.bool_]) -> None:
@@ -673,7 +591,7 @@ class EvidenceTracker:
     def _centres(self) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
         """Each alternative's centre pose (x, y, theta), each shape (A,)."""
         ax, ay, at = self._anchor_pose()
-        cx, cy, ct = _carry(self.moves, np.array([ax]), np.array([ay]), np.array([at]))
+        cx, cy, ct = carry(self.moves, np.array([ax]), np.array([ay]), np.array([at]))
         return cx[:, 0], cy[:, 0], ct[:, 0]
 
     def _set_anchor(self, cloud: NDArray[np.float64]) -> None:
@@ -682,12 +600,12 @@ class EvidenceTracker:
         places = self._centres() if old is not None and self.count else None
         self._anchor = cloud
         if places is not None:
-            self.moves = _moves_onto(self._anchor_pose(), *places)
+            self.moves = moves_onto(self._anchor_pose(), *places)
 
     def _draw_anchor(self, main: Hypothesis, particles: tuple[NDArray[np.float64], ...]) -> bool:
         """Draw the anchor from the filter's particles of the main mode; False if none."""
         x, y, t, w = particles
-        w = np.where(_near(x, y, t, main, self.settings), w, 0.0)
+        w = np.where(near(x, y, t, main, self.settings), w, 0.0)
         total = w.sum()
         if total <= 0.0:
             return False
@@ -714,15 +632,15 @@ class EvidenceTracker:
             return
         ax, ay, at = self._anchor_pose()
         anchor = Hypothesis(ax, ay, at, 0.0)
-        if _same_place(main.x, main.y, main.theta_rad, anchor, st):
+        if same_place(main.x, main.y, main.theta_rad, anchor, st):
             close = (
                 np.hypot(ax - main.x, ay - main.y) < st.distinct_m / 2
-                and abs(_wrap(at - main.theta_rad)) < st.distinct_rad / 2
+                and abs(wrap_one(at - main.theta_rad)) < st.distinct_rad / 2
             )
             if not close:
                 self._draw_anchor(main, particles)
             return
-        hit = np.flatnonzero(_near(*self._centres(), main, st)) if self.count else np.empty(0)
+        hit = np.flatnonzero(near(*self._centres(), main, st)) if self.count else np.empty(0)
         if hit.size:
             self._make_main(int(hit[np.argmax(self.evidence[hit])]))
             return
@@ -730,11 +648,11 @@ class EvidenceTracker:
             # The old anchor's place, now an alternative, carried from the new anchor; with
             # a known start, at the odds the prior gives it against the new place.
             nx, ny, nt = self._anchor_pose()
-            ahead = _moves_onto((ax, ay, at), np.array([nx]), np.array([ny]), np.array([nt]))[0]
+            ahead = moves_onto((ax, ay, at), np.array([nx]), np.array([ny]), np.array([nt]))[0]
             odds = -float(self._prior_log_ratio(ahead[None])[0])
             self._carry_start(ahead)
             if fitted:
-                back = _moves_onto((nx, ny, nt), np.array([ax]), np.array([ay]), np.array([at]))
+                back = moves_onto((nx, ny, nt), np.array([ax]), np.array([ay]), np.array([at]))
                 self._append(back[0], odds)
 
     def _make_main(self, i: int) -> None:
@@ -743,12 +661,12 @@ class EvidenceTracker:
         ax, ay, at = self._anchor_pose()
         shift, seg_shift = float(self.llr[i]), float(self.seg[i])
         assert self._anchor is not None
-        cx, cy, ct = _carry(self.moves[i : i + 1], *self._anchor)
+        cx, cy, ct = carry(self.moves[i : i + 1], *self._anchor)
         places = self._centres()
         self._anchor = np.vstack([cx[0], cy[0], ct[0]])
         px, py, pt = (v.copy() for v in places)
         px[i], py[i], pt[i] = ax, ay, at
-        self.moves = _moves_onto(self._anchor_pose(), px, py, pt)
+        self.moves = moves_onto(self._anchor_pose(), px, py, pt)
         self.llr = self.llr - shift
         self.llr[i] = -shift
         self.seg = self.seg - seg_shift
@@ -759,18 +677,18 @@ class EvidenceTracker:
 
     def _near_any(self, h: Hypothesis) -> bool:
         """Whether ``h`` is a tracked alternative's place, or a dropped one's."""
-        if self.count and _near(*self._centres(), h, self.settings).any():
+        if self.count and near(*self._centres(), h, self.settings).any():
             return True
         if not self._graves.shape[0]:
             return False
         ax, ay, at = (np.array([v]) for v in self._anchor_pose())
-        gx, gy, gt = _carry(self._graves, ax, ay, at)
-        return bool(_near(gx[:, 0], gy[:, 0], gt[:, 0], h, self.settings).any())
+        gx, gy, gt = carry(self._graves, ax, ay, at)
+        return bool(near(gx[:, 0], gy[:, 0], gt[:, 0], h, self.settings).any())
 
     def _forget_covered(self, main: Hypothesis) -> None:
         """Drop alternatives the main mode has come to cover (the filter holds them)."""
         if self.count and self._anchor is not None:
-            self._keep(~_near(*self._centres(), main, self.settings))
+            self._keep(~near(*self._centres(), main, self.settings))
 
     # --------------------------------------------------------------- search
     def window(
@@ -810,47 +728,7 @@ class EvidenceTracker:
     ) -> NDArray[np.float64]:
         """Sum of log-likelihoods over the history window, poses chained back, shape (N,)."""
         w = self.window() if window is None else window
-        return sensor_kernel.window_log_likelihood(x, y, theta, w, self.map, self.config, self.grid)
-
-    def _refined(
-        self,
-        x: NDArray[np.float64],
-        y: NDArray[np.float64],
-        t: NDArray[np.float64],
-        rounds: tuple[tuple[int, float, float], ...],
-        window: sensor_kernel.ObservationWindow,
-    ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
-        """Each pose moved to the best of its jittered copies over the window (``rounds``
-        of random jitter), with its window score. The jitter is drawn first, round by
-        round (x, y, heading), then every round runs in one compiled call."""
-        m = x.shape[0]
-        jitter = [
-            (
-                self.rng.normal(0.0, std_m, (m, count)),
-                self.rng.normal(0.0, std_m, (m, count)),
-                self.rng.normal(0.0, std_rad, (m, count)),
-            )
-            for count, std_m, std_rad in rounds
-        ]
-        return sensor_kernel.window_jitter_search(
-            x, y, t, jitter, window, self.map, self.config, self.grid
-        )
-
-    def _polished(
-        self,
-        x: NDArray[np.float64],
-        y: NDArray[np.float64],
-        t: NDArray[np.float64],
-        window: sensor_kernel.ObservationWindow,
-    ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
-        """Pattern search over the window: each round tries the 27 steps of -1, 0, +1 in
-        x, y and heading around each pose, moves to the best, and halves the steps.
-        Every pose of a search and every round go through one compiled call."""
-        st = self.settings
-        return sensor_kernel.window_pattern_search(
-            x, y, t, PATTERN, st.polish_step_m, st.polish_step_rad, st.polish_rounds,
-            window, self.map, self.config, self.grid,
-        )  # fmt: skip
+        return self.sensor.window_log_likelihood(x, y, theta, w)
 
     def _search(self, main: Hypothesis, window: sensor_kernel.ObservationWindow) -> None:
         """One global consistency search (module docstring) over ``window`` (this frame's
@@ -866,40 +744,16 @@ class EvidenceTracker:
         prior = st.seed_llr if self.mode_searches else 0.0
         self.mode_searches += 1
         obs = self._history[-1][1]
-        fs = self.map.free_space
-        area = fs.free_cells.size * fs.resolution_m**2
-        n = int(min(max(st.candidates_per_m2 * area, st.min_candidates), st.max_candidates))
-        cx, cy, ct = sample_from_observation(
-            n, obs, self.map, self.rng, self.config.bearing_std_rad("")
-        )
-        away = ~_near(cx, cy, ct, main, st)
-        cx, cy, ct = cx[away], cy[away], ct[away]
-        picked: list[int] = []
-        rx = ry = rt = np.empty(0)
-        if cx.size:
-            score = sensor_kernel.log_likelihood(cx, cy, ct, obs, self.map, self.config, self.grid)
-            k = min(st.shortlist, cx.size)
-            top = np.argpartition(-score, k - 1)[:k]
-            rx, ry, rt, rs = self._refined(cx[top], cy[top], ct[top], st.refine, window)
-            # The best distinct places, in plain Python over precomputed flags (a numpy
-            # call on one element per candidate cost more than the comparisons).
-            close = _near_pairs(rx, ry, rt, st)
-            finite = np.isfinite(rs).tolist()
-            for i in np.argsort(-rs).tolist():
-                if not finite[i] or len(picked) >= st.finalists:
-                    break
-                row = close[i]
-                if any(row[j] for j in picked):
-                    continue
-                picked.append(i)
+        new_x, new_y, new_t = self.finder.finalists(obs, main, window)
         # One polish: the main mode, the tracked alternatives, the finalists.
         ax, ay, at = self._centres() if self.count else (np.empty(0),) * 3
         a = ax.size
-        main_pose, main_score, (qx, qy, qt, qs) = self._polish_with_main(
+        main_pose, main_score, (qx, qy, qt, qs) = self.finder.polish_with_main(
             main,
-            np.concatenate([ax, rx[picked]]),
-            np.concatenate([ay, ry[picked]]),
-            np.concatenate([at, rt[picked]]),
+            self._anchor_pose(),
+            np.concatenate([ax, new_x]),
+            np.concatenate([ay, new_y]),
+            np.concatenate([at, new_t]),
             window,
         )
         mx, my, mt = main_pose
@@ -921,9 +775,9 @@ class EvidenceTracker:
             if gain + prior < st.seed_llr or not np.isfinite(gain):
                 break
             h = Hypothesis(float(fx[i]), float(fy[i]), float(ft[i]), 0.0)
-            if _same_place(h.x, h.y, h.theta_rad, main_h, st):
+            if same_place(h.x, h.y, h.theta_rad, main_h, st):
                 continue
-            move = _moves_onto(
+            move = moves_onto(
                 self._anchor_pose(), np.array([h.x]), np.array([h.y]), np.array([h.theta_rad])
             )[0]
             if self._near_any(h) or not self._walk_fits(move):
@@ -958,14 +812,14 @@ class EvidenceTracker:
         moved = False
         for i in np.argsort(-score):
             h = Hypothesis(float(x[i]), float(y[i]), float(t[i]), 0.0)
-            near = np.flatnonzero(_near(cx, cy, ct, h, self.settings))
-            if near.size != 1 or not score[i] > current[near[0]]:
+            same = np.flatnonzero(near(cx, cy, ct, h, self.settings))
+            if same.size != 1 or not score[i] > current[same[0]]:
                 continue
-            j = int(near[0])
+            j = int(same[0])
             cx[j], cy[j], ct[j], current[j] = h.x, h.y, h.theta_rad, score[i]
             moved = True
         if moved:
-            self.moves = _moves_onto(self._anchor_pose(), cx, cy, ct)
+            self.moves = moves_onto(self._anchor_pose(), cx, cy, ct)
 
     def _refit_young(self, main: Hypothesis, window: sensor_kernel.ObservationWindow) -> None:
         """Polish every young alternative's place over the window, each frame.
@@ -979,41 +833,11 @@ class EvidenceTracker:
         """
         young = np.flatnonzero(self.age < self.settings.young)
         cx, cy, ct = (v.copy() for v in self._centres())
-        main_pose, _, (qx, qy, qt, _) = self._polish_with_main(
-            main, cx[young], cy[young], ct[young], window
+        main_pose, _, (qx, qy, qt, _) = self.finder.polish_with_main(
+            main, self._anchor_pose(), cx[young], cy[young], ct[young], window
         )
         cx[young], cy[young], ct[young] = qx, qy, qt
         self._recentre(main_pose, (cx, cy, ct))
-
-    def _polish_with_main(
-        self,
-        main: Hypothesis,
-        x: NDArray[np.float64],
-        y: NDArray[np.float64],
-        t: NDArray[np.float64],
-        window: sensor_kernel.ObservationWindow,
-    ) -> tuple[
-        tuple[float, float, float],
-        float,
-        tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]],
-    ]:
-        """Polish the main mode and the places (x, y, t) together, in one call.
-
-        The main mode is polished from two starts, the filter's cluster and the anchor,
-        and the better kept (a pattern search from one start can stop in a poorer local
-        optimum). Returns the main mode's pose and window score, and the places' polished
-        poses and scores.
-        """
-        ax, ay, at = self._anchor_pose()
-        px, py, pt, ps = self._polished(
-            np.concatenate([[main.x, ax], x]),
-            np.concatenate([[main.y, ay], y]),
-            np.concatenate([[main.theta_rad, at], t]),
-            window,
-        )
-        b = int(np.argmax(ps[:2]))
-        pose = (float(px[b]), float(py[b]), float(pt[b]))
-        return pose, float(ps[b]), (px[2:], py[2:], pt[2:], ps[2:])
 
     def _walk_fits(self, move: NDArray[np.float64]) -> bool:
         """Whether the main mode's walk so far, carried by ``move``, stays in the free
@@ -1022,7 +846,7 @@ class EvidenceTracker:
         if not self._trail:
             return True
         tx, ty = self._trail.points().T.copy()
-        cx, cy, _ = _carry(move[None], tx, ty, np.zeros_like(tx))
+        cx, cy, _ = carry(move[None], tx, ty, np.zeros_like(tx))
         return bool(self.map.free_space.is_free(cx[0], cy[0]).all())
 
     def _recentre(
@@ -1035,11 +859,11 @@ class EvidenceTracker:
         lose evidence for nothing until it had drifted back."""
         assert self._anchor is not None
         x, y, theta = main
-        move = _moves_onto(self._anchor_pose(), np.array([x]), np.array([y]), np.array([theta]))
-        cx, cy, ct = _carry(move, *self._anchor)
+        move = moves_onto(self._anchor_pose(), np.array([x]), np.array([y]), np.array([theta]))
+        cx, cy, ct = carry(move, *self._anchor)
         self._anchor = np.vstack([cx[0], cy[0], ct[0]])
         if self.count:
-            self.moves = _moves_onto(self._anchor_pose(), *places)
+            self.moves = moves_onto(self._anchor_pose(), *places)
             self._merge_duplicates()
 
     def _merge_duplicates(self) -> None:
@@ -1051,7 +875,7 @@ class EvidenceTracker:
             if not keep[i]:
                 continue
             h = Hypothesis(float(cx[i]), float(cy[i]), float(ct[i]), 0.0)
-            same = _near(cx, cy, ct, h, self.settings) & keep
+            same = near(cx, cy, ct, h, self.settings) & keep
             same[i] = False
             keep &= ~same
         self._keep(keep)
@@ -1086,168 +910,3 @@ class EvidenceTracker:
         ny = self._anchor[1, pick] + self.rng.normal(0.0, jitter, n)
         nt = wrap_angle(self._anchor[2, pick] + self.rng.normal(0.0, jitter, n))
         return nx, ny, nt
-
-
-#: The pattern search's 27 steps (x, y, heading; each -1, 0 or +1), shape (3, 27), in
-#: the order of ``np.meshgrid``'s grid flattened: the search takes the first of equal
-#: candidates, so the order is part of its result.
-PATTERN = np.array(np.meshgrid([-1.0, 0.0, 1.0], [-1.0, 0.0, 1.0], [-1.0, 0.0, 1.0])).reshape(3, -1)
-
-
-def pattern_search_reference(
-    x: NDArray[np.float64],
-    y: NDArray[np.float64],
-    t: NDArray[np.float64],
-    pattern: NDArray[np.float64],
-    step_m: float,
-    step_rad: float,
-    rounds: int,
-    window: sensor_kernel.ObservationWindow,
-    semantic_map: SemanticMap,
-    config: FilterConfig,
-    grid: VisibilityGrid | None = None,
-) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
-    """The pattern search of :meth:`EvidenceTracker._polished` in numpy, the definition
-    :func:`~app.localization.sensor_kernel.window_pattern_search` computes: each round
-    scores every step of ``pattern`` (3, K) around every pose over the window, -inf
-    outside the free space, moves each pose to its best step (the first of equals) if
-    that beats its score, keeps the larger score, and halves the steps."""
-    dx, dy, dt = pattern
-    scoring = (window, semantic_map, config, grid)
-    score = sensor_kernel.window_log_likelihood(x, y, t, window, semantic_map, config, grid)
-    for _ in range(rounds):
-        jx = x[:, None] + step_m * dx[None, :]
-        jy = y[:, None] + step_m * dy[None, :]
-        jt = wrap_angle(t[:, None] + step_rad * dt[None, :])
-        x, y, t, score = _best_candidates(x, y, t, score, jx, jy, jt, True, scoring)
-        step_m, step_rad = step_m / 2.0, step_rad / 2.0
-    return x, y, t, score
-
-
-def jitter_search_reference(
-    x: NDArray[np.float64],
-    y: NDArray[np.float64],
-    t: NDArray[np.float64],
-    jitter: Sequence[tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]],
-    window: sensor_kernel.ObservationWindow,
-    semantic_map: SemanticMap,
-    config: FilterConfig,
-    grid: VisibilityGrid | None = None,
-) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
-    """The jitter search of :meth:`EvidenceTracker._refined` in numpy, the definition
-    :func:`~app.localization.sensor_kernel.window_jitter_search` computes: each round
-    adds its offsets (x, y, heading; each (N, K)) to the poses, scores the copies over
-    the window, -inf outside the free space, and moves each pose to its best copy (the
-    first of equals) if that beats its score."""
-    scoring = (window, semantic_map, config, grid)
-    score = sensor_kernel.window_log_likelihood(x, y, t, window, semantic_map, config, grid)
-    for ox, oy, ot in jitter:
-        jx = x[:, None] + ox
-        jy = y[:, None] + oy
-        jt = wrap_angle(t[:, None] + ot)
-        x, y, t, score = _best_candidates(x, y, t, score, jx, jy, jt, False, scoring)
-    return x, y, t, score
-
-
-#: What scores a pose over a window: the window, the map, the configuration, the grid.
-_Scoring = tuple[sensor_kernel.ObservationWindow, SemanticMap, FilterConfig, VisibilityGrid | None]
-
-
-def _best_candidates(
-    x: NDArray[np.float64],
-    y: NDArray[np.float64],
-    t: NDArray[np.float64],
-    score: NDArray[np.float64],
-    jx: NDArray[np.float64],
-    jy: NDArray[np.float64],
-    jt: NDArray[np.float64],
-    keep_max: bool,
-    scoring: _Scoring,
-) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
-    """One round of the references above: each pose's candidates (row i of ``jx, jy,
-    jt``, shape (N, K)) scored over the window, -inf outside the free space; the pose
-    moves to its best (the first of equals) where that beats its score, which becomes
-    the best's there (and everywhere the larger of the two with ``keep_max``)."""
-    window, semantic_map, config, grid = scoring
-    m, k = jx.shape
-    rows = np.arange(m)
-    js = sensor_kernel.window_log_likelihood(
-        jx.reshape(-1), jy.reshape(-1), jt.reshape(-1), window, semantic_map, config, grid
-    )
-    js = np.where(semantic_map.free_space.is_free(jx, jy), js.reshape(m, k), -np.inf)
-    best = np.argmax(js, axis=1)
-    better = js[rows, best] > score
-    x = np.where(better, jx[rows, best], x)
-    y = np.where(better, jy[rows, best], y)
-    t = np.where(better, jt[rows, best], t)
-    top = js[rows, best]
-    return x, y, t, (np.maximum(score, top) if keep_max else np.where(better, top, score))
-
-
-def _same_place(x: float, y: float, t: float, h: Hypothesis, st: EvidenceSettings) -> bool:
-    """:func:`_near` for one pose, in plain float arithmetic (it runs several times a
-    frame, where numpy's overhead on scalars was most of its cost)."""
-    turn = abs(wrap_deg(math.degrees(t - h.theta_rad)))
-    return math.hypot(x - h.x, y - h.y) < st.distinct_m and math.radians(turn) < st.distinct_rad
-
-
-def _wrap(angle: float) -> float:
-    """:func:`~app.maps.geometry.wrap_angle` of one angle in plain float arithmetic (the
-    same operations: Python's float ``%`` rounds as numpy's ``mod`` does, both C's
-    ``fmod`` corrected to the divisor's sign), without numpy's overhead on a scalar."""
-    wrapped = (angle + math.pi) % (2.0 * math.pi) - math.pi
-    return math.pi if wrapped <= -math.pi else wrapped
-
-
-def _near(
-    x: NDArray[np.float64] | float,
-    y: NDArray[np.float64] | float,
-    t: NDArray[np.float64] | float,
-    h: Hypothesis,
-    st: EvidenceSettings,
-) -> NDArray[np.bool_]:
-    """Whether poses are the same place as ``h`` (within ``distinct_m`` and ``_rad``)."""
-    return (np.hypot(np.asarray(x) - h.x, np.asarray(y) - h.y) < st.distinct_m) & (
-        np.abs(wrap_angle(np.asarray(t) - h.theta_rad)) < st.distinct_rad
-    )
-
-
-def _near_pairs(
-    x: NDArray[np.float64], y: NDArray[np.float64], t: NDArray[np.float64], st: EvidenceSettings
-) -> NDArray[np.bool_]:
-    """:func:`_near` of every pose against every pose, shape (N, N): row ``i`` is
-    ``_near(x, y, t, pose i)``, with the same arithmetic (one call instead of one a
-    pose)."""
-    return (np.hypot(x[None, :] - x[:, None], y[None, :] - y[:, None]) < st.distinct_m) & (
-        np.abs(wrap_angle(t[None, :] - t[:, None])) < st.distinct_rad
-    )
-
-
-def _carry(
-    moves: NDArray[np.float64],
-    x: NDArray[np.float64],
-    y: NDArray[np.float64],
-    t: NDArray[np.float64],
-) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
-    """Poses carried by each rigid motion (turn, shift x, shift y), each shape (A, N)."""
-    turn, sx, sy = moves[:, 0:1], moves[:, 1:2], moves[:, 2:3]
-    c, s = np.cos(turn), np.sin(turn)
-    return c * x - s * y + sx, s * x + c * y + sy, wrap_angle(t + turn)
-
-
-def _moves_onto(
-    source: tuple[float, float, float],
-    x: NDArray[np.float64],
-    y: NDArray[np.float64],
-    t: NDArray[np.float64],
-) -> NDArray[np.float64]:
-    """The rigid motions carrying the pose ``source`` onto each pose (x, y, t), (A, 3)."""
-    sx, sy, st = source
-    turn = wrap_angle(np.asarray(t) - st)
-    c, s = np.cos(turn), np.sin(turn)
-    return np.column_stack([turn, x - (c * sx - s * sy), y - (s * sx + c * sy)])
-
-
-def main_mode(hypotheses: Sequence[Hypothesis]) -> Hypothesis | None:
-    """The heaviest hypothesis of the filter's own clusters, if any."""
-    return hypotheses[0] if hypotheses else None

@@ -24,12 +24,17 @@ from app.localization.config import FilterConfig
 from app.localization.convergence import ConvergenceGate, FitQuality, protection_radius
 from app.localization.dilution import BearingGeometry
 from app.localization.estimate import estimate_pose, with_alternatives
-from app.localization.evidence import PATTERN, EvidenceTracker
+from app.localization.evidence import EvidenceTracker
 from app.localization.floors import AltitudeReading, FloorTracker
 from app.localization.kld import kld_sample_size
 from app.localization.latency import CaptureClock, moved_forward
-from app.localization.motion import penalized, sample_motion
-from app.localization.recovery import AugmentedMCL, sample_from_observation
+from app.localization.models import (
+    BearingSensorModel,
+    MotionModel,
+    OdometryMotionModel,
+    SensorModel,
+)
+from app.localization.recovery import AugmentedMCL
 from app.localization.resampling import (
     effective_sample_size,
     log_sum_exp,
@@ -37,6 +42,7 @@ from app.localization.resampling import (
     systematic_resample,
     weights_and_log_sum_exp,
 )
+from app.localization.search import PATTERN
 from app.localization.sensor import Observation, normalized_residuals, prepare_observation
 from app.localization.slide import OdometryCheck
 from app.localization.types import Detection, Estimate, InitialPose, Odometry
@@ -83,6 +89,9 @@ class ParticleFilter:
         initial_pose: a known start, or None for global localization (uniform over the
             free space, any heading).
         state: a :meth:`checkpoint` to go on from instead (``initial_pose`` is ignored).
+        sensor_model, motion_model: the models the filter weighs and moves its particles
+            with (:mod:`~app.localization.models`); by default the bearing-only semantic
+            sensor model and the odometry motion model of ``config``.
     """
 
     def __init__(
@@ -93,11 +102,15 @@ class ParticleFilter:
         rng: np.random.Generator,
         initial_pose: InitialPose | None = None,
         state: Mapping[str, Any] | None = None,
+        sensor_model: SensorModel | None = None,
+        motion_model: MotionModel | None = None,
     ) -> None:
         self.map = ensure_prepared(semantic_map)  # its grids, built now if need be
         self.config = config or FilterConfig()
         self.rng = rng
         self._vis = semantic_map.visibility if self.config.visibility else None
+        self.sensor = sensor_model or BearingSensorModel(semantic_map, self.config, self._vis)
+        self.motion = motion_model or OdometryMotionModel(semantic_map, self.config)
         self._recovery = AugmentedMCL(self.config.alpha_slow, self.config.alpha_fast)
         self._gate = ConvergenceGate()
         margin = 2.0 * FIT_FOV_MARGIN_STDS * self.config.bearing_std_deg
@@ -108,9 +121,7 @@ class ParticleFilter:
         self._fit_scale = std / float(np.hypot(std, self.config.fit_bias_deg))
         #: Alternative places and their evidence (None with ``config.evidence`` off).
         self.evidence = (
-            EvidenceTracker(semantic_map, self.config, self._vis, rng)
-            if self.config.evidence
-            else None
+            EvidenceTracker(self.sensor, self.motion, rng) if self.config.evidence else None
         )
         #: Objects in clear view that the camera keeps not reporting (gates converged).
         self.unseen = (
@@ -195,10 +206,10 @@ class ParticleFilter:
     def predict(self, odometry: Odometry | None) -> None:
         """Move every particle by the noisy odometry; impossible moves lose their weight."""
         x0, y0 = self.x, self.y
-        self.x, self.y, self.theta = sample_motion(
-            self.x, self.y, self.theta, odometry, self.config, self.rng
+        self.x, self.y, self.theta = self.motion.sample(
+            self.x, self.y, self.theta, odometry, self.rng
         )
-        self.log_w, possible = penalized(x0, y0, self.x, self.y, self.map, self.log_w)
+        self.log_w, possible = self.motion.weigh_moves(x0, y0, self.x, self.y, self.log_w)
         if not possible:
             # Every hypothesis walked through a wall or off the map: the belief is
             # wrong everywhere. Start again from no knowledge rather than keep ghosts.
@@ -226,9 +237,7 @@ class ParticleFilter:
 
     def observation_log_likelihood(self, obs: Observation) -> NDArray[np.float64]:
         """log P(Z | s, M) for every particle, shape (N,)."""
-        return sensor_kernel.log_likelihood(
-            self.x, self.y, self.theta, obs, self.map, self.config, self._vis
-        )
+        return self.sensor.log_likelihood(self.x, self.y, self.theta, obs)
 
     def correct(self, detections: Sequence[Detection]) -> float:
         """Weight particles by the detections; return the injection share asked for.
@@ -240,7 +249,7 @@ class ParticleFilter:
     def _correct(self, detections: Sequence[Detection]) -> tuple[float, NDArray[np.float64] | None]:
         """:meth:`correct`, and the normalized weights it computed on the way (None
         when it did not weigh: :attr:`weights` then computes them)."""
-        obs = prepare_observation(detections, self.map, self.config)
+        obs = self.sensor.observe(detections)
         self.last_observation = obs
         if obs.empty:
             self.frames_without_evidence += 1
@@ -274,9 +283,7 @@ class ParticleFilter:
         """
         self._seed_from_observation = False
         n_obs = int(SEED_SHARE * self.n)
-        x, y, th = sample_from_observation(
-            n_obs, obs, self.map, self.rng, self.config.bearing_std_rad("")
-        )
+        x, y, th = self.sensor.sample_poses(n_obs, obs, self.rng)
         self.x[:n_obs], self.y[:n_obs], self.theta[:n_obs] = x, y, th
         self.log_w[:] = 0.0
 
@@ -305,9 +312,7 @@ class ParticleFilter:
         obs = self.last_observation
         n_new = round(inject_share * n_target)
         if n_new > 0 and obs is not None and not obs.empty:
-            nx, ny, nt = sample_from_observation(
-                n_new, obs, self.map, self.rng, self.config.bearing_std_rad("")
-            )
+            nx, ny, nt = self.sensor.sample_poses(n_new, obs, self.rng)
             slots = self.rng.choice(n_target, size=n_new, replace=False)
             self.x[slots], self.y[slots], self.theta[slots] = nx, ny, nt
         return True
@@ -696,10 +701,8 @@ def warm_up() -> None:
         normalized_residuals(1.0, 1.0, 0.0, obs, tiny, cfg)
         compass = CompassReading(0.0, 0.1)
         window = sensor_kernel.pack_window([((0.0, 0.0, 0.0), obs, compass)])
-        sensor_kernel.window_log_likelihood(pf.x, pf.y, pf.theta, window, tiny, cfg, pf._vis)
-        sensor_kernel.window_pattern_search(
-            pf.x[:2], pf.y[:2], pf.theta[:2], PATTERN, 0.1, 0.1, 1, window, tiny, cfg, pf._vis
-        )
+        pf.sensor.window_log_likelihood(pf.x, pf.y, pf.theta, window)
+        pf.sensor.pattern_search(pf.x[:2], pf.y[:2], pf.theta[:2], PATTERN, 0.1, 0.1, 1, window)
         est = estimate_pose(pf.x, pf.y, pf.theta, pf.weights, rng=pf.rng, max_points=10)
         protection_radius(pf.x, pf.y, pf.weights, est, pf.rng)
         tiny.visibility.row(1.0, 1.0)  # a cell's row unpacked (the fit check's, the narrator's)

@@ -215,6 +215,18 @@ def log_likelihood(
         x, y, theta: particle poses, shape (N,), metres and radians.
         grid: the map's visibility grid (used when ``config.visibility`` is on).
     """
+    return likelihood_with(_sensor_setup(semantic_map, config, grid), x, y, theta, obs)
+
+
+def likelihood_with(
+    setup: SensorSetup,
+    x: NDArray[np.float64],
+    y: NDArray[np.float64],
+    theta: NDArray[np.float64],
+    obs: Observation,
+) -> NDArray[np.float64]:
+    """:func:`log_likelihood` with the map's part of the kernel's arguments made once
+    (:func:`_sensor_setup`; a sensor model keeps it, app.localization.models)."""
     n = x.shape[0]
     out = np.zeros(n, dtype=np.float64)
     if obs.empty:
@@ -223,7 +235,7 @@ def log_likelihood(
         np.ascontiguousarray(x, dtype=np.float64),
         np.ascontiguousarray(y, dtype=np.float64),
         np.ascontiguousarray(theta, dtype=np.float64),
-        *_sensor_setup(semantic_map, config, grid),
+        *setup,
         obs.det_cos,
         obs.det_sin,
         obs.det_score,
@@ -482,9 +494,11 @@ def _window_search(
         step_m, step_rad = step_m / 2.0, step_rad / 2.0
 
 
-def _free_space_setup(
-    semantic_map: SemanticMap,
-) -> tuple[NDArray[np.bool_], tuple[float, float, float, float, float]]:
+#: The free space's arguments of the search kernels (:func:`_free_space_setup`).
+FreeSetup = tuple[NDArray[np.bool_], tuple[float, float, float, float, float]]
+
+
+def _free_space_setup(semantic_map: SemanticMap) -> FreeSetup:
     """The free-space mask flattened row-major, and its grid (origin x, origin y,
     1 / resolution, rows, cols) as floats, one compiled signature for every map: the
     numbers :meth:`~app.maps.freespace.FreeSpaceGrid.is_free` gives
@@ -512,17 +526,16 @@ def _searched(
     step_rad: float,
     rounds: int,
     window: ObservationWindow,
-    semantic_map: SemanticMap,
-    config: FilterConfig,
-    grid: VisibilityGrid | None,
+    free: FreeSetup,
+    setup: SensorSetup,
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
-    """One call of :func:`_window_search` on copies of the poses: (x, y, theta, score)."""
+    """One call of :func:`_window_search` on copies of the poses: (x, y, theta, score);
+    ``free`` and ``setup`` from :func:`_free_space_setup` and :func:`_sensor_setup`."""
     x, y, theta = (np.array(v, dtype=np.float64) for v in (x, y, theta))
     score = np.empty(x.shape[0])
     _window_search(
         x, y, theta, counts, jitter, np.ascontiguousarray(pattern, dtype=np.float64),
-        float(step_m), float(step_rad), int(rounds), *_free_space_setup(semantic_map),
-        window.arrays, _sensor_setup(semantic_map, config, grid), score,
+        float(step_m), float(step_rad), int(rounds), *free, window.arrays, setup, score,
     )  # fmt: skip
     return x, y, theta, score
 
@@ -538,6 +551,17 @@ def window_log_likelihood(
 ) -> NDArray[np.float64]:
     """Sum over the window's frames of log P(Z_f | pose ⊕ rel_f, M) (and the compass's
     log-likelihood where a frame has one), one compiled call, shape (N,)."""
+    return window_likelihood_with(_sensor_setup(semantic_map, config, grid), x, y, theta, window)
+
+
+def window_likelihood_with(
+    setup: SensorSetup,
+    x: NDArray[np.float64],
+    y: NDArray[np.float64],
+    theta: NDArray[np.float64],
+    window: ObservationWindow,
+) -> NDArray[np.float64]:
+    """:func:`window_log_likelihood` with :func:`_sensor_setup` made once."""
     out = np.zeros(x.shape[0], dtype=np.float64)
     if not window.frames or not x.shape[0]:
         return out
@@ -546,7 +570,7 @@ def window_log_likelihood(
         np.ascontiguousarray(x, dtype=np.float64),
         np.ascontiguousarray(y, dtype=np.float64),
         np.ascontiguousarray(theta, dtype=np.float64),
-        *arrays[:5], *_sensor_setup(semantic_map, config, grid), *arrays[5:], out,
+        *arrays[:5], *setup, *arrays[5:], out,
     )  # fmt: skip
     return out
 
@@ -571,13 +595,31 @@ def window_pattern_search(
     candidate in the free space if that beats its window score, keeps the larger
     score, and halves the steps (``step_m``, ``step_rad`` the first round's). The
     arithmetic is the numpy definition's,
-    :func:`app.localization.evidence.pattern_search_reference`, to the bit. Returns the
+    :func:`app.localization.search.pattern_search_reference`, to the bit. Returns the
     poses and their window scores, each shape (N,).
     """
-    return _searched(
-        x, y, theta, _NO_COUNTS, _NO_STEPS, pattern, step_m, step_rad, rounds,
-        window, semantic_map, config, grid,
+    return pattern_search_with(
+        _free_space_setup(semantic_map), _sensor_setup(semantic_map, config, grid),
+        x, y, theta, pattern, step_m, step_rad, rounds, window,
     )  # fmt: skip
+
+
+def pattern_search_with(
+    free: FreeSetup,
+    setup: SensorSetup,
+    x: NDArray[np.float64],
+    y: NDArray[np.float64],
+    theta: NDArray[np.float64],
+    pattern: NDArray[np.float64],
+    step_m: float,
+    step_rad: float,
+    rounds: int,
+    window: ObservationWindow,
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """:func:`window_pattern_search` with the map's setups made once."""
+    return _searched(
+        x, y, theta, _NO_COUNTS, _NO_STEPS, pattern, step_m, step_rad, rounds, window, free, setup
+    )
 
 
 def window_jitter_search(
@@ -597,9 +639,25 @@ def window_jitter_search(
     copies per pose: drawn beforehand, since they do not depend on the search. A copy
     replaces its pose when it lies in the free space and beats the pose's window score.
     The arithmetic is the numpy definition's,
-    :func:`app.localization.evidence.jitter_search_reference`, to the bit. Returns the
+    :func:`app.localization.search.jitter_search_reference`, to the bit. Returns the
     poses and their window scores, each shape (N,).
     """
+    return jitter_search_with(
+        _free_space_setup(semantic_map), _sensor_setup(semantic_map, config, grid),
+        x, y, theta, jitter, window,
+    )  # fmt: skip
+
+
+def jitter_search_with(
+    free: FreeSetup,
+    setup: SensorSetup,
+    x: NDArray[np.float64],
+    y: NDArray[np.float64],
+    theta: NDArray[np.float64],
+    jitter: Sequence[tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]],
+    window: ObservationWindow,
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """:func:`window_jitter_search` with the map's setups made once."""
     counts = np.array([ox.shape[1] for ox, _, _ in jitter], dtype=np.int64)
     offsets = np.empty((3, x.shape[0] * int(counts.sum())))
     start = 0
@@ -608,6 +666,4 @@ def window_jitter_search(
         for row, part in zip(offsets, round_offsets, strict=True):
             row[start : start + n] = part.reshape(-1)
         start += n
-    return _searched(
-        x, y, theta, counts, offsets, _NO_STEPS, 0.0, 0.0, 0, window, semantic_map, config, grid
-    )
+    return _searched(x, y, theta, counts, offsets, _NO_STEPS, 0.0, 0.0, 0, window, free, setup)

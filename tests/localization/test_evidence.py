@@ -10,18 +10,13 @@ import pytest
 
 from app.experiments.hard_maps import rotation_room
 from app.localization import sensor_kernel
+from app.localization.alternatives import DEFAULT_EVIDENCE, near, near_pairs
 from app.localization.compass import CompassReading, compass_log_likelihood, compass_terms
 from app.localization.config import FilterConfig
-from app.localization.evidence import (
-    DEFAULT_EVIDENCE,
-    PATTERN,
-    EvidenceTracker,
-    _near,
-    _near_pairs,
-    jitter_search_reference,
-    pattern_search_reference,
-)
+from app.localization.evidence import EvidenceTracker
 from app.localization.filter import ParticleFilter
+from app.localization.models import BearingSensorModel, OdometryMotionModel
+from app.localization.search import PATTERN, jitter_search_reference, pattern_search_reference
 from app.localization.sensor import log_likelihood_reference, prepare_observation
 from app.localization.tolerances import U64, candidate_flip_mask, log_likelihood_tolerance
 from app.localization.types import Hypothesis, Odometry
@@ -122,7 +117,8 @@ def search_windows(m: SemanticMap) -> list[EvidenceTracker]:
     for seed, (name, cfg, sim_changes) in enumerate(cases):
         sim = replace(paper_config("nominal", cfg.fov_deg), duration_s=4.0, **sim_changes)
         grid = m.visibility if cfg.visibility else None
-        tracker = EvidenceTracker(m, cfg, grid, np.random.default_rng(seed))
+        models = BearingSensorModel(m, cfg, grid), OdometryMotionModel(m, cfg)
+        tracker = EvidenceTracker(*models, np.random.default_rng(seed))
         frames = [] if name == "no frames" else simulate(m, sim, np.random.default_rng(seed))
         for f in frames[:12]:
             heading = None if f.compass_rad is None else CompassReading(f.compass_rad, 0.2)
@@ -177,7 +173,7 @@ def test_compiled_pattern_search_is_the_reference(paper_office: SemanticMap) -> 
             want = pattern_search_reference(x, y, t, pattern, *steps, *args)
             assert_same_numbers(got, want)
             if trial == 0:  # the polish is this search
-                assert_same_numbers(tracker._polished(x, y, t, window), want)
+                assert_same_numbers(tracker.finder.polished(x, y, t, window), want)
             moved += int(np.count_nonzero((got[0] != x) | (got[1] != y)))
             off_free += int(np.count_nonzero(~paper_office.free_space.is_free(x, y)))
     assert moved > 100 and off_free > 50  # the searches really moved, from everywhere
@@ -203,15 +199,15 @@ def test_compiled_jitter_search_is_the_reference(paper_office: SemanticMap) -> N
             got = sensor_kernel.window_jitter_search(x, y, t, jitter, *args)
             assert_same_numbers(got, jitter_search_reference(x, y, t, jitter, *args))
         rounds = ((16, 0.2, 0.1), (5, 0.05, 0.02))
-        tracker.rng = np.random.default_rng(13)
-        got = tracker._refined(x, y, t, rounds, window)
+        tracker.finder.rng = np.random.default_rng(13)
+        got = tracker.finder.refined(x, y, t, rounds, window)
         drawn = np.random.default_rng(13)
         jitter = [
             tuple(drawn.normal(0.0, std, (x.size, count)) for std in (s_m, s_m, s_rad))
             for count, s_m, s_rad in rounds
         ]
         assert_same_numbers(got, jitter_search_reference(x, y, t, jitter, *args))
-        assert tracker.rng.bit_generator.state == drawn.bit_generator.state
+        assert tracker.finder.rng.bit_generator.state == drawn.bit_generator.state
 
 
 def test_near_pairs_is_near_of_every_pose() -> None:
@@ -226,10 +222,10 @@ def test_near_pairs_is_near_of_every_pose() -> None:
     x[3], y[3], t[3] = x[2], y[2], t[2] + st.distinct_rad
     x[5], y[5], t[5] = x[4], y[4], np.pi - st.distinct_rad / 2
     t[4] = -np.pi + st.distinct_rad / 2
-    pairs = _near_pairs(x, y, t, st)
+    pairs = near_pairs(x, y, t, st)
     for i in range(x.size):
         h = Hypothesis(float(x[i]), float(y[i]), float(t[i]), 0.0)
-        assert np.array_equal(pairs[i], _near(x, y, t, h, st))
+        assert np.array_equal(pairs[i], near(x, y, t, h, st))
     assert 60 < np.count_nonzero(pairs) < 60 * 60  # some pairs near, most not
 
 
@@ -307,9 +303,9 @@ def test_paper_model_has_no_evidence_tracker(paper_office: SemanticMap) -> None:
 
 
 def test_the_trail_keeps_the_last_positions_in_order() -> None:
-    from app.localization.evidence import _Trail
+    from app.localization.alternatives import Trail
 
-    trail = _Trail(5)
+    trail = Trail(5)
     assert len(trail) == 0 and trail.points().shape == (0, 2)
     for k in range(23):  # past the point where the oldest are dropped
         trail.append(float(k), -float(k))

@@ -1,0 +1,187 @@
+"""The filter's sensor and motion models, as objects it is given.
+
+Beluga (Ekumen's Monte Carlo localization library) builds a particle filter from a
+motion model and a sensor model, each hiding its map, its noise and its arithmetic
+behind a few calls; the filter only moves, weighs, estimates and resamples. The same
+split here: :class:`~app.localization.filter.ParticleFilter` and
+:class:`~app.localization.evidence.EvidenceTracker` receive a :class:`SensorModel` and
+a :class:`MotionModel` (by default :class:`BearingSensorModel` and
+:class:`OdometryMotionModel`, built from the map and the :class:`FilterConfig`), and
+never call a compiled kernel with its long argument list themselves. The map's part of
+those arguments (visibility bits, field of view, range, free space, walls) is made
+once, when the model is built, instead of at every call.
+
+Another detector (a model for a depth camera, say) or another odometry (one that
+estimates its own scale) is another class with the same methods, handed to the filter.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Protocol
+
+import numpy as np
+from numpy.typing import NDArray
+
+from app.localization import sensor_kernel
+from app.localization.config import FilterConfig
+from app.localization.motion import penalized, sample_motion
+from app.localization.recovery import sample_from_observation
+from app.localization.sensor import Observation, prepare_observation
+from app.localization.sensor_kernel import ObservationWindow
+from app.localization.types import Detection, Odometry
+from app.maps.model import SemanticMap
+from app.maps.visibility import VisibilityGrid
+
+Array = NDArray[np.float64]
+Poses = tuple[Array, Array, Array]
+#: Poses with their window scores: x, y, theta, score.
+ScoredPoses = tuple[Array, Array, Array, Array]
+#: Per round of a jitter search, the offsets in x, y and heading, each shape (N, K).
+Jitter = Sequence[tuple[Array, Array, Array]]
+
+
+class SensorModel(Protocol):
+    """What the filter asks of a sensor model: how likely each pose makes what was seen."""
+
+    semantic_map: SemanticMap
+    config: FilterConfig
+    grid: VisibilityGrid | None
+
+    def observe(self, detections: Sequence[Detection]) -> Observation:
+        """This frame's detections in the form the other methods read (may be empty)."""
+        ...
+
+    def log_likelihood(self, x: Array, y: Array, theta: Array, obs: Observation) -> Array:
+        """log P(Z | pose, M) for every pose, shape (N,)."""
+        ...
+
+    def window_log_likelihood(
+        self, x: Array, y: Array, theta: Array, window: ObservationWindow
+    ) -> Array:
+        """Sum of log P over a window of recent frames, the poses chained back, shape (N,)."""
+        ...
+
+    def pattern_search(
+        self,
+        x: Array,
+        y: Array,
+        theta: Array,
+        pattern: Array,
+        step_m: float,
+        step_rad: float,
+        rounds: int,
+        window: ObservationWindow,
+    ) -> ScoredPoses:
+        """Each pose polished onto the window by a pattern search (halving steps)."""
+        ...
+
+    def jitter_search(
+        self, x: Array, y: Array, theta: Array, jitter: Jitter, window: ObservationWindow
+    ) -> ScoredPoses:
+        """Each pose moved to the best of its jittered copies over the window."""
+        ...
+
+    def sample_poses(self, n: int, obs: Observation, rng: np.random.Generator) -> Poses:
+        """``n`` poses that explain one of the frame's detections each (obs not empty)."""
+        ...
+
+
+class MotionModel(Protocol):
+    """What the filter asks of a motion model: where each pose goes, and whether it can."""
+
+    def sample(
+        self,
+        x: Array,
+        y: Array,
+        theta: Array,
+        odometry: Odometry | None,
+        rng: np.random.Generator,
+        out: Array | None = None,
+    ) -> Poses:
+        """New poses after one noisy step of ``odometry`` (None: unknown motion)."""
+        ...
+
+    def weigh_moves(
+        self, x0: Array, y0: Array, x1: Array, y1: Array, log_w: Array
+    ) -> tuple[Array, bool]:
+        """``log_w`` with every impossible move (through a wall, off the free space) at
+        -inf, and whether any weight is left."""
+        ...
+
+
+class BearingSensorModel:
+    """The bearing-only semantic sensor model (paper, eq. 3, with this project's
+    extensions: clutter floor, visibility, field of view, detector classes), run by the
+    compiled kernels of :mod:`~app.localization.sensor_kernel`."""
+
+    def __init__(
+        self, semantic_map: SemanticMap, config: FilterConfig, grid: VisibilityGrid | None
+    ) -> None:
+        self.semantic_map = semantic_map
+        self.config = config
+        self.grid = grid
+        self._setup = sensor_kernel._sensor_setup(semantic_map, config, grid)
+        self._free = sensor_kernel._free_space_setup(semantic_map)
+        self._seed_std_rad = config.bearing_std_rad("")
+
+    def observe(self, detections: Sequence[Detection]) -> Observation:
+        return prepare_observation(detections, self.semantic_map, self.config)
+
+    def log_likelihood(self, x: Array, y: Array, theta: Array, obs: Observation) -> Array:
+        return sensor_kernel.likelihood_with(self._setup, x, y, theta, obs)
+
+    def window_log_likelihood(
+        self, x: Array, y: Array, theta: Array, window: ObservationWindow
+    ) -> Array:
+        return sensor_kernel.window_likelihood_with(self._setup, x, y, theta, window)
+
+    def pattern_search(
+        self,
+        x: Array,
+        y: Array,
+        theta: Array,
+        pattern: Array,
+        step_m: float,
+        step_rad: float,
+        rounds: int,
+        window: ObservationWindow,
+    ) -> ScoredPoses:
+        return sensor_kernel.pattern_search_with(
+            self._free, self._setup, x, y, theta, pattern, step_m, step_rad, rounds, window
+        )
+
+    def jitter_search(
+        self, x: Array, y: Array, theta: Array, jitter: Jitter, window: ObservationWindow
+    ) -> ScoredPoses:
+        free, setup = self._free, self._setup
+        return sensor_kernel.jitter_search_with(free, setup, x, y, theta, jitter, window)
+
+    def sample_poses(self, n: int, obs: Observation, rng: np.random.Generator) -> Poses:
+        return sample_from_observation(n, obs, self.semantic_map, rng, self._seed_std_rad)
+
+
+class OdometryMotionModel:
+    """Body-frame odometry with noise growing with the motion
+    (:mod:`~app.localization.motion`); moves through walls or off the free space are
+    impossible."""
+
+    def __init__(self, semantic_map: SemanticMap, config: FilterConfig) -> None:
+        self.semantic_map = semantic_map
+        self.config = config
+
+    def sample(
+        self,
+        x: Array,
+        y: Array,
+        theta: Array,
+        odometry: Odometry | None,
+        rng: np.random.Generator,
+        out: Array | None = None,
+    ) -> Poses:
+        return sample_motion(x, y, theta, odometry, self.config, rng, out=out)
+
+    def weigh_moves(
+        self, x0: Array, y0: Array, x1: Array, y1: Array, log_w: Array
+    ) -> tuple[Array, bool]:
+        return penalized(x0, y0, x1, y1, self.semantic_map, log_w)
