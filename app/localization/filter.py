@@ -139,7 +139,9 @@ class ParticleFilter:
         #: What systematic bearing errors can do to the fix (:mod:`~app.localization.dilution`).
         self.geometry = BearingGeometry(semantic_map, self.config)
         #: Whether the estimate keeps to the odometry (:mod:`~app.localization.slide`).
-        self.odometry_check = OdometryCheck()
+        self.odometry_check = OdometryCheck(
+            self.config.trans_noise_frac, self.config.heading_slack_deg
+        )
         if state is None:
             self.reset(initial_pose)
         else:  # from a checkpoint (:meth:`checkpoint`): no cloud to draw first

@@ -36,6 +36,11 @@ SLIDE_FRAMES = 25
 #: The youngest estimate compared with (2 s at 5 Hz): a cloud that converged a metre
 #: off and is being dragged further shows within seconds of converging.
 MIN_FRAMES = 10
+#: How far the heading of the estimate compared with may be off (degrees), at least: a
+#: latency of up to 0.3 s the app does not report while turning at 30 deg/s. A filter
+#: that allows its heading more slack (``FilterConfig.heading_slack_deg``: a real
+#: detector's latency while turning, the hand's sway) allows this check as much.
+HEADING_TOLERANCE_DEG = 10.0
 
 Pose = tuple[float, float, float]
 
@@ -48,9 +53,17 @@ def _compose(a: Pose, forward: float, left: float, turn: float) -> Pose:
 
 
 class OdometryCheck:
-    """The recent converged estimates with the dead reckoning at each (module docstring)."""
+    """The recent converged estimates with the dead reckoning at each (module docstring).
 
-    def __init__(self) -> None:
+    ``scale_tolerance``: how far off the odometry's scale may be, a share of the
+    distance walked (the motion model's translation noise share for the odometry's
+    source: 0.15 at PDR grade, 0.1 otherwise); ``heading_tolerance_deg``: how far off the
+    heading of the estimate compared with may be (at least ``HEADING_TOLERANCE_DEG``).
+    """
+
+    def __init__(self, scale_tolerance: float = 0.1, heading_tolerance_deg: float = 0.0) -> None:
+        self.scale_tolerance = scale_tolerance
+        self.heading_tolerance_rad = math.radians(max(HEADING_TOLERANCE_DEG, heading_tolerance_deg))
         self.reset()
 
     def reset(self) -> None:
@@ -67,9 +80,18 @@ class OdometryCheck:
         )
 
     def slide_m(self, x: float, y: float) -> float:
-        """How far (x, y) lies from the oldest converged estimate of the last
-        ``SLIDE_FRAMES`` frames, at least ``MIN_FRAMES`` old, carried forward by the
-        odometry since (m); 0 without such an estimate."""
+        """How far (x, y) lies from where the odometry carries the oldest converged
+        estimate of the last ``SLIDE_FRAMES`` frames (at least ``MIN_FRAMES`` old), m;
+        0 without such an estimate.
+
+        Neither end is exact: that estimate's heading may be off by a few degrees (a
+        latency the app does not report, a turn), which swings the carried position
+        sideways by the distance walked times the error, and the odometry's scale is off
+        by up to ``scale_tolerance`` of it (PDR grade). Neither is a slide, so the
+        carried position is the whole band of them: walked distances within
+        ``scale_tolerance`` of the odometry's, turned by up to ``heading_tolerance_rad``.
+        The slide is the distance from (x, y) to that band.
+        """
         old_enough = len(self._past) - MIN_FRAMES + 1
         anchors = (i for i in range(old_enough) if self._past[i][1] is not None)
         first = next(anchors, None)
@@ -77,13 +99,21 @@ class OdometryCheck:
             return 0.0
         reckoned_then, estimate_then = self._past[first]
         assert estimate_then is not None
-        # The dead reckoning's motion since then, in its pose then, applied to the estimate then.
+        # The dead reckoning's motion since then, in its own pose then ...
         rx, ry, rt = reckoned_then
         dx, dy = self._reckoned[0] - rx, self._reckoned[1] - ry
         c, s = math.cos(rt), math.sin(rt)
         forward, left = c * dx + s * dy, -s * dx + c * dy
-        px, py, _ = _compose(estimate_then, forward, left, 0.0)
-        return math.hypot(x - px, y - py)
+        # ... and where the estimate lies relative to the estimate then, in its heading.
+        ex, ey, et = estimate_then
+        c, s = math.cos(et), math.sin(et)
+        px, py = x - ex, y - ey
+        return _distance_to_band(
+            (c * px + s * py, -s * px + c * py),
+            (forward, left),
+            self.scale_tolerance,
+            self.heading_tolerance_rad,
+        )
 
     def add(self, x: float, y: float, theta: float, converged: bool) -> None:
         """Record this frame's estimate (kept as an anchor only when converged)."""
@@ -104,3 +134,28 @@ class OdometryCheck:
 
 def _pose(value: Any) -> Pose:
     return (float(value[0]), float(value[1]), float(value[2]))
+
+
+def _distance_to_band(
+    point: tuple[float, float],
+    motion: tuple[float, float],
+    scale_tolerance: float,
+    heading_tolerance_rad: float,
+) -> float:
+    """Distance from ``point`` to the band of places ``motion`` (forward, left) leads to
+    from the origin with its length off by up to ``scale_tolerance`` of it and its
+    direction by up to ``heading_tolerance_rad``: a sector of an annulus."""
+    length = math.hypot(*motion)
+    near, far = length * (1.0 - scale_tolerance), length * (1.0 + scale_tolerance)
+    radius = math.hypot(*point)
+    if length == 0.0 or radius == 0.0:
+        return max(0.0, radius - far, near - radius)
+    off = math.atan2(point[1], point[0]) - math.atan2(motion[1], motion[0])
+    off = (off + math.pi) % (2.0 * math.pi) - math.pi
+    if abs(off) <= heading_tolerance_rad:
+        return max(0.0, radius - far, near - radius)
+    # Outside the sector: the nearest point is on its nearer straight edge.
+    edge = math.atan2(motion[1], motion[0]) + math.copysign(heading_tolerance_rad, off)
+    ux, uy = math.cos(edge), math.sin(edge)
+    along = min(max(point[0] * ux + point[1] * uy, near), far)
+    return math.hypot(point[0] - along * ux, point[1] - along * uy)

@@ -32,12 +32,32 @@ def test_an_estimate_that_keeps_to_the_odometry_does_not_slide() -> None:
 
 
 def test_a_dragged_estimate_slides_by_the_drag_since_the_oldest_anchor() -> None:
-    check = OdometryCheck()
+    check = OdometryCheck(scale_tolerance=0.0)
     x, y = _walk(check, SLIDE_FRAMES, 0.03)
     check.moved(STEP)
     # The oldest anchor is SLIDE_FRAMES frames back; the drag since then is 0.03 a frame
     # for the frames after it, and the estimate now lags by 0.03 more.
     assert check.slide_m(x, y + 0.07) == pytest.approx(0.03 * SLIDE_FRAMES, abs=1e-9)
+
+
+def test_the_odometry_scale_and_the_anchor_heading_may_be_off() -> None:
+    """A lag within the odometry's scale tolerance, or a swing sideways within the
+    anchor's heading tolerance, is no slide; beyond them, the excess is."""
+    walked = 0.1 * SLIDE_FRAMES  # from the oldest anchor to now
+    check = OdometryCheck(scale_tolerance=0.1)
+    x, y = _walk(check, SLIDE_FRAMES, 0.03)
+    check.moved(STEP)
+    lag = 0.03 * SLIDE_FRAMES
+    assert check.slide_m(x, y + 0.07) == pytest.approx(lag - 0.1 * walked, abs=1e-9)
+    check = OdometryCheck(scale_tolerance=0.1)
+    x, y = _walk(check, SLIDE_FRAMES, 0.0)
+    check.moved(STEP)
+    anchor_y = y + 0.1 - walked
+    for turn_deg, slid in ((8.0, 0.0), (-8.0, 0.0), (30.0, walked * math.sin(math.radians(20.0)))):
+        # The estimate now where the walk, turned by turn_deg at the anchor, leads.
+        t = math.radians(turn_deg)
+        now = (x - walked * math.sin(t), anchor_y + walked * math.cos(t))
+        assert check.slide_m(*now) == pytest.approx(slid, abs=1e-9)
 
 
 def test_no_anchor_younger_than_min_frames_and_none_after_a_reset() -> None:
