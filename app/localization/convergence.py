@@ -5,10 +5,12 @@ cluster is tight and heavy, has stayed put for a few frames, explains the detect
 global search has run since it formed (or a tight known start rules other places out)
 and the alternatives it found are improbable; held until the cluster spreads, lightens
 or jumps, the detections stop fitting, an object in clear view keeps going unreported,
-the odometry breaks off, dead reckoning lasts too long, or an alternative gains
-probability. :func:`protection_radius` is the radius around the pose that holds the
-truth with 99 % probability under the whole belief (the filter also bounds it below by
-what systematic bearing errors can do, :mod:`~app.localization.dilution`).
+the odometry breaks off, dead reckoning lasts too long, an alternative gains
+probability, or the estimate slides away from where the odometry carries it
+(:mod:`~app.localization.slide`). :func:`protection_radius` is the radius around the
+pose that holds the truth with 99 % probability under the whole belief (the filter also
+bounds it below by what systematic bearing errors can do,
+:mod:`~app.localization.dilution`).
 """
 
 from __future__ import annotations
@@ -57,8 +59,10 @@ class ConvergenceGate:
     :mod:`~app.localization.unseen`), detections arrived in the last
     ``gain_without_evidence`` frames, the recent bearings' geometry pins the fix within
     ``gain_geometry_m`` (:mod:`~app.localization.dilution`), a global consistency search
-    has run since the cluster formed, and the alternatives it found hold at most
-    ``gain_alternatives`` of the probability (:mod:`~app.localization.evidence`).
+    has run since the cluster formed, the alternatives it found hold at most
+    ``gain_alternatives`` of the probability (:mod:`~app.localization.evidence`), and
+    the estimate has not slid more than ``hold_slide_m`` from a recent converged one
+    carried by the odometry (:mod:`~app.localization.slide`).
 
     **Held** while the cluster stays reasonably heavy and tight (``hold_*``), does not
     jump, still explains the detections (looser ``hold_fit`` and ``hold_unexplained``,
@@ -66,10 +70,11 @@ class ConvergenceGate:
     unreported), dead reckoning has not lasted longer
     than ``hold_without_evidence`` frames, the odometry has not broken off (a frame
     without it after frames with it: the person may have been carried anywhere), the
-    geometry still pins the fix within ``hold_geometry_m``, and
+    geometry still pins the fix within ``hold_geometry_m``,
     the alternatives stay below ``hold_alternatives`` (counting those that survived
-    their probation). Only frames with detections count towards a light cluster
-    (frames without any leave freshly injected particles unweighed). A false detection
+    their probation), and the estimate does not slide more than ``hold_slide_m``. Only
+    frames with detections count towards a light cluster (frames without any leave
+    freshly injected particles unweighed). A false detection
     explained by clutter does not count against the estimate; a kidnap, a pose
     drifting away from the evidence, or an alternative place gaining probability does.
     """
@@ -95,6 +100,11 @@ class ConvergenceGate:
     #: Frames in a row the cluster may stay lighter than ``hold_mass`` (a frame with a
     #: single detection can lend freshly injected particles a passing share).
     hold_light_frames: int = 3
+    #: How far (m) the estimate may lie from a converged one a few seconds ago carried by
+    #: the odometry (:mod:`~app.localization.slide`): 0.5 m, half the error the
+    #: integrity suite calls wrong. Drags by a moved object measured 0.5-0.9 m over
+    #: 5 s, converged estimates within 0.5 m of the truth rarely more than 0.5 m.
+    hold_slide_m: float = 0.5
 
     def __init__(
         self, frames: int = 5, tolerance_m: float = 0.3, tolerance_rad: float = np.radians(15.0)
@@ -139,6 +149,7 @@ class ConvergenceGate:
         confirmed_alternatives: float | None = None,
         evidence_frame: bool = True,
         geometry_m: float = 0.0,
+        slide_m: float = 0.0,
     ) -> Estimate:
         """``raw`` with ``converged`` decided by the rules above."""
         last = self._last
@@ -167,6 +178,7 @@ class ConvergenceGate:
                 "alternative": against > self.hold_alternatives,
                 "odometry lost": motion_lost,
                 "weak geometry": geometry_m > self.hold_geometry_m,
+                "slide": slide_m > self.hold_slide_m,
             }
             self._held = not any(reasons.values())
             if not self._held:
@@ -182,6 +194,7 @@ class ConvergenceGate:
             and not quality.contradicted
             and frames_without_evidence <= self.gain_without_evidence
             and geometry_m <= self.gain_geometry_m
+            and slide_m <= self.hold_slide_m
         )
         steady = (
             raw.converged

@@ -44,6 +44,7 @@ from app.localization.resampling import (
 )
 from app.localization.search import PATTERN
 from app.localization.sensor import Observation, normalized_residuals, prepare_observation
+from app.localization.slide import OdometryCheck
 from app.localization.types import Detection, Estimate, InitialPose, Odometry
 from app.localization.unseen import UnseenObjects
 from app.maps.geometry import wrap_angle
@@ -137,6 +138,10 @@ class ParticleFilter:
         self.capture = CaptureClock()
         #: What systematic bearing errors can do to the fix (:mod:`~app.localization.dilution`).
         self.geometry = BearingGeometry(semantic_map, self.config)
+        #: Whether the estimate keeps to the odometry (:mod:`~app.localization.slide`).
+        self.odometry_check = OdometryCheck(
+            self.config.trans_noise_frac, self.config.heading_slack_deg
+        )
         if state is None:
             self.reset(initial_pose)
         else:  # from a checkpoint (:meth:`checkpoint`): no cloud to draw first
@@ -157,6 +162,7 @@ class ParticleFilter:
         self.log_w = np.zeros(n, dtype=np.float64)
         self.capture.reset()
         self.geometry.reset()
+        self.odometry_check.reset()
         if initial_pose is not None:
             start = (initial_pose.x, initial_pose.y, initial_pose.theta_rad)
             self.geometry.set_prior(start, initial_pose.std_xy_m)
@@ -224,6 +230,7 @@ class ParticleFilter:
         self._recovery.reset()
         self._gate.reset()
         self.geometry.reset()
+        self.odometry_check.reset()
         if self.evidence is not None:
             self.evidence.reset()
         if self.unseen is not None:
@@ -353,6 +360,9 @@ class ParticleFilter:
         self.predict(odometry)
         if odometry is not None:
             self.geometry.moved(odometry)
+            self.odometry_check.moved(odometry)
+        else:  # the person may have been carried anywhere: nothing to compare with
+            self.odometry_check.reset()
         if self.floors is not None:
             self.x, self.log_w, contradicted = self.floors.apply(
                 self.x, self.y, self.log_w, altitude, self.rng
@@ -362,6 +372,7 @@ class ParticleFilter:
             elif self.floors.changed:
                 # The fix the bearings' geometry gave rides along with the person.
                 self.geometry.shift_x(self.floors.shift_x_m)
+                self.odometry_check.reset()  # the ride is no walk the odometry saw
                 if self.evidence is not None:
                     # The alternatives were carried by the walk's odometry, not the ride:
                     # none of them rode along. The next search looks afresh.
@@ -403,9 +414,11 @@ class ParticleFilter:
             confirmed_alternatives=confirmed,
             evidence_frame=self.frames_without_evidence == 0,
             geometry_m=(fix_m := self.geometry.radius_m(raw.x, raw.y, raw.theta_rad)),
+            slide_m=self.odometry_check.slide_m(raw.x, raw.y),
         )
         if est.converged and transit:
             est = est.with_converged(False)
+        self.odometry_check.add(raw.x, raw.y, raw.theta_rad, est.converged)
         if self.evidence is not None:
             est = with_alternatives(est, self.evidence.hypotheses(), share)
         if est.converged:
@@ -450,6 +463,7 @@ class ParticleFilter:
         self.log_w = np.zeros(self.n)
         self._gate.reset()
         self.geometry.clear_frames()
+        self.odometry_check.reset()
         self.quality = None
         w = self.weights
         ess = effective_sample_size(w)
@@ -503,6 +517,7 @@ class ParticleFilter:
             "estimate": self.estimate,
             "capture": self.capture.checkpoint(),
             "geometry": self.geometry.checkpoint(),
+            "odometry_check": self.odometry_check.checkpoint(),
         }
         if self.floors is not None:  # maps with several levels only
             state["floors"] = self.floors.checkpoint()
@@ -536,6 +551,7 @@ class ParticleFilter:
         self.estimate = from_plain(Estimate, state["estimate"])
         self.capture.restore(state.get("capture"))
         self.geometry.restore(state.get("geometry"))
+        self.odometry_check.restore(state.get("odometry_check"))
         self.last_observation = None
 
     def _update_fit(self, raw: Estimate) -> None:

@@ -1,0 +1,161 @@
+"""Whether the estimate keeps to the odometry: a cloud dragged off by a stale map.
+
+An object moved since the map was drawn (a table 1.3 m from where the map has it) is
+detected every frame where the map says nothing is. At the true pose each of its
+detections costs the clutter floor; a pose a metre off explains it, at the price of
+a few degrees on the objects that did not move. Frame after frame the second is about
+as likely as the first, and the cloud, whose motion noise lets it slip a few
+centimetres a frame, slides towards it: measured on the phone suite's stale maps, the
+estimate fell 0.6-0.9 m behind the odometry over 5 s of walking while the cloud stayed
+a few centimetres wide, every detection looked explained, and the gate said
+"converged" a metre off (docs/results/phone.md). The fit at one frame cannot tell:
+from the dragged pose the moved object fits and the others are a little off.
+
+The odometry can tell. Over a few seconds it is good to centimetres at VIO grade and
+to a tenth of the distance at PDR grade, and it does not know the map. So the check
+keeps the converged estimates of the last ``SLIDE_FRAMES`` frames with the odometry's
+dead reckoning at each, and measures how far the estimate now lies from the oldest of
+them (at least ``MIN_FRAMES`` old) carried forward by the odometry since: the *slide*. A
+converged estimate that slid more than the gate allows (:class:`~app.localization.
+convergence.ConvergenceGate`, ``hold_slide_m``) is not one to tell a person: either
+it, or the one before, was wrong by about that much.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from typing import Any
+
+from app.localization.types import Odometry
+
+#: Frames between the estimate compared and the one it is compared with (5 s at 5 Hz:
+#: long enough for a drag of a few centimetres a frame to add up, short enough for the
+#: odometry's drift to stay small).
+SLIDE_FRAMES = 25
+#: The youngest estimate compared with (2 s at 5 Hz): a cloud that converged a metre
+#: off and is being dragged further shows within seconds of converging.
+MIN_FRAMES = 10
+#: How far the heading of the estimate compared with may be off (degrees), at least: a
+#: latency of up to 0.3 s the app does not report while turning at 30 deg/s. A filter
+#: that allows its heading more slack (``FilterConfig.heading_slack_deg``: a real
+#: detector's latency while turning, the hand's sway) allows this check as much.
+HEADING_TOLERANCE_DEG = 10.0
+
+Pose = tuple[float, float, float]
+
+
+def _compose(a: Pose, forward: float, left: float, turn: float) -> Pose:
+    """Pose ``a`` moved by ``forward``, ``left`` (in its own frame) and turned by ``turn``."""
+    x, y, t = a
+    c, s = math.cos(t), math.sin(t)
+    return (x + c * forward - s * left, y + s * forward + c * left, t + turn)
+
+
+class OdometryCheck:
+    """The recent converged estimates with the dead reckoning at each (module docstring).
+
+    ``scale_tolerance``: how far off the odometry's scale may be, a share of the
+    distance walked (the motion model's translation noise share for the odometry's
+    source: 0.15 at PDR grade, 0.1 otherwise); ``heading_tolerance_deg``: how far off the
+    heading of the estimate compared with may be (at least ``HEADING_TOLERANCE_DEG``).
+    """
+
+    def __init__(self, scale_tolerance: float = 0.1, heading_tolerance_deg: float = 0.0) -> None:
+        self.scale_tolerance = scale_tolerance
+        self.heading_tolerance_rad = math.radians(max(HEADING_TOLERANCE_DEG, heading_tolerance_deg))
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the history (odometry lost, the belief started over or moved elsewhere)."""
+        #: Dead reckoning: the odometry composed since the last reset.
+        self._reckoned: Pose = (0.0, 0.0, 0.0)
+        #: Per frame: the dead reckoning then, and the converged estimate (None if not).
+        self._past: deque[tuple[Pose, Pose | None]] = deque(maxlen=SLIDE_FRAMES)
+
+    def moved(self, odometry: Odometry) -> None:
+        """The person moved by ``odometry``."""
+        self._reckoned = _compose(
+            self._reckoned, odometry.forward_m, odometry.left_m, odometry.turn_rad
+        )
+
+    def slide_m(self, x: float, y: float) -> float:
+        """How far (x, y) lies from where the odometry carries the oldest converged
+        estimate of the last ``SLIDE_FRAMES`` frames (at least ``MIN_FRAMES`` old), m;
+        0 without such an estimate.
+
+        Neither end is exact: that estimate's heading may be off by a few degrees (a
+        latency the app does not report, a turn), which swings the carried position
+        sideways by the distance walked times the error, and the odometry's scale is off
+        by up to ``scale_tolerance`` of it (PDR grade). Neither is a slide, so the
+        carried position is the whole band of them: walked distances within
+        ``scale_tolerance`` of the odometry's, turned by up to ``heading_tolerance_rad``.
+        The slide is the distance from (x, y) to that band.
+        """
+        old_enough = len(self._past) - MIN_FRAMES + 1
+        anchors = (i for i in range(old_enough) if self._past[i][1] is not None)
+        first = next(anchors, None)
+        if first is None:
+            return 0.0
+        reckoned_then, estimate_then = self._past[first]
+        assert estimate_then is not None
+        # The dead reckoning's motion since then, in its own pose then ...
+        rx, ry, rt = reckoned_then
+        dx, dy = self._reckoned[0] - rx, self._reckoned[1] - ry
+        c, s = math.cos(rt), math.sin(rt)
+        forward, left = c * dx + s * dy, -s * dx + c * dy
+        # ... and where the estimate lies relative to the estimate then, in its heading.
+        ex, ey, et = estimate_then
+        c, s = math.cos(et), math.sin(et)
+        px, py = x - ex, y - ey
+        return _distance_to_band(
+            (c * px + s * py, -s * px + c * py),
+            (forward, left),
+            self.scale_tolerance,
+            self.heading_tolerance_rad,
+        )
+
+    def add(self, x: float, y: float, theta: float, converged: bool) -> None:
+        """Record this frame's estimate (kept as an anchor only when converged)."""
+        self._past.append((self._reckoned, (x, y, theta) if converged else None))
+
+    def checkpoint(self) -> dict[str, Any]:
+        return {"reckoned": self._reckoned, "past": list(self._past)}
+
+    def restore(self, state: Any) -> None:
+        """From :meth:`checkpoint` (None: a checkpoint from before it existed)."""
+        self.reset()
+        if state is None:
+            return
+        self._reckoned = _pose(state["reckoned"])
+        for reckoned, estimate in state["past"]:
+            self._past.append((_pose(reckoned), None if estimate is None else _pose(estimate)))
+
+
+def _pose(value: Any) -> Pose:
+    return (float(value[0]), float(value[1]), float(value[2]))
+
+
+def _distance_to_band(
+    point: tuple[float, float],
+    motion: tuple[float, float],
+    scale_tolerance: float,
+    heading_tolerance_rad: float,
+) -> float:
+    """Distance from ``point`` to the band of places ``motion`` (forward, left) leads to
+    from the origin with its length off by up to ``scale_tolerance`` of it and its
+    direction by up to ``heading_tolerance_rad``: a sector of an annulus."""
+    length = math.hypot(*motion)
+    near, far = length * (1.0 - scale_tolerance), length * (1.0 + scale_tolerance)
+    radius = math.hypot(*point)
+    if length == 0.0 or radius == 0.0:
+        return max(0.0, radius - far, near - radius)
+    off = math.atan2(point[1], point[0]) - math.atan2(motion[1], motion[0])
+    off = (off + math.pi) % (2.0 * math.pi) - math.pi
+    if abs(off) <= heading_tolerance_rad:
+        return max(0.0, radius - far, near - radius)
+    # Outside the sector: the nearest point is on its nearer straight edge.
+    edge = math.atan2(motion[1], motion[0]) + math.copysign(heading_tolerance_rad, off)
+    ux, uy = math.cos(edge), math.sin(edge)
+    along = min(max(point[0] * ux + point[1] * uy, near), far)
+    return math.hypot(point[0] - along * ux, point[1] - along * uy)

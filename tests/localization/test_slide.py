@@ -1,0 +1,96 @@
+"""The odometry check: how far the estimate slid from where the odometry carries it."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from app.localization.convergence import ConvergenceGate, FitQuality
+from app.localization.slide import MIN_FRAMES, SLIDE_FRAMES, OdometryCheck
+from app.localization.types import Estimate, Hypothesis, Odometry
+
+STEP = Odometry(0.1, 0.0, 0.0)
+
+
+def _walk(check: OdometryCheck, frames: int, lag_per_frame: float) -> tuple[float, float]:
+    """Walk north at 0.1 m a frame from (2, 1), facing north, the estimate falling behind
+    by ``lag_per_frame`` a frame; returns the last estimate."""
+    x, y = 2.0, 1.0
+    for _ in range(frames):
+        check.moved(STEP)
+        y += 0.1 - lag_per_frame
+        check.add(x, y, math.pi / 2, converged=True)
+    return x, y
+
+
+def test_an_estimate_that_keeps_to_the_odometry_does_not_slide() -> None:
+    check = OdometryCheck()
+    x, y = _walk(check, SLIDE_FRAMES, 0.0)
+    check.moved(STEP)
+    assert check.slide_m(x, y + 0.1) == pytest.approx(0.0, abs=1e-12)
+
+
+def test_a_dragged_estimate_slides_by_the_drag_since_the_oldest_anchor() -> None:
+    check = OdometryCheck(scale_tolerance=0.0)
+    x, y = _walk(check, SLIDE_FRAMES, 0.03)
+    check.moved(STEP)
+    # The oldest anchor is SLIDE_FRAMES frames back; the drag since then is 0.03 a frame
+    # for the frames after it, and the estimate now lags by 0.03 more.
+    assert check.slide_m(x, y + 0.07) == pytest.approx(0.03 * SLIDE_FRAMES, abs=1e-9)
+
+
+def test_the_odometry_scale_and_the_anchor_heading_may_be_off() -> None:
+    """A lag within the odometry's scale tolerance, or a swing sideways within the
+    anchor's heading tolerance, is no slide; beyond them, the excess is."""
+    walked = 0.1 * SLIDE_FRAMES  # from the oldest anchor to now
+    check = OdometryCheck(scale_tolerance=0.1)
+    x, y = _walk(check, SLIDE_FRAMES, 0.03)
+    check.moved(STEP)
+    lag = 0.03 * SLIDE_FRAMES
+    assert check.slide_m(x, y + 0.07) == pytest.approx(lag - 0.1 * walked, abs=1e-9)
+    check = OdometryCheck(scale_tolerance=0.1)
+    x, y = _walk(check, SLIDE_FRAMES, 0.0)
+    check.moved(STEP)
+    anchor_y = y + 0.1 - walked
+    for turn_deg, slid in ((8.0, 0.0), (-8.0, 0.0), (30.0, walked * math.sin(math.radians(20.0)))):
+        # The estimate now where the walk, turned by turn_deg at the anchor, leads.
+        t = math.radians(turn_deg)
+        now = (x - walked * math.sin(t), anchor_y + walked * math.cos(t))
+        assert check.slide_m(*now) == pytest.approx(slid, abs=1e-9)
+
+
+def test_no_anchor_younger_than_min_frames_and_none_after_a_reset() -> None:
+    check = OdometryCheck()
+    x, y = _walk(check, MIN_FRAMES - 1, 0.05)
+    assert check.slide_m(x, y + 5.0) == 0.0
+    check.reset()
+    assert check.slide_m(x, y + 5.0) == 0.0
+
+
+def test_checkpoint_round_trip_keeps_the_slide() -> None:
+    check = OdometryCheck()
+    x, y = _walk(check, SLIDE_FRAMES, 0.02)
+    copy = OdometryCheck()
+    copy.restore(check.checkpoint())
+    assert copy.slide_m(x, y) == check.slide_m(x, y) > 0.0
+    copy.restore(None)
+    assert copy.slide_m(x, y) == 0.0
+
+
+def _estimate() -> Estimate:
+    top = Hypothesis(0.0, 0.0, 0.0, 0.9, 0.05)
+    return Estimate(0.0, 0.0, 0.0, 0.05, 0.05, 0.01, True, (top,))
+
+
+def test_the_gate_lets_go_of_a_sliding_estimate_and_does_not_take_it() -> None:
+    gate = ConvergenceGate()
+    fit = FitQuality(0.5, 0.0)
+    for _ in range(gate.frames + 1):
+        est = gate.confirm(_estimate(), quality=fit, searched_ago=0)
+    assert est.converged
+    est = gate.confirm(_estimate(), quality=fit, searched_ago=0, slide_m=gate.hold_slide_m + 0.1)
+    assert not est.converged and gate.lost_because == ("slide",)
+    for _ in range(gate.frames + 1):
+        est = gate.confirm(_estimate(), quality=fit, searched_ago=0, slide_m=1.0)
+    assert not est.converged
