@@ -112,7 +112,7 @@ class ConvergenceGate:
     #: ``hold_unexplained`` before ``converged`` is given up (1 s at 5 frames/s).
     hold_misfit_frames: int = 5
     #: Frames with detections free of an unseen-object contradiction that gaining
-    #: ``converged`` takes after one (5 s at 5 frames/s; no wait before the first).
+    #: ``converged`` again takes once one has taken it away (5 s at 5 frames/s).
     regain_after_unseen_frames: int = 25
 
     def __init__(
@@ -129,7 +129,8 @@ class ConvergenceGate:
         self._held = False
         self._light = 0
         self._misfit = 0
-        #: Frames with detections since the last unseen-object contradiction (None: none).
+        #: Frames with detections since the last unseen-object contradiction, counted
+        #: once one has taken ``converged`` away (None: none has since the last reset).
         self._since_unseen: int | None = None
         self.lost_because: tuple[str, ...] = ()
 
@@ -198,6 +199,8 @@ class ConvergenceGate:
             if not self._held:
                 self._streak = 0
                 self._misfit = 0
+                if reasons["unseen object"]:
+                    self._since_unseen = 0
                 #: Why ``converged`` was last lost (for diagnostics and the suite).
                 self.lost_because = tuple(k for k, v in reasons.items() if v)
             return raw.with_converged(self._held)
@@ -233,10 +236,13 @@ class ConvergenceGate:
         return since is None or since >= self.regain_after_unseen_frames
 
     def _count_unseen(self, quality: FitQuality | None, evidence_frame: bool) -> None:
-        """Frames with detections since an object in clear view last went unreported."""
+        """Frames with detections since an object in clear view last went unreported,
+        once one has taken ``converged`` away (a first fix waits for none)."""
+        if self._since_unseen is None:
+            return
         if quality is not None and quality.contradicted:
             self._since_unseen = 0
-        elif evidence_frame and self._since_unseen is not None:
+        elif evidence_frame:
             self._since_unseen += 1
 
     def _misfit_lasts(self, quality: FitQuality | None, evidence_frame: bool) -> bool:

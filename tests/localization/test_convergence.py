@@ -85,3 +85,10 @@ def test_the_counters_survive_a_checkpoint() -> None:
     copy.restore(gate.checkpoint())
     assert not _feed(copy, GOOD, copy.regain_after_unseen_frames - 1)
     assert _feed(copy, GOOD)
+
+
+def test_an_unseen_object_before_the_first_fix_does_not_delay_it() -> None:
+    gate = ConvergenceGate()
+    assert not _feed(gate, UNSEEN, 3)
+    assert not _feed(gate, GOOD, gate.frames - 1)
+    assert _feed(gate, GOOD)
