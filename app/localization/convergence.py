@@ -77,6 +77,19 @@ class ConvergenceGate:
     freshly injected particles unweighed). A false detection
     explained by clutter does not count against the estimate; a kidnap, a pose
     drifting away from the evidence, or an alternative place gaining probability does.
+
+    **Hysteresis against flapping** (a person hearing "found", "not sure", "found"
+    learns to trust neither). A fit past the hold thresholds releases only once it has
+    lasted ``hold_misfit_frames`` frames with detections in a row: a real phone's
+    bearings all shift for a moment while it turns with an unannounced latency, and the
+    smoothed fit crosses ``hold_fit`` for a frame or two at the right place; a kidnap
+    still shows at once (bad frames, a jump, an alternative), a pose drifting away
+    from the evidence within a second. An object in clear view going unreported
+    releases at once (on a stale map it is what catches a fix pulled a metre off), but
+    once it has, ``converged`` is gained again only after ``regain_after_unseen_frames``
+    frames with detections free of it: a far object the detector reports now and then
+    would otherwise flag, clear and flag again, each time taking back a fix it had just
+    given.
     """
 
     gain_fit: float = 2.0
@@ -105,6 +118,12 @@ class ConvergenceGate:
     #: integrity suite calls wrong. Drags by a moved object measured 0.5-0.9 m over
     #: 5 s, converged estimates within 0.5 m of the truth rarely more than 0.5 m.
     hold_slide_m: float = 0.5
+    #: Frames with detections in a row the fit may stay past ``hold_fit`` or
+    #: ``hold_unexplained`` before ``converged`` is given up (1 s at 5 frames/s).
+    hold_misfit_frames: int = 5
+    #: Frames with detections free of an unseen-object contradiction that gaining
+    #: ``converged`` again takes once one has taken it away (5 s at 5 frames/s).
+    regain_after_unseen_frames: int = 25
 
     def __init__(
         self, frames: int = 5, tolerance_m: float = 0.3, tolerance_rad: float = np.radians(15.0)
@@ -119,6 +138,10 @@ class ConvergenceGate:
         self._last: Estimate | None = None
         self._held = False
         self._light = 0
+        self._misfit = 0
+        #: Frames with detections since the last unseen-object contradiction, counted
+        #: once one has taken ``converged`` away (None: none has since the last reset).
+        self._since_unseen: int | None = None
         self.lost_because: tuple[str, ...] = ()
 
     def checkpoint(self) -> dict[str, Any]:
@@ -128,6 +151,8 @@ class ConvergenceGate:
             "last": self._last,
             "held": self._held,
             "light": self._light,
+            "misfit": self._misfit,
+            "since_unseen": self._since_unseen,
         }
 
     def restore(self, state: Mapping[str, Any]) -> None:
@@ -135,6 +160,9 @@ class ConvergenceGate:
         self._last = from_plain(Estimate | None, state["last"])
         self._held = bool(state["held"])
         self._light = int(state["light"])
+        self._misfit = int(state.get("misfit", 0))
+        since = state.get("since_unseen")
+        self._since_unseen = None if since is None else int(since)
 
     def confirm(
         self,
@@ -156,6 +184,7 @@ class ConvergenceGate:
         self._last = raw
         step = float(np.hypot(raw.x - last.x, raw.y - last.y)) if last is not None else np.inf
         turn = abs(wrap_rad(float(raw.theta_rad - last.theta_rad))) if last else np.pi
+        self._count_unseen(quality, evidence_frame)
         if self._held:
             top = raw.hypotheses[0] if raw.hypotheses else None
             light = top is None or top.weight < self.hold_mass
@@ -169,9 +198,7 @@ class ConvergenceGate:
                 "wide": max(raw.std_x_m, raw.std_y_m) > self.hold_std_xy_m
                 or raw.std_theta_rad > self.hold_std_theta_rad,
                 "jump": step > moved_m + self.hold_jump_m,
-                "misfit": quality is None
-                or quality.fit > self.hold_fit
-                or quality.unexplained > self.hold_unexplained,
+                "misfit": self._misfit_lasts(quality, evidence_frame),
                 "bad frame": quality is not None and quality.bad_frame,
                 "unseen object": quality is not None and quality.contradicted,
                 "dead reckoning": frames_without_evidence > self.hold_without_evidence,
@@ -183,6 +210,9 @@ class ConvergenceGate:
             self._held = not any(reasons.values())
             if not self._held:
                 self._streak = 0
+                self._misfit = 0
+                if reasons["unseen object"]:
+                    self._since_unseen = 0
                 #: Why ``converged`` was last lost (for diagnostics and the suite).
                 self.lost_because = tuple(k for k, v in reasons.items() if v)
             return raw.with_converged(self._held)
@@ -208,8 +238,36 @@ class ConvergenceGate:
             and searched_ago is not None
             and searched_ago < self._streak
             and alternatives <= self.gain_alternatives
+            and self._unseen_cleared
         )
         return raw.with_converged(self._held)
+
+    @property
+    def _unseen_cleared(self) -> bool:
+        """Whether the last unseen-object contradiction (if any) is long enough past."""
+        since = self._since_unseen
+        return since is None or since >= self.regain_after_unseen_frames
+
+    def _count_unseen(self, quality: FitQuality | None, evidence_frame: bool) -> None:
+        """Frames with detections since an object in clear view last went unreported,
+        once one has taken ``converged`` away (a first fix waits for none)."""
+        if self._since_unseen is None:
+            return
+        if quality is not None and quality.contradicted:
+            self._since_unseen = 0
+        elif evidence_frame:
+            self._since_unseen += 1
+
+    def _misfit_lasts(self, quality: FitQuality | None, evidence_frame: bool) -> bool:
+        """Whether the fit has been past the hold thresholds for ``hold_misfit_frames``
+        frames with detections in a row (no fit measured at all: at once)."""
+        if quality is None:
+            return True
+        if quality.fit <= self.hold_fit and quality.unexplained <= self.hold_unexplained:
+            self._misfit = 0
+        elif evidence_frame:
+            self._misfit += 1
+        return self._misfit >= self.hold_misfit_frames
 
 
 #: Probability the protection radius must hold (docs/API.md, FrameResult.protection_m).

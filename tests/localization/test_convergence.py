@@ -1,0 +1,94 @@
+"""The convergence gate's hysteresis: slow doubts need time, signs of a kidnap do not."""
+
+from __future__ import annotations
+
+from app.localization.convergence import ConvergenceGate, FitQuality
+from app.localization.types import Estimate, Hypothesis
+
+GOOD = FitQuality(fit=0.5, unexplained=0.05)
+MISFIT = FitQuality(fit=ConvergenceGate.hold_fit + 1.0, unexplained=0.05)
+BAD_FRAME = FitQuality(fit=0.5, unexplained=0.05, bad_frame=True)
+UNSEEN = FitQuality(fit=0.5, unexplained=0.05, contradicted=True)
+
+
+def _tight() -> Estimate:
+    """A tight, heavy cluster standing still at (2, 3)."""
+    return Estimate(2.0, 3.0, 0.0, 0.05, 0.05, 0.02, True, (Hypothesis(2.0, 3.0, 0.0, 1.0, 0.05),))
+
+
+def _feed(gate: ConvergenceGate, quality: FitQuality, frames: int = 1) -> bool:
+    """``frames`` frames with detections standing still; whether converged after the last."""
+    out = False
+    for _ in range(frames):
+        out = gate.confirm(_tight(), quality=quality, searched_ago=0).converged
+    return out
+
+
+def _held_gate() -> ConvergenceGate:
+    gate = ConvergenceGate()
+    assert _feed(gate, GOOD, gate.frames)
+    return gate
+
+
+def test_first_fix_does_not_wait() -> None:
+    gate = ConvergenceGate()
+    assert not _feed(gate, GOOD, gate.frames - 1)
+    assert _feed(gate, GOOD)
+
+
+def test_a_misfit_releases_only_once_it_lasts() -> None:
+    gate = _held_gate()
+    assert _feed(gate, MISFIT, gate.hold_misfit_frames - 1)
+    assert not _feed(gate, MISFIT)
+    assert gate.lost_because == ("misfit",)
+
+
+def test_a_passing_misfit_starts_the_count_again() -> None:
+    gate = _held_gate()
+    for _ in range(3):
+        assert _feed(gate, MISFIT, gate.hold_misfit_frames - 1)
+        assert _feed(gate, GOOD)
+
+
+def test_frames_without_detections_do_not_count_towards_a_misfit() -> None:
+    gate = _held_gate()
+    assert _feed(gate, MISFIT, gate.hold_misfit_frames - 1)
+    for _ in range(3):
+        blind = gate.confirm(_tight(), quality=MISFIT, searched_ago=0, evidence_frame=False)
+        assert blind.converged
+    assert not _feed(gate, MISFIT)
+
+
+def test_a_bad_frame_releases_at_once() -> None:
+    gate = _held_gate()
+    assert not _feed(gate, BAD_FRAME)
+    assert gate.lost_because == ("bad frame",)
+
+
+def test_an_unseen_object_releases_at_once_and_delays_the_next_fix() -> None:
+    gate = _held_gate()
+    assert not _feed(gate, UNSEEN)
+    assert gate.lost_because == ("unseen object",)
+    assert not _feed(gate, GOOD, gate.regain_after_unseen_frames - 1)
+    assert _feed(gate, GOOD)
+
+
+def test_the_counters_survive_a_checkpoint() -> None:
+    gate = _held_gate()
+    _feed(gate, MISFIT, gate.hold_misfit_frames - 1)
+    copy = ConvergenceGate()
+    copy.restore(gate.checkpoint())
+    assert not _feed(copy, MISFIT)
+    gate = _held_gate()
+    _feed(gate, UNSEEN)
+    copy = ConvergenceGate()
+    copy.restore(gate.checkpoint())
+    assert not _feed(copy, GOOD, copy.regain_after_unseen_frames - 1)
+    assert _feed(copy, GOOD)
+
+
+def test_an_unseen_object_before_the_first_fix_does_not_delay_it() -> None:
+    gate = ConvergenceGate()
+    assert not _feed(gate, UNSEEN, 3)
+    assert not _feed(gate, GOOD, gate.frames - 1)
+    assert _feed(gate, GOOD)
