@@ -127,14 +127,6 @@ def same_place(x: float, y: float, t: float, h: Hypothesis, st: EvidenceSettings
     return math.hypot(x - h.x, y - h.y) < st.distinct_m and math.radians(turn) < st.distinct_rad
 
 
-def wrap_one(angle: float) -> float:
-    """:func:`~app.maps.geometry.wrap_angle` of one angle in plain float arithmetic (the
-    same operations: Python's float ``%`` rounds as numpy's ``mod`` does, both C's
-    ``fmod`` corrected to the divisor's sign), without numpy's overhead on a scalar."""
-    wrapped = (angle + math.pi) % (2.0 * math.pi) - math.pi
-    return math.pi if wrapped <= -math.pi else wrapped
-
-
 def near(
     x: NDArray[np.float64] | float,
     y: NDArray[np.float64] | float,

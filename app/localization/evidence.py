@@ -78,7 +78,6 @@ from app.localization.alternatives import (
     moves_onto,
     near,
     same_place,
-    wrap_one,
 )
 from app.localization.compass import CompassReading, compass_log_likelihood
 from app.localization.models import MotionModel, SensorModel
@@ -86,7 +85,7 @@ from app.localization.resampling import systematic_resample
 from app.localization.search import PlaceSearch
 from app.localization.sensor import Observation, observation_columns, observations_from_columns
 from app.localization.types import Hypothesis, InitialPose, Odometry
-from app.maps.geometry import wrap_angle
+from app.maps.geometry import wrap_angle, wrap_rad
 from app.state import from_columns, from_plain
 
 
@@ -635,7 +634,7 @@ class EvidenceTracker:
         if same_place(main.x, main.y, main.theta_rad, anchor, st):
             close = (
                 np.hypot(ax - main.x, ay - main.y) < st.distinct_m / 2
-                and abs(wrap_one(at - main.theta_rad)) < st.distinct_rad / 2
+                and abs(wrap_rad(at - main.theta_rad)) < st.distinct_rad / 2
             )
             if not close:
                 self._draw_anchor(main, particles)

@@ -118,22 +118,6 @@ def _free_check(x0, y0, x1, y1, mask, ox, oy, res, long_sq, walls, eps, base, pe
     return finite
 
 
-def motion_log_penalty(
-    x0: NDArray[np.float64],
-    y0: NDArray[np.float64],
-    x1: NDArray[np.float64],
-    y1: NDArray[np.float64],
-    semantic_map: SemanticMap,
-) -> NDArray[np.float64]:
-    """0 for a possible move, -inf for one that ends off the free space or crosses a wall.
-
-    Free space keeps a clearance of 0.1 m from every wall, so a move that starts and
-    ends in free space can only cross a wall if it is longer than twice that
-    (``LONG_MOVE_M``); only those are ray-tested.
-    """
-    return penalized(x0, y0, x1, y1, semantic_map, np.zeros(x1.shape[0]))[0]
-
-
 def penalized(
     x0: NDArray[np.float64],
     y0: NDArray[np.float64],
@@ -142,7 +126,13 @@ def penalized(
     semantic_map: SemanticMap,
     log_w: NDArray[np.float64],
 ) -> tuple[NDArray[np.float64], bool]:
-    """``log_w + motion_log_penalty(...)`` and whether any of it is finite, in one pass."""
+    """``log_w`` plus each move's penalty (0 for a possible move, -inf for one that ends
+    off the free space or crosses a wall) and whether any of it is finite, in one pass.
+
+    Free space keeps a clearance of 0.1 m from every wall, so a move that starts and
+    ends in free space can only cross a wall if it is longer than twice that
+    (``LONG_MOVE_M``); only those are ray-tested.
+    """
     fs = semantic_map.free_space
     out = np.empty(x1.shape[0])
     walls = np.ascontiguousarray(semantic_map.walls, dtype=np.float64).reshape(-1, 4)

@@ -27,7 +27,9 @@ import math
 from collections import deque
 from typing import Any
 
+from app.localization.motion import compose_odometry
 from app.localization.types import Odometry
+from app.maps.geometry import wrap_rad
 
 #: Frames between the estimate compared and the one it is compared with (5 s at 5 Hz:
 #: long enough for a drag of a few centimetres a frame to add up, short enough for the
@@ -43,13 +45,6 @@ MIN_FRAMES = 10
 HEADING_TOLERANCE_DEG = 10.0
 
 Pose = tuple[float, float, float]
-
-
-def _compose(a: Pose, forward: float, left: float, turn: float) -> Pose:
-    """Pose ``a`` moved by ``forward``, ``left`` (in its own frame) and turned by ``turn``."""
-    x, y, t = a
-    c, s = math.cos(t), math.sin(t)
-    return (x + c * forward - s * left, y + s * forward + c * left, t + turn)
 
 
 class OdometryCheck:
@@ -75,9 +70,9 @@ class OdometryCheck:
 
     def moved(self, odometry: Odometry) -> None:
         """The person moved by ``odometry``."""
-        self._reckoned = _compose(
-            self._reckoned, odometry.forward_m, odometry.left_m, odometry.turn_rad
-        )
+        reckoned = compose_odometry(Odometry(*self._reckoned), odometry)
+        assert reckoned is not None  # (both motions known)
+        self._reckoned = (reckoned.forward_m, reckoned.left_m, reckoned.turn_rad)
 
     def slide_m(self, x: float, y: float) -> float:
         """How far (x, y) lies from where the odometry carries the oldest converged
@@ -151,7 +146,7 @@ def _distance_to_band(
     if length == 0.0 or radius == 0.0:
         return max(0.0, radius - far, near - radius)
     off = math.atan2(point[1], point[0]) - math.atan2(motion[1], motion[0])
-    off = (off + math.pi) % (2.0 * math.pi) - math.pi
+    off = wrap_rad(off)
     if abs(off) <= heading_tolerance_rad:
         return max(0.0, radius - far, near - radius)
     # Outside the sector: the nearest point is on its nearer straight edge.

@@ -10,7 +10,6 @@ from app.localization.config import FilterConfig
 from app.localization.fastmath import fill_normal
 from app.localization.motion import (
     NO_ODOMETRY_STD_M,
-    motion_log_penalty,
     penalized,
     sample_motion,
 )
@@ -86,7 +85,7 @@ def test_moves_through_walls_or_off_the_map_are_impossible() -> None:
     y0 = np.array([2.0, 2.0, 1.0, 2.0])
     x1 = np.array([3.5, 2.8, 1.2, 7.0])  # through the wall, short step, step, off the map
     y1 = np.array([2.0, 2.0, 1.0, 2.0])
-    penalty = motion_log_penalty(x0, y0, x1, y1, m)
+    penalty, _ = penalized(x0, y0, x1, y1, m, np.zeros(x0.size))
     assert penalty.tolist() == [-np.inf, 0.0, 0.0, -np.inf]
 
 
@@ -100,7 +99,7 @@ def test_penalized_weights_are_the_weights_plus_the_penalty() -> None:
     y1 = np.array([2.0, 2.0, 1.0, 2.0])
     log_w = np.array([-1.5, -0.25, -np.inf, 3.0])
     got, possible = penalized(x0, y0, x1, y1, m, log_w)
-    assert got.tolist() == (log_w + motion_log_penalty(x0, y0, x1, y1, m)).tolist()
+    assert got.tolist() == (log_w + penalized(x0, y0, x1, y1, m, np.zeros(4))[0]).tolist()
     assert got.tolist() == [-np.inf, -0.25, -np.inf, -np.inf] and possible
     assert not penalized(x0[[0, 3]], y0[[0, 3]], x1[[0, 3]], y1[[0, 3]], m, log_w[:2])[1]
 
@@ -116,7 +115,8 @@ def test_wall_test_of_long_moves_agrees_with_the_geometry_module() -> None:
     rng = np.random.default_rng(5)
     start = m.free_space.sample(5000, rng)
     end = start + rng.normal(0.0, 1.0, start.shape)  # many long moves, some through walls
-    penalty = motion_log_penalty(start[:, 0], start[:, 1], end[:, 0], end[:, 1], m)
+    zeros = np.zeros(len(start))
+    penalty, _ = penalized(start[:, 0], start[:, 1], end[:, 0], end[:, 1], m, zeros)
     expected = m.free_space.is_free(end[:, 0], end[:, 1]) & ~segments_cross_walls(
         start, end, m.walls
     )
