@@ -23,7 +23,9 @@ each particle, so a belief on the wrong floor is a wrong position: tens of metre
 the truth in the plane, never "converged" there.
 
 While the smoothed altitude is more than ``DRIFT_SHARE`` of a storey from the anchor, or
-rises or falls as fast as a lift does, the person is between floors
+rises or falls as fast as a lift does, and some of the belief stands in a connector's
+stop (nobody rides a lift from the middle of a shop floor: elsewhere such a reading is
+the barometer's noise), the person is between floors
 (:attr:`FloorTracker.in_transit`): the filter then calls nobody located, starts its
 convergence test afresh, and neither injects particles nor lets the evidence search move
 the cloud (a lift car looks the same on every floor; the barometer, not the view, says
@@ -155,6 +157,18 @@ class FloorTracker:
             return np.full(x.shape, -1, dtype=np.int64)
         return first_polygon(np.column_stack([x, y]), self._edges, self._starts)
 
+    def _share_in_stops(
+        self, x: NDArray[np.float64], y: NDArray[np.float64], log_w: NDArray[np.float64]
+    ) -> float:
+        """The share of the weight on particles standing in a connector's stop."""
+        inside = self.stop_of(x, y) >= 0
+        if not inside.any():
+            return 0.0
+        if not np.isfinite(log_w).any():
+            return float(inside.mean())
+        w = np.exp(log_w - log_w.max())
+        return float(w[inside].sum() / w.sum())
+
     def _move(
         self,
         x: NDArray[np.float64],
@@ -203,7 +217,13 @@ class FloorTracker:
         threshold = CHANGE_SHARE * self.storey_m
         band = DRIFT_SHARE * self.storey_m
         if abs(delta) < threshold:
-            self.in_transit = abs(delta) >= band or moving
+            # Only a person in a connector can be between floors: while less than
+            # CONTRADICTED_SHARE of the weight stands in a stop, a reading that looks
+            # like a ride is the barometer's noise or drift (a full storey's change
+            # would still contradict such a belief, below).
+            self.in_transit = (abs(delta) >= band or moving) and self._share_in_stops(
+                x, y, log_w
+            ) >= CONTRADICTED_SHARE
             if not self.in_transit:
                 self.anchor_m += DRIFT_GAIN * delta
             return x, log_w, False

@@ -171,6 +171,32 @@ def test_a_lift_passing_a_floor_is_between_floors_all_the_way() -> None:
     assert not any(flags[:10])
 
 
+def test_a_barometer_jump_is_no_ride_for_a_belief_outside_every_connector() -> None:
+    # A second of readings 0.7 m above the one before: a lift's rate, or the noise of a
+    # phone's barometer. Only a person in a connector can be riding.
+    readings = [100.0] * 10 + [100.7] * 5
+    hall = FloorTracker(VENUE)
+    x, y = particles(6.0, 11.0, 0)  # in the hall, far from every stop
+    feed(hall, x, y, readings)
+    assert not hall.in_transit
+    lift = FloorTracker(VENUE)
+    x, y = particles(1.5, 1.5, 0)  # in the lift car
+    feed(lift, x, y, readings)
+    assert lift.in_transit
+    # A belief split 99.5 / 0.5 % between the hall and the car: the car's share is too
+    # small to call the person between floors; 5 % of it is enough.
+    for share, expected in ((0.005, False), (0.05, True)):
+        tracker = FloorTracker(VENUE)
+        (xa, ya), (xb, yb) = particles(1.5, 1.5, 0, 100), particles(6.0, 11.0, 0, 100)
+        x, y = np.concatenate([xa, xb]), np.concatenate([ya, yb])
+        log_w = np.concatenate([np.full(100, np.log(share)), np.full(100, np.log(1 - share))])
+        for r in readings:
+            x, log_w, _ = tracker.apply(
+                x, y, log_w, AltitudeReading(r, 0.5), np.random.default_rng(0)
+            )
+        assert tracker.in_transit is expected
+
+
 def test_the_evidence_search_keeps_no_alternative_in_another_floors_lift_car() -> None:
     tracker = FloorTracker(VENUE)
     assert tracker.place_allowed(1.5 + PITCH, 1.5)  # nothing carried yet: anywhere
