@@ -709,3 +709,5 @@ def warm_up() -> None:
         protection_radius(pf.x, pf.y, pf.weights, est, pf.rng)
         tiny.visibility.row(1.0, 1.0)  # a cell's row unpacked (the fit check's, the narrator's)
         kld_sample_size(pf.x, pf.y, pf.theta, pf.weights, 10, 50)
+    # The unseen-object check's answer from its counts alone (a restored session's).
+    assert not UnseenObjects(tiny, FilterConfig()).contradicted

@@ -17,8 +17,12 @@ of that class, or of any class while that one has not been seen yet: a detector 
 only reports small objects up close is not held to more) and of those in which a
 detection of its class pointed at it (within ``cutoff_sigmas`` of its bearing). An
 object in clear view for ``min_expected`` frames' worth of count yet seen in at most
-``max_seen_share`` of them marks the estimate as *contradicted*: converged is not
-gained, and is given up.
+``max_seen_share`` of them, and missed in more of them than a detector with this
+session's hit rate would miss by chance (``chance_miss``), marks the estimate as
+*contradicted*: converged is not gained, and is given up. The hit rate is learnt from
+the objects in clear view that the detector does report now and then: a detector that
+misses a third of what is in view (distance, blur, occlusion by people) must miss an
+object for longer before its absence says the pose is wrong.
 
 Only frames with detections count (a blocked camera reports nothing at all, which says
 nothing about any one object). When the estimate jumps by more than ``jump_m`` the
@@ -56,6 +60,22 @@ class UnseenSettings:
     min_expected: float = 4.0
     max_seen_share: float = 0.15
     jump_m: float = 1.0
+    #: The detector's hit rate, learnt from the objects in clear view that it does
+    #: report now and then (an object never reported is the question, not the rate):
+    #: decayed sums of their frames in clear view and of those it was reported in, per
+    #: frame by ``rate_decay`` (about 50 frames of memory), starting from a prior worth
+    #: ``rate_prior_frames`` frames at ``rate_prior``.
+    rate_decay: float = 0.98
+    rate_prior: float = 0.9
+    rate_prior_frames: float = 10.0
+    #: An object flagged by the counts must also have been missed more than a detector
+    #: with the learnt hit rate would miss it by chance: that rate's miss probability to
+    #: the power of the decayed missed frames must be below this. At a 90 % hit rate the
+    #: counts ask more already (3.4 misses against 2.7); at 80 % it takes 3.9, at 70 %
+    #: (a detector missing 30 % of what is in view) 5.2. Stricter (4e-4) gained more
+    #: availability on the phone suite but let a stale map's moved objects drag a
+    #: converged estimate over 1 m (5 frames); looser (1e-2) kept a corridor's flips.
+    chance_miss: float = 2e-3
 
 
 DEFAULT_UNSEEN = UnseenSettings()
@@ -77,6 +97,10 @@ class UnseenObjects:
         #: Per class, the farthest an object of it was seen from the estimate (m; 0 while
         #: none was): how far this detector reports such objects.
         self.reach_m = np.zeros(len(semantic_map.classes))
+        #: Decayed frames in clear view, and reported, of the objects the detector does
+        #: report (the hit rate's sums, :class:`UnseenSettings`): the detector's, kept
+        #: over a reset as the classes are.
+        self.rate_sums = np.zeros(2)
         self.reset()
 
     def reset(self) -> None:
@@ -99,10 +123,20 @@ class UnseenObjects:
         if self._contradicted is not None:
             return self._contradicted
         st = self.settings
-        flagged = (self.expected >= st.min_expected) & (
-            self.seen <= st.max_seen_share * self.expected
+        flagged = (
+            (self.expected >= st.min_expected)
+            & (self.seen <= st.max_seen_share * self.expected)
+            & (self.expected - self.seen >= self._misses_needed())
         )
         return bool(flagged.any())
+
+    def _misses_needed(self) -> float:
+        """Decayed missed frames that a detector with the learnt hit rate makes by
+        chance with probability ``chance_miss`` (:class:`UnseenSettings`)."""
+        return _misses_needed(
+            self.rate_sums, self.settings.rate_prior, self.settings.rate_prior_frames,
+            self.settings.chance_miss,
+        )  # fmt: skip
 
     def update(
         self,
@@ -142,7 +176,8 @@ class UnseenObjects:
             float(np.radians(self.config.fov_deg) / 2.0 - st.margin_rad),
             obs.det_bearing, obs.det_group, group_class, obs.group_kappa,
             st.near_m, st.min_m, st.cutoff_sigmas, st.decay, st.min_expected, st.max_seen_share,
-            self.reach_m, self.expected, self.seen,
+            self.reach_m, self.expected, self.seen, self.rate_sums, st.rate_decay,
+            st.rate_prior, st.rate_prior_frames, st.chance_miss,
         )  # fmt: skip
 
     @property
@@ -157,6 +192,7 @@ class UnseenObjects:
             "seen": self.seen,
             "reported": self.reported,
             "reach": self.reach_m,
+            "rate": self.rate_sums,
             "at": None if self._at is None else list(self._at),
         }
 
@@ -165,13 +201,23 @@ class UnseenObjects:
         self.seen = np.array(state["seen"], dtype=np.float64)
         self.reported = np.array(state["reported"], dtype=bool)
         self.reach_m = np.array(state.get("reach", np.zeros(self.reported.size)), dtype=float)
+        # (a checkpoint from before the learnt hit rate starts from its prior)
+        self.rate_sums = np.array(state.get("rate", np.zeros(2)), dtype=np.float64)
         at = state["at"]
         self._at = None if at is None else (float(at[0]), float(at[1]))
         self._contradicted = None
 
 
 @njit(cache=True)
-def _count_frame(dx, dy, direction, theta, object_class, reported, visible_row, with_row, fov_check, fov_centre, half_fov, det_bearing, det_group, group_class, group_kappa, near_m, min_m, cutoff_sigmas, decay, min_expected, max_seen_share, reach, expected, seen):  # fmt: skip  # noqa: E501  # pragma: no cover - compiled
+def _misses_needed(rate_sums, prior, prior_frames, chance):  # pragma: no cover - compiled
+    """:meth:`UnseenObjects._misses_needed` (the learnt rate from ``rate_sums``)."""
+    hit_rate = (rate_sums[1] + prior * prior_frames) / (rate_sums[0] + prior_frames)
+    miss = min(max(1.0 - hit_rate, 1e-6), 1.0 - 1e-9)
+    return np.log(chance) / np.log(miss)
+
+
+@njit(cache=True)
+def _count_frame(dx, dy, direction, theta, object_class, reported, visible_row, with_row, fov_check, fov_centre, half_fov, det_bearing, det_group, group_class, group_kappa, near_m, min_m, cutoff_sigmas, decay, min_expected, max_seen_share, reach, expected, seen, rate_sums, rate_decay, rate_prior, rate_prior_frames, chance_miss):  # fmt: skip  # noqa: E501  # pragma: no cover - compiled
     """One frame's counts at the pose (its offsets ``dx``, ``dy`` to the objects, their
     ``direction`` and the heading ``theta``), with numpy's arithmetic of the
     vectorized form it replaces, element by element (the same bits; compiled because
@@ -215,7 +261,7 @@ def _count_frame(dx, dy, direction, theta, object_class, reported, visible_row, 
     new_seen = np.empty(n)
     in_clear = 0
     missed = 0
-    flagged = False
+    rate_sums *= rate_decay
     for i in range(n):
         r = reach[object_class[i]]
         clear = view[i] and dist[i] <= (r if r > 0.0 else top)
@@ -225,6 +271,17 @@ def _count_frame(dx, dy, direction, theta, object_class, reported, visible_row, 
             in_clear += 1
             if not hit[i]:
                 missed += 1
-        if new_expected[i] >= min_expected and new_seen[i] <= max_seen_share * new_expected[i]:
+            # The hit rate counts the objects this detector does report now and then.
+            if new_seen[i] > max_seen_share * new_expected[i]:
+                rate_sums[0] += 1.0
+                rate_sums[1] += 1.0 if hit[i] else 0.0
+    needed = _misses_needed(rate_sums, rate_prior, rate_prior_frames, chance_miss)
+    flagged = False
+    for i in range(n):
+        if (
+            new_expected[i] >= min_expected
+            and new_seen[i] <= max_seen_share * new_expected[i]
+            and new_expected[i] - new_seen[i] >= needed
+        ):
             flagged = True
     return new_expected, new_seen, in_clear, missed, flagged

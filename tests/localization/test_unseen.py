@@ -11,13 +11,13 @@ from app.bench import CLASSES, generated_map
 from app.localization.config import FilterConfig
 from app.localization.sensor import prepare_observation
 from app.localization.types import Detection
-from app.localization.unseen import UnseenObjects
+from app.localization.unseen import DEFAULT_UNSEEN, UnseenObjects
 from app.maps.geometry import wrap_angle
 
 
 def _numpy_counts(
     unseen: UnseenObjects, x: float, y: float, theta: float, obs, row
-) -> tuple[np.ndarray, np.ndarray, int, int, np.ndarray]:
+) -> tuple[np.ndarray, np.ndarray, int, int, np.ndarray, np.ndarray]:
     """One frame counted as the vectorized numpy code did (before it was compiled)."""
     st, sm, cfg = unseen.settings, unseen.map, unseen.config
     index = {c: i for i, c in enumerate(sm.classes)}
@@ -47,7 +47,13 @@ def _numpy_counts(
     expected = st.decay * unseen.expected + clear
     seen_count = st.decay * unseen.seen + (clear & seen)
     missed = int(np.count_nonzero(clear & ~seen))
-    return expected, seen_count, int(np.count_nonzero(clear)), missed, reach_m
+    # The hit rate's sums: the objects in clear view that the detector does report now
+    # and then, one at a time (as the kernel adds them).
+    rate = unseen.rate_sums * st.rate_decay
+    for i in np.flatnonzero(clear & (seen_count > st.max_seen_share * expected)):
+        rate[0] += 1.0
+        rate[1] += 1.0 if seen[i] else 0.0
+    return expected, seen_count, int(np.count_nonzero(clear)), missed, reach_m, rate
 
 
 def _bits(a: np.ndarray) -> np.ndarray:
@@ -63,7 +69,9 @@ def test_compiled_frame_count_matches_numpy_to_the_bit(
 ) -> None:
     sm = generated_map(40, seed=2)
     cfg = replace(FilterConfig(), fov_deg=fov_deg, fov_centre_deg=centre_deg)
-    unseen = UnseenObjects(sm, cfg)
+    # Detections aimed at a few random objects a frame make a detector that misses most
+    # of what is in view: a loose chance_miss lets such a walk meet both answers.
+    unseen = UnseenObjects(sm, cfg, replace(DEFAULT_UNSEEN, chance_miss=0.5))
     rng = np.random.default_rng(7)
     x, y = 6.0, 5.0
     answers = set()
@@ -92,11 +100,71 @@ def test_compiled_frame_count_matches_numpy_to_the_bit(
         assert np.array_equal(_bits(got[1]), _bits(want[1]))
         assert got[2:] == want[2:4]
         assert np.array_equal(_bits(unseen.reach_m), _bits(want[4]))
+        assert np.array_equal(_bits(unseen.rate_sums), _bits(want[5]))
         # The kernel's answer to "contradicted" is the counts' (the property's formula).
         st = unseen.settings
-        flagged = (got[0] >= st.min_expected) & (got[1] <= st.max_seen_share * got[0])
+        hit_rate = (want[5][1] + st.rate_prior * st.rate_prior_frames) / (
+            want[5][0] + st.rate_prior_frames
+        )
+        needed = np.log(st.chance_miss) / np.log(1.0 - hit_rate)
+        flagged = (
+            (got[0] >= st.min_expected)
+            & (got[1] <= st.max_seen_share * got[0])
+            & (got[0] - got[1] >= needed)
+        )
         assert unseen.contradicted == bool(flagged.any())
         answers.add(unseen.contradicted)
     assert unseen.expected.max() > 1.0  # objects were in clear view, some frames running
     if fov_deg == 360.0:  # the full view meets both answers (a narrow one may not)
         assert answers == {True, False}, answers
+
+
+def _walk_past(unseen: UnseenObjects, sm, hit_prob: float, absent: int, frames: int, seed: int):
+    """Frames at one pose seeing every object in clear view with ``hit_prob`` each, but
+    never the object ``absent``; per frame, whether the estimate was contradicted."""
+    rng = np.random.default_rng(seed)
+    x, y, theta = 10.0, 9.0, 0.0  # 15 objects within 7.5 m in line of sight
+    flags = []
+    for _ in range(frames):
+        dets = [
+            Detection(sm.class_of(int(i)), float(np.arctan2(dy, dx)) - theta, 0.9)
+            for i, (dx, dy) in enumerate(sm.object_xy - (x, y))
+            if i != absent and rng.random() < hit_prob
+        ]
+        obs = prepare_observation(dets, sm, unseen.config)
+        unseen.update(x, y, theta, obs, sm.visibility.row(x, y))
+        flags.append(unseen.contradicted)
+    return flags
+
+
+def test_a_detector_that_misses_a_third_must_miss_an_object_longer() -> None:
+    sm = generated_map(40, seed=2)
+    cfg = FilterConfig()
+    probe = UnseenObjects(sm, cfg)
+    _walk_past(probe, sm, 1.0, -1, 3, seed=0)
+    in_clear = np.flatnonzero(probe.expected > 0)
+    assert in_clear.size >= 4
+    # The object to leave out: the one farthest in bearing from any other of its class
+    # (a detection of a neighbour of the same class in its direction would see it).
+    offsets = sm.object_xy - (10.0, 9.0)
+    bearing = np.arctan2(offsets[:, 1], offsets[:, 0])
+
+    def alone(i: int) -> float:
+        mates = [
+            j for j in range(sm.object_count) if j != i and sm.object_class[j] == sm.object_class[i]
+        ]
+        return float(np.min(np.abs(wrap_angle(bearing[mates] - bearing[i]))))
+
+    absent = max(in_clear.tolist(), key=alone)
+    assert alone(absent) > np.radians(10.0)
+    # A reliable detector: the object never reported is flagged within a second.
+    reliable = _walk_past(UnseenObjects(sm, cfg), sm, 0.98, absent, 60, seed=1)
+    assert any(reliable[:8])
+    # One missing 30 % at random, every object present: its unlucky runs flag nothing
+    # (they did at the counts alone: a run of about four misses was enough) ...
+    flaky = UnseenObjects(sm, cfg)
+    assert not any(_walk_past(flaky, sm, 0.7, -1, 600, seed=2))
+    rate = flaky.rate_sums[1] / flaky.rate_sums[0]
+    assert 0.6 < rate < 0.85  # (a neighbour of the same class seen counts too)
+    # ... and an object it never reports is still flagged, later.
+    assert any(_walk_past(UnseenObjects(sm, cfg), sm, 0.7, absent, 60, seed=3))
