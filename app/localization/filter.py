@@ -77,6 +77,11 @@ BAD_FRAMES_IN_A_ROW = 2
 SLACK_STEP_DEG = 2.0
 #: Alternatives are searched for while the heaviest cluster is at most this wide (m).
 SEARCH_MAX_SPREAD_M = 0.5
+#: An unreported object in clear view of a converged estimate is taken for gone from
+#: the world (a stale map) when a global search at most this many frames ago found no
+#: other place (``ParticleFilter._place_is_unique``): the evidence tracker searches
+#: every 25 frames while it finds nothing.
+UNIQUE_SEARCH_FRAMES = 25
 
 
 class ParticleFilter:
@@ -583,6 +588,8 @@ class ParticleFilter:
         row = self._vis.row(raw.x, raw.y) if self._vis is not None else None
         if self.unseen is not None:
             self.unseen.update(raw.x, raw.y, raw.theta_rad, obs, row)
+            if self.unseen.contradicted and self._place_is_unique():
+                self.unseen.forgive()  # a stale map: the object is gone
         self.geometry.add(raw.x, raw.y, raw.theta_rad, obs, row)
         r = normalized_residuals(raw.x, raw.y, raw.theta_rad, obs, self.map, self._fit_config, row)
         if self._fit_scale != 1.0:
@@ -625,6 +632,25 @@ class ParticleFilter:
             unexplained = q.unexplained + a_share * (unexplained - q.unexplained)
         contradicted = self.unseen is not None and self.unseen.contradicted
         self.quality = FitQuality(fit, unexplained, bad, contradicted)
+
+    def _place_is_unique(self) -> bool:
+        """Whether the converged estimate's place is the only one that explains what
+        was seen: a global search of the last ``UNIQUE_SEARCH_FRAMES`` frames found no
+        alternative, none is tracked, and the last frame's fit was good. An object in
+        clear view that goes unreported there is gone from the world, not a sign of
+        another place (unseen.UnseenObjects.forgive)."""
+        ev = self.evidence
+        q = self.quality
+        return (
+            ev is not None
+            and self.estimate.converged
+            and ev.count == 0
+            and ev.searched_ago is not None
+            and ev.searched_ago <= UNIQUE_SEARCH_FRAMES
+            and q is not None
+            and not q.bad_frame
+            and q.fit <= self._gate.hold_fit
+        )
 
     def _turned_fits(
         self,

@@ -24,6 +24,13 @@ the objects in clear view that the detector does report now and then: a detector
 misses a third of what is in view (distance, blur, occlusion by people) must miss an
 object for longer before its absence says the pose is wrong.
 
+An object can be forgiven (:meth:`UnseenObjects.forgive`): once the filter knows its
+converged place is the only one that explains what is seen (a recent global search found
+no other), an object flagged there with no detection of its class anywhere near it is
+taken for gone from the world (a map drawn before it was taken away) and flags nothing
+any more. One whose class keeps being reported near it was moved, and stays a
+contradiction: its drawn place would drag the estimate.
+
 Only frames with detections count (a blocked camera reports nothing at all, which says
 nothing about any one object). When the estimate jumps by more than ``jump_m`` the
 counts start again: they were about another place.
@@ -76,6 +83,10 @@ class UnseenSettings:
     #: availability on the phone suite but let a stale map's moved objects drag a
     #: converged estimate over 1 m (5 frames); looser (1e-2) kept a corridor's flips.
     chance_miss: float = 2e-3
+    #: A detection of an object's class within this angle of its bearing (but not close
+    #: enough to see it) is a near miss: the object may have been moved since the map
+    #: was drawn, and then it is not forgiven (:meth:`UnseenObjects.forgive`).
+    near_miss_rad: float = float(np.radians(25.0))
 
 
 DEFAULT_UNSEEN = UnseenSettings()
@@ -101,6 +112,9 @@ class UnseenObjects:
         #: report (the hit rate's sums, :class:`UnseenSettings`): the detector's, kept
         #: over a reset as the classes are.
         self.rate_sums = np.zeros(2)
+        #: Objects taken for gone from the world (a stale map, :meth:`forgive`): they
+        #: flag nothing any more in this session.
+        self.absent = np.zeros(semantic_map.object_count, dtype=bool)
         self.reset()
 
     def reset(self) -> None:
@@ -108,6 +122,9 @@ class UnseenObjects:
         n = self.map.object_count
         self.expected = np.zeros(n)
         self.seen = np.zeros(n)
+        #: Decayed frames in clear view with a near miss of the object (its class
+        #: reported within ``near_miss_rad`` of it, but not seeing it).
+        self.near = np.zeros(n)
         self._at: tuple[float, float] | None = None
         self._contradicted: bool | None = None  # None: compute from the counts
         #: The last frame's objects in clear view, and how many of them went unreported.
@@ -123,12 +140,33 @@ class UnseenObjects:
         if self._contradicted is not None:
             return self._contradicted
         st = self.settings
-        flagged = (
+        return bool(self._flagged().any())
+
+    def _flagged(self) -> NDArray[np.bool_]:
+        """Per object, whether its counts flag it (:attr:`contradicted`'s formula)."""
+        st = self.settings
+        return (
             (self.expected >= st.min_expected)
             & (self.seen <= st.max_seen_share * self.expected)
             & (self.expected - self.seen >= self._misses_needed())
+            & ~self.absent
         )
-        return bool(flagged.any())
+
+    def forgive(self) -> int:
+        """Take the objects flagged now for gone from the world; how many there were.
+
+        For a caller that knows the estimate is right although an object in clear view
+        goes unreported: the filter calls it when a global search of the last few
+        seconds found no other place that explains the detections as well (in a mirror
+        image of a room or a twin office there is one, and the object then stays a
+        contradiction). What is left is a map drawn before the object was taken away.
+        """
+        # An object whose class keeps being reported near it was moved, not taken
+        # away: its place in the map may drag the estimate, and it stays a contradiction.
+        flagged = self._flagged() & (self.near <= self.settings.max_seen_share * self.expected)
+        self.absent |= flagged
+        self._contradicted = None
+        return int(flagged.sum())
 
     def _misses_needed(self) -> float:
         """Decayed missed frames that a detector with the learnt hit rate makes by
@@ -165,6 +203,7 @@ class UnseenObjects:
         (
             self.expected,
             self.seen,
+            self.near,
             self.frame_expected,
             self.frame_missed,
             self._contradicted,
@@ -176,8 +215,8 @@ class UnseenObjects:
             float(np.radians(self.config.fov_deg) / 2.0 - st.margin_rad),
             obs.det_bearing, obs.det_group, group_class, obs.group_kappa,
             st.near_m, st.min_m, st.cutoff_sigmas, st.decay, st.min_expected, st.max_seen_share,
-            self.reach_m, self.expected, self.seen, self.rate_sums, st.rate_decay,
-            st.rate_prior, st.rate_prior_frames, st.chance_miss,
+            self.reach_m, self.expected, self.seen, self.near, self.absent, self.rate_sums,
+            st.rate_decay, st.rate_prior, st.rate_prior_frames, st.chance_miss, st.near_miss_rad,
         )  # fmt: skip
 
     @property
@@ -193,6 +232,8 @@ class UnseenObjects:
             "reported": self.reported,
             "reach": self.reach_m,
             "rate": self.rate_sums,
+            "absent": self.absent,
+            "near": self.near,
             "at": None if self._at is None else list(self._at),
         }
 
@@ -203,6 +244,14 @@ class UnseenObjects:
         self.reach_m = np.array(state.get("reach", np.zeros(self.reported.size)), dtype=float)
         # (a checkpoint from before the learnt hit rate starts from its prior)
         self.rate_sums = np.array(state.get("rate", np.zeros(2)), dtype=np.float64)
+        near = state.get("near")
+        self.near = np.zeros(self.expected.size) if near is None else np.array(near, dtype=float)
+        absent = state.get("absent")
+        self.absent = (
+            np.zeros(self.map.object_count, dtype=bool)
+            if absent is None
+            else np.array(absent, dtype=bool)
+        )
         at = state["at"]
         self._at = None if at is None else (float(at[0]), float(at[1]))
         self._contradicted = None
@@ -217,7 +266,7 @@ def _misses_needed(rate_sums, prior, prior_frames, chance):  # pragma: no cover 
 
 
 @njit(cache=True)
-def _count_frame(dx, dy, direction, theta, object_class, reported, visible_row, with_row, fov_check, fov_centre, half_fov, det_bearing, det_group, group_class, group_kappa, near_m, min_m, cutoff_sigmas, decay, min_expected, max_seen_share, reach, expected, seen, rate_sums, rate_decay, rate_prior, rate_prior_frames, chance_miss):  # fmt: skip  # noqa: E501  # pragma: no cover - compiled
+def _count_frame(dx, dy, direction, theta, object_class, reported, visible_row, with_row, fov_check, fov_centre, half_fov, det_bearing, det_group, group_class, group_kappa, near_m, min_m, cutoff_sigmas, decay, min_expected, max_seen_share, reach, expected, seen, near, absent, rate_sums, rate_decay, rate_prior, rate_prior_frames, chance_miss, near_miss_rad):  # fmt: skip  # noqa: E501  # pragma: no cover - compiled
     """One frame's counts at the pose (its offsets ``dx``, ``dy`` to the objects, their
     ``direction`` and the heading ``theta``), with numpy's arithmetic of the
     vectorized form it replaces, element by element (the same bits; compiled because
@@ -231,6 +280,7 @@ def _count_frame(dx, dy, direction, theta, object_class, reported, visible_row, 
     dist = np.empty(n)
     view = np.zeros(n, dtype=np.bool_)
     hit = np.zeros(n, dtype=np.bool_)
+    close = np.zeros(n, dtype=np.bool_)
     for i in range(n):
         dist[i] = np.hypot(dx[i], dy[i])
         c = object_class[i]
@@ -248,9 +298,12 @@ def _count_frame(dx, dy, direction, theta, object_class, reported, visible_row, 
             if group_class[g] != c:
                 continue
             within = cutoff_sigmas / np.sqrt(group_kappa[g])
-            if abs(_wrap(det_bearing[k] - bearing)) <= within:
+            off = abs(_wrap(det_bearing[k] - bearing))
+            if off <= within:
                 hit[i] = True
                 break
+            if off <= near_miss_rad:
+                close[i] = True
     # How far this detector reports each class, learnt from what it reported; a class
     # never seen yet is expected as far as any class was.
     for i in range(n):
@@ -259,6 +312,7 @@ def _count_frame(dx, dy, direction, theta, object_class, reported, visible_row, 
     top = reach.max()
     new_expected = np.empty(n)
     new_seen = np.empty(n)
+    new_near = np.empty(n)
     in_clear = 0
     missed = 0
     rate_sums *= rate_decay
@@ -267,6 +321,7 @@ def _count_frame(dx, dy, direction, theta, object_class, reported, visible_row, 
         clear = view[i] and dist[i] <= (r if r > 0.0 else top)
         new_expected[i] = decay * expected[i] + (1.0 if clear else 0.0)
         new_seen[i] = decay * seen[i] + (1.0 if clear and hit[i] else 0.0)
+        new_near[i] = decay * near[i] + (1.0 if clear and close[i] and not hit[i] else 0.0)
         if clear:
             in_clear += 1
             if not hit[i]:
@@ -282,6 +337,7 @@ def _count_frame(dx, dy, direction, theta, object_class, reported, visible_row, 
             new_expected[i] >= min_expected
             and new_seen[i] <= max_seen_share * new_expected[i]
             and new_expected[i] - new_seen[i] >= needed
+            and not absent[i]
         ):
             flagged = True
-    return new_expected, new_seen, in_clear, missed, flagged
+    return new_expected, new_seen, new_near, in_clear, missed, flagged

@@ -168,3 +168,41 @@ def test_a_detector_that_misses_a_third_must_miss_an_object_longer() -> None:
     assert 0.6 < rate < 0.85  # (a neighbour of the same class seen counts too)
     # ... and an object it never reports is still flagged, later.
     assert any(_walk_past(UnseenObjects(sm, cfg), sm, 0.7, absent, 60, seed=3))
+
+
+def test_an_object_taken_away_is_forgiven_one_moved_is_not() -> None:
+    sm = generated_map(40, seed=2)
+    cfg = FilterConfig()
+    x, y = 10.0, 9.0
+    offsets = sm.object_xy - (x, y)
+    bearing = np.arctan2(offsets[:, 1], offsets[:, 0])
+    probe = UnseenObjects(sm, cfg)
+    _walk_past(probe, sm, 1.0, -1, 3, seed=0)
+    in_clear = np.flatnonzero(probe.expected > 0)
+
+    def alone(i: int) -> float:
+        mates = [
+            j for j in range(sm.object_count) if j != i and sm.object_class[j] == sm.object_class[i]
+        ]
+        return float(np.min(np.abs(wrap_angle(bearing[mates] - bearing[i]))))
+
+    gone = max(in_clear.tolist(), key=alone)
+    assert alone(gone) > np.radians(30.0)
+    # Taken away: never reported, no detection of its class anywhere near it.
+    taken = UnseenObjects(sm, cfg)
+    flags = _walk_past(taken, sm, 1.0, gone, 20, seed=1)
+    assert flags[-1] and taken.forgive() == 1
+    assert not taken.contradicted and taken.absent[gone]
+    assert not any(_walk_past(taken, sm, 1.0, gone, 20, seed=2))  # it flags no more
+    # Moved: its class keeps being reported 15 degrees off its drawn place.
+    moved = UnseenObjects(sm, cfg)
+    rng = np.random.default_rng(4)
+    for _ in range(20):
+        dets = [
+            Detection(sm.class_of(int(i)), float(bearing[i]), 0.9)
+            for i in range(sm.object_count)
+            if i != gone and rng.random() < 0.98
+        ] + [Detection(sm.class_of(gone), float(bearing[gone] + np.radians(15.0)), 0.9)]
+        obs = prepare_observation(dets, sm, cfg)
+        moved.update(x, y, 0.0, obs, sm.visibility.row(x, y))
+    assert moved.contradicted and moved.forgive() == 0 and moved.contradicted
