@@ -139,7 +139,6 @@ class UnseenObjects:
         comparisons, element by element); otherwise it is computed here."""
         if self._contradicted is not None:
             return self._contradicted
-        st = self.settings
         return bool(self._flagged().any())
 
     def _flagged(self) -> NDArray[np.bool_]:
