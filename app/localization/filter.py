@@ -21,7 +21,12 @@ from numpy.typing import NDArray
 from app.localization import sensor_kernel
 from app.localization.compass import CompassReading, compass_log_likelihood
 from app.localization.config import FilterConfig
-from app.localization.convergence import ConvergenceGate, FitQuality, protection_radius
+from app.localization.convergence import (
+    ConvergenceGate,
+    FitQuality,
+    protection_radius,
+    widened_radius,
+)
 from app.localization.dilution import BearingGeometry
 from app.localization.estimate import estimate_pose, with_alternatives
 from app.localization.evidence import EvidenceTracker
@@ -407,6 +412,7 @@ class ParticleFilter:
         turned = np.pi if odometry is None else odometry.turn_rad
         lost = odometry is None and self._had_odometry
         self._had_odometry = odometry is not None
+        slide_m = self.odometry_check.slide_m(raw.x, raw.y)
         est = self._gate.confirm(
             raw,
             moved,
@@ -419,7 +425,7 @@ class ParticleFilter:
             confirmed_alternatives=confirmed,
             evidence_frame=self.frames_without_evidence == 0,
             geometry_m=(fix_m := self.geometry.radius_m(raw.x, raw.y, raw.theta_rad)),
-            slide_m=self.odometry_check.slide_m(raw.x, raw.y),
+            slide_m=slide_m,
         )
         if est.converged and transit:
             est = est.with_converged(False)
@@ -431,9 +437,12 @@ class ParticleFilter:
             radius = protection_radius(self.x, self.y, w, est, self.rng, share, reach)
             # Errors the cloud cannot know of (a box's centre, an object drawn a little off)
             # repeat every frame; the geometry bounds what they can do (capped at the map's
-            # size: a fix no geometry pins down is still somewhere on the map).
+            # size: a fix no geometry pins down is still somewhere on the map). Residuals
+            # larger than the noise and bias explain, and a slide away from the odometry,
+            # widen it (convergence.widened_radius).
             radius = max(radius, min(fix_m, self._map_span_m))
-            est = est.with_protection(radius)
+            fit = None if self.quality is None else self.quality.fit
+            est = est.with_protection(widened_radius(radius, fit, slide_m))
         if self.floors is not None:
             self.floors.after_estimate(self.x, w, est.x, est.converged)
         self.estimate = est

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
-from app.localization.convergence import ConvergenceGate, FitQuality
+import math
+
+from app.localization.convergence import ConvergenceGate, FitQuality, widened_radius
 from app.localization.types import Estimate, Hypothesis
 
 GOOD = FitQuality(fit=0.5, unexplained=0.05)
@@ -92,3 +94,15 @@ def test_an_unseen_object_before_the_first_fix_does_not_delay_it() -> None:
     assert not _feed(gate, UNSEEN, 3)
     assert not _feed(gate, GOOD, gate.frames - 1)
     assert _feed(gate, GOOD)
+
+
+def test_residuals_beyond_the_noise_widen_the_radius() -> None:
+    assert widened_radius(0.4, 0.8, 0.0) == 0.4  # the noise explains them: as it was
+    assert widened_radius(0.4, None, 0.0) == 0.4  # no fit measured: as it was
+    assert math.isclose(widened_radius(0.4, 4.0, 0.0), 0.8)  # twice the std: twice
+    assert widened_radius(0.4, 2.0, 0.0) > 0.4
+
+
+def test_a_slide_away_from_the_odometry_adds_to_the_radius() -> None:
+    assert math.isclose(widened_radius(0.3, 0.5, 0.35), 0.65)
+    assert math.isclose(widened_radius(0.3, 4.0, 0.2), 0.8)
