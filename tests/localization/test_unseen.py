@@ -119,11 +119,39 @@ def test_compiled_frame_count_matches_numpy_to_the_bit(
         assert answers == {True, False}, answers
 
 
+POSE = (10.0, 9.0)  # 15 objects within 7.5 m in line of sight on generated_map(40, 2)
+
+
+def _bearings(sm) -> np.ndarray:
+    offsets = sm.object_xy - POSE
+    return np.arctan2(offsets[:, 1], offsets[:, 0])
+
+
+def _loneliest_in_view(sm, cfg) -> tuple[int, float]:
+    """The object in clear view at POSE farthest in bearing from any other of its class
+    (a detection of a same-class neighbour in its direction would see it), and that
+    angle."""
+    probe = UnseenObjects(sm, cfg)
+    _walk_past(probe, sm, 1.0, -1, 3, seed=0)
+    in_clear = np.flatnonzero(probe.expected > 0)
+    assert in_clear.size >= 4
+    bearing = _bearings(sm)
+
+    def alone(i: int) -> float:
+        mates = [
+            j for j in range(sm.object_count) if j != i and sm.object_class[j] == sm.object_class[i]
+        ]
+        return float(np.min(np.abs(wrap_angle(bearing[mates] - bearing[i]))))
+
+    best = max(in_clear.tolist(), key=alone)
+    return best, alone(best)
+
+
 def _walk_past(unseen: UnseenObjects, sm, hit_prob: float, absent: int, frames: int, seed: int):
     """Frames at one pose seeing every object in clear view with ``hit_prob`` each, but
     never the object ``absent``; per frame, whether the estimate was contradicted."""
     rng = np.random.default_rng(seed)
-    x, y, theta = 10.0, 9.0, 0.0  # 15 objects within 7.5 m in line of sight
+    (x, y), theta = POSE, 0.0
     flags = []
     for _ in range(frames):
         dets = [
@@ -140,23 +168,8 @@ def _walk_past(unseen: UnseenObjects, sm, hit_prob: float, absent: int, frames: 
 def test_a_detector_that_misses_a_third_must_miss_an_object_longer() -> None:
     sm = generated_map(40, seed=2)
     cfg = FilterConfig()
-    probe = UnseenObjects(sm, cfg)
-    _walk_past(probe, sm, 1.0, -1, 3, seed=0)
-    in_clear = np.flatnonzero(probe.expected > 0)
-    assert in_clear.size >= 4
-    # The object to leave out: the one farthest in bearing from any other of its class
-    # (a detection of a neighbour of the same class in its direction would see it).
-    offsets = sm.object_xy - (10.0, 9.0)
-    bearing = np.arctan2(offsets[:, 1], offsets[:, 0])
-
-    def alone(i: int) -> float:
-        mates = [
-            j for j in range(sm.object_count) if j != i and sm.object_class[j] == sm.object_class[i]
-        ]
-        return float(np.min(np.abs(wrap_angle(bearing[mates] - bearing[i]))))
-
-    absent = max(in_clear.tolist(), key=alone)
-    assert alone(absent) > np.radians(10.0)
+    absent, apart = _loneliest_in_view(sm, cfg)
+    assert apart > np.radians(10.0)
     # A reliable detector: the object never reported is flagged within a second.
     reliable = _walk_past(UnseenObjects(sm, cfg), sm, 0.98, absent, 60, seed=1)
     assert any(reliable[:8])
@@ -173,21 +186,9 @@ def test_a_detector_that_misses_a_third_must_miss_an_object_longer() -> None:
 def test_an_object_taken_away_is_forgiven_one_moved_is_not() -> None:
     sm = generated_map(40, seed=2)
     cfg = FilterConfig()
-    x, y = 10.0, 9.0
-    offsets = sm.object_xy - (x, y)
-    bearing = np.arctan2(offsets[:, 1], offsets[:, 0])
-    probe = UnseenObjects(sm, cfg)
-    _walk_past(probe, sm, 1.0, -1, 3, seed=0)
-    in_clear = np.flatnonzero(probe.expected > 0)
-
-    def alone(i: int) -> float:
-        mates = [
-            j for j in range(sm.object_count) if j != i and sm.object_class[j] == sm.object_class[i]
-        ]
-        return float(np.min(np.abs(wrap_angle(bearing[mates] - bearing[i]))))
-
-    gone = max(in_clear.tolist(), key=alone)
-    assert alone(gone) > np.radians(30.0)
+    (x, y), bearing = POSE, _bearings(sm)
+    gone, apart = _loneliest_in_view(sm, cfg)
+    assert apart > np.radians(30.0)
     # Taken away: never reported, no detection of its class anywhere near it.
     taken = UnseenObjects(sm, cfg)
     flags = _walk_past(taken, sm, 1.0, gone, 20, seed=1)
