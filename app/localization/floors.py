@@ -59,6 +59,10 @@ SMOOTH_FRAMES = 5
 #: readings of 0.25 m).
 RATE_FRAMES = 10
 LIFT_RISE_M = 0.6
+#: How far the smoothed altitude must also have left the anchor for the rate test to
+#: start a ride (m): about 2 stds of a 5-reading mean of readings 0.4 m apart (a poor
+#: barometer), which a lift at 1 m/s covers in about half a second.
+RATE_ENTRY_M = 0.4
 #: A level change is under way when the smoothed altitude leaves the anchor by this
 #: share of the storey height towards the next level (more than half: after the
 #: anchor moves a storey, the way back needs a fifth of a storey more).
@@ -221,7 +225,12 @@ class FloorTracker:
             # CONTRADICTED_SHARE of the weight stands in a stop, a reading that looks
             # like a ride is the barometer's noise or drift (a full storey's change
             # would still contradict such a belief, below).
-            self.in_transit = (abs(delta) >= band or moving) and self._share_in_stops(
+            # The rate test starts a ride only once the altitude has also left the
+            # anchor by RATE_ENTRY_M (a noisy barometer's half-means cross LIFT_RISE_M
+            # now and then at rest); it keeps one going through a floor passed without
+            # stopping, where the altitude is back near a level's.
+            ride_rate = moving and (self.in_transit or abs(delta) >= RATE_ENTRY_M)
+            self.in_transit = (abs(delta) >= band or ride_rate) and self._share_in_stops(
                 x, y, log_w
             ) >= CONTRADICTED_SHARE
             if not self.in_transit:

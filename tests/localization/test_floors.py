@@ -197,6 +197,18 @@ def test_a_barometer_jump_is_no_ride_for_a_belief_outside_every_connector() -> N
         assert tracker.in_transit is expected
 
 
+def test_a_noisy_barometer_at_rest_in_the_lift_starts_no_ride() -> None:
+    # The newer half of the last ten readings 0.7 m above the older one, yet their
+    # mean only 0.3 m above where the person stands: noise, not a lift under way.
+    tracker = FloorTracker(VENUE)
+    x, y = particles(1.5, 1.5, 0)  # in the lift car
+    feed(tracker, x, y, [100.0] * 10 + [99.6] * 5 + [100.3] * 5)
+    assert not tracker.in_transit
+    # The same rise carried on (a lift leaving): between floors.
+    feed(tracker, x, y, [100.6, 100.9, 101.2])
+    assert tracker.in_transit
+
+
 def test_the_evidence_search_keeps_no_alternative_in_another_floors_lift_car() -> None:
     tracker = FloorTracker(VENUE)
     assert tracker.place_allowed(1.5 + PITCH, 1.5)  # nothing carried yet: anywhere
