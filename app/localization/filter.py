@@ -643,7 +643,7 @@ class ParticleFilter:
         self.quality = FitQuality(fit, unexplained, bad, contradicted)
 
     def _place_is_unique(self) -> bool:
-        """Whether the converged estimate's place is the only one that explains what
+        """Whether the last frame's converged estimate's place is the only one that explains what
         was seen: a global search of the last ``UNIQUE_SEARCH_FRAMES`` frames found no
         alternative, none is tracked, and the last frame's fit was good. An object in
         clear view that goes unreported there is gone from the world, not a sign of
@@ -744,5 +744,6 @@ def warm_up() -> None:
         protection_radius(pf.x, pf.y, pf.weights, est, pf.rng)
         tiny.visibility.row(1.0, 1.0)  # a cell's row unpacked (the fit check's, the narrator's)
         kld_sample_size(pf.x, pf.y, pf.theta, pf.weights, 10, 50)
-    # The unseen-object check's answer from its counts alone (a restored session's).
-    assert not UnseenObjects(tiny, FilterConfig()).contradicted
+    # The unseen-object check's answer from its counts alone (a restored session's); not
+    # an assert, which python -O would strip with the compile.
+    _ = UnseenObjects(tiny, FilterConfig()).contradicted

@@ -17,7 +17,7 @@ from app.maps.geometry import wrap_angle
 
 def _numpy_counts(
     unseen: UnseenObjects, x: float, y: float, theta: float, obs, row
-) -> tuple[np.ndarray, np.ndarray, int, int, np.ndarray, np.ndarray]:
+) -> tuple[np.ndarray, np.ndarray, int, int, np.ndarray, np.ndarray, np.ndarray]:
     """One frame counted as the vectorized numpy code did (before it was compiled)."""
     st, sm, cfg = unseen.settings, unseen.map, unseen.config
     index = {c: i for i, c in enumerate(sm.classes)}
@@ -41,11 +41,15 @@ def _numpy_counts(
     within = st.cutoff_sigmas / np.sqrt(obs.group_kappa[obs.det_group])
     seen = np.zeros(sm.object_count, dtype=bool)
     seen[in_view] = (same & (err <= within[None, :])).any(axis=1)
+    # A near miss: a detection of its class within near_miss_rad, none seeing it.
+    close = np.zeros(sm.object_count, dtype=bool)
+    close[in_view] = (same & (err <= st.near_miss_rad)).any(axis=1)
     np.maximum.at(reach_m, cls[seen], dist[seen])
     reach = np.where(reach_m > 0.0, reach_m, reach_m.max())
     clear = view & (dist <= reach[cls])
     expected = st.decay * unseen.expected + clear
     seen_count = st.decay * unseen.seen + (clear & seen)
+    near = st.decay * unseen.near + (clear & close & ~seen)
     missed = int(np.count_nonzero(clear & ~seen))
     # The hit rate's sums: the objects in clear view that the detector does report now
     # and then, one at a time (as the kernel adds them).
@@ -53,7 +57,7 @@ def _numpy_counts(
     for i in np.flatnonzero(clear & (seen_count > st.max_seen_share * expected)):
         rate[0] += 1.0
         rate[1] += 1.0 if seen[i] else 0.0
-    return expected, seen_count, int(np.count_nonzero(clear)), missed, reach_m, rate
+    return expected, seen_count, int(np.count_nonzero(clear)), missed, reach_m, rate, near
 
 
 def _bits(a: np.ndarray) -> np.ndarray:
@@ -75,6 +79,7 @@ def test_compiled_frame_count_matches_numpy_to_the_bit(
     rng = np.random.default_rng(7)
     x, y = 6.0, 5.0
     answers = set()
+    near_misses = 0
     for frame in range(60):
         # A wandering pose (small steps, so the counts are not reset by a jump) and
         # detections: some aimed at objects (noisy), some of a class the map lacks.
@@ -101,6 +106,8 @@ def test_compiled_frame_count_matches_numpy_to_the_bit(
         assert got[2:] == want[2:4]
         assert np.array_equal(_bits(unseen.reach_m), _bits(want[4]))
         assert np.array_equal(_bits(unseen.rate_sums), _bits(want[5]))
+        assert np.array_equal(_bits(unseen.near), _bits(want[6]))
+        near_misses += int(np.count_nonzero(want[6]))
         # The kernel's answer to "contradicted" is the counts' (the property's formula).
         st = unseen.settings
         hit_rate = (want[5][1] + st.rate_prior * st.rate_prior_frames) / (
@@ -115,6 +122,7 @@ def test_compiled_frame_count_matches_numpy_to_the_bit(
         assert unseen.contradicted == bool(flagged.any())
         answers.add(unseen.contradicted)
     assert unseen.expected.max() > 1.0  # objects were in clear view, some frames running
+    assert near_misses > 0  # the near-miss counts were compared where they count
     if fov_deg == 360.0:  # the full view meets both answers (a narrow one may not)
         assert answers == {True, False}, answers
 
