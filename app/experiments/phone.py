@@ -325,6 +325,8 @@ def run_scenario(
         initial_pose=initial,
         sensor=SensorSpec(bearing_std_deg=2.0, fov_deg=cond.fov_deg),
         camera=pinhole_camera() if cond.pinhole else None,
+        # The app knows which tracking it runs (docs/API.md, SessionCreate.odometry).
+        odometry_source=grade.name if (grade := cond.effects.odometry) else "unknown",
     )
     manager = _manager()
     assert isinstance(manager, SessionManager)

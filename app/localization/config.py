@@ -80,6 +80,12 @@ class FilterConfig:
     #: Noise floors per frame, so a standing person still diffuses a little.
     trans_noise_floor_m: float = 0.02
     rot_noise_floor_deg: float = 1.0
+    #: Estimate the odometry's scale and heading drift and take them out of every frame's
+    #: odometry (:mod:`~app.localization.odometry_bias`), with the prior of this source
+    #: ("vio", "pdr" or "unknown"; docs/API.md, ``SessionCreate.odometry``). None: the
+    #: odometry is taken as it comes (the paper's and the simulator's suites). The
+    #: service always estimates them.
+    odometry_source: str | None = None
 
     #: Resample when the effective sample size falls below this fraction of N.
     resample_threshold: float = 0.5

@@ -32,13 +32,14 @@ from app.localization.estimate import estimate_pose, with_alternatives
 from app.localization.evidence import EvidenceTracker
 from app.localization.floors import AltitudeReading, FloorTracker
 from app.localization.kld import kld_sample_size
-from app.localization.latency import CaptureClock, moved_forward
+from app.localization.latency import DEFAULT_FRAME_S, CaptureClock, moved_forward
 from app.localization.models import (
     BearingSensorModel,
     MotionModel,
     OdometryMotionModel,
     SensorModel,
 )
+from app.localization.odometry_bias import BIAS_PRIORS, OdometryBias
 from app.localization.recovery import AugmentedMCL
 from app.localization.resampling import (
     effective_sample_size,
@@ -148,6 +149,9 @@ class ParticleFilter:
         self.capture = CaptureClock()
         #: What systematic bearing errors can do to the fix (:mod:`~app.localization.dilution`).
         self.geometry = BearingGeometry(semantic_map, self.config)
+        #: The odometry's scale and heading drift (:mod:`~app.localization.odometry_bias`).
+        source = self.config.odometry_source
+        self.odometry_bias = None if source is None else OdometryBias(BIAS_PRIORS[source])
         #: Whether the estimate keeps to the odometry (:mod:`~app.localization.slide`).
         self.odometry_check = OdometryCheck(
             self.config.trans_noise_frac, self.config.heading_slack_deg
@@ -173,6 +177,8 @@ class ParticleFilter:
         self.capture.reset()
         self.geometry.reset()
         self.odometry_check.reset()
+        if self.odometry_bias is not None:
+            self.odometry_bias.reset()
         if initial_pose is not None:
             start = (initial_pose.x, initial_pose.y, initial_pose.theta_rad)
             self.geometry.set_prior(start, initial_pose.std_xy_m)
@@ -352,12 +358,27 @@ class ParticleFilter:
         The estimate summarizes the weighted particles before resampling: resampling
         only adds noise to what they say (and to what the injected particles say).
         """
+        raw_odometry = odometry
+        seconds = frame_s if frame_s is not None and frame_s > 0.0 else DEFAULT_FRAME_S
+        if self.odometry_bias is not None:
+            odometry = self.odometry_bias.correct(odometry, seconds)
         odometry = self.capture.step(odometry, frame_s, detections_age_s)
         self._step(odometry, detections, heading, altitude)
         back = self.capture.back
-        if back.forward_m == 0.0 and back.left_m == 0.0 and back.turn_rad == 0.0:
-            return self.estimate
-        return moved_forward(self.estimate, back)
+        est = self.estimate
+        if not (back.forward_m == 0.0 and back.left_m == 0.0 and back.turn_rad == 0.0):
+            est = moved_forward(est, back)
+        if self.odometry_bias is not None:
+            rode = self.floors is not None and self.floors.changed
+            self.odometry_bias.observe(
+                None if rode else raw_odometry,
+                seconds,
+                (est.x, est.y, est.theta_rad),
+                est.converged,
+                max(est.std_x_m, est.std_y_m),
+                est.std_theta_rad,
+            )
+        return est
 
     def _step(
         self,
@@ -533,6 +554,8 @@ class ParticleFilter:
             "geometry": self.geometry.checkpoint(),
             "odometry_check": self.odometry_check.checkpoint(),
         }
+        if self.odometry_bias is not None:
+            state["odometry_bias"] = self.odometry_bias.checkpoint()
         if self.floors is not None:  # maps with several levels only
             state["floors"] = self.floors.checkpoint()
         return state
@@ -566,6 +589,8 @@ class ParticleFilter:
         self.capture.restore(state.get("capture"))
         self.geometry.restore(state.get("geometry"))
         self.odometry_check.restore(state.get("odometry_check"))
+        if self.odometry_bias is not None:
+            self.odometry_bias.restore(state.get("odometry_bias"))
         self.last_observation = None
 
     def _update_fit(self, raw: Estimate) -> None:

@@ -308,6 +308,7 @@ class SessionManager:
             heading_slack_deg=REAL_DETECTOR_SLACK_DEG,
             trans_noise_frac=ODOMETRY_NOISE[request.odometry_source][0],
             rot_noise_frac=ODOMETRY_NOISE[request.odometry_source][1],
+            odometry_source=request.odometry_source,
         )
         seed = request.seed if request.seed is not None else secrets.randbits(63)
         initial, levels = initial_on_levels(semantic_map, request)
