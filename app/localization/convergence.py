@@ -61,7 +61,9 @@ class ConvergenceGate:
     ``gain_without_evidence`` frames, the recent bearings' geometry pins the fix within
     ``gain_geometry_m`` (:mod:`~app.localization.dilution`), a global consistency search
     has run since the cluster formed, the alternatives it found hold at most
-    ``gain_alternatives`` of the probability (:mod:`~app.localization.evidence`), and
+    ``gain_alternatives`` of the probability (:mod:`~app.localization.evidence`) and
+    held no more than ``hold_alternatives`` on any of those frames (a fix gained on
+    frames whose competitor would have released it held is given up soon after), and
     the estimate has not slid more than ``hold_slide_m`` from a recent converged one
     carried by the odometry (:mod:`~app.localization.slide`).
 
@@ -87,10 +89,13 @@ class ConvergenceGate:
     still shows at once (bad frames, a jump, an alternative), a pose drifting away
     from the evidence within a second. An object in clear view going unreported
     releases at once (on a stale map it is what catches a fix pulled a metre off), but
-    once it has, ``converged`` is gained again only after ``regain_after_unseen_frames``
-    frames with detections free of it: a far object the detector reports now and then
-    would otherwise flag, clear and flag again, each time taking back a fix it had just
-    given.
+    once it has, or once one has kept a fix from being gained at this place,
+    ``converged`` is gained only after ``regain_after_unseen_frames`` frames with
+    detections free of it: a far object the detector reports now and then would
+    otherwise flag, clear and flag again, and an object that left the view unresolved
+    would come back into it, each time taking back a fix just given. The frames
+    towards a gain are also held to the odometry (:mod:`~app.localization.slide`): a
+    cloud dragged off while nothing was converged is not gained mid-drag.
     """
 
     gain_fit: float = 2.0
@@ -125,6 +130,9 @@ class ConvergenceGate:
     #: Frames with detections free of an unseen-object contradiction that gaining
     #: ``converged`` again takes once one has taken it away (5 s at 5 frames/s).
     regain_after_unseen_frames: int = 25
+    #: A jump of the estimate farther than this (m) leaves the place an unseen-object
+    #: contradiction was raised at (the unseen check's counts start again past 1 m too).
+    unseen_place_m: float = 1.0
 
     def __init__(
         self, frames: int = 5, tolerance_m: float = 0.3, tolerance_rad: float = np.radians(15.0)
@@ -185,7 +193,7 @@ class ConvergenceGate:
         self._last = raw
         step = float(np.hypot(raw.x - last.x, raw.y - last.y)) if last is not None else np.inf
         turn = abs(wrap_rad(float(raw.theta_rad - last.theta_rad))) if last else np.pi
-        self._count_unseen(quality, evidence_frame)
+        self._count_unseen(quality, evidence_frame, step)
         if self._held:
             top = raw.hypotheses[0] if raw.hypotheses else None
             light = top is None or top.weight < self.hold_mass
@@ -226,6 +234,7 @@ class ConvergenceGate:
             and frames_without_evidence <= self.gain_without_evidence
             and geometry_m <= self.gain_geometry_m
             and slide_m <= self.hold_slide_m
+            and alternatives <= self.hold_alternatives
         )
         steady = (
             raw.converged
@@ -244,18 +253,32 @@ class ConvergenceGate:
         return raw.with_converged(self._held)
 
     @property
+    def streak(self) -> int:
+        """Frames in a row the estimate has been steady and fitting towards a gain (0
+        after a release; held at ``frames`` or more while converged)."""
+        return self._streak
+
+    @property
     def _unseen_cleared(self) -> bool:
         """Whether the last unseen-object contradiction (if any) is long enough past."""
         since = self._since_unseen
         return since is None or since >= self.regain_after_unseen_frames
 
-    def _count_unseen(self, quality: FitQuality | None, evidence_frame: bool) -> None:
-        """Frames with detections since an object in clear view last went unreported,
-        once one has taken ``converged`` away (a first fix waits for none)."""
-        if self._since_unseen is None:
-            return
+    def _count_unseen(self, quality: FitQuality | None, evidence_frame: bool, step: float) -> None:
+        """Frames with detections since an object in clear view last went unreported at
+        this place (None: none has since the estimate came here).
+
+        A contradiction counts whether or not ``converged`` was held when it came: one
+        that kept a fix from being gained and lapsed only because its object left the
+        view is as unresolved as one that took a fix away. Once the estimate jumps
+        farther than ``unseen_place_m`` it was about another place, and is forgotten.
+        """
         if quality is not None and quality.contradicted:
             self._since_unseen = 0
+        elif self._since_unseen is None:
+            return
+        elif step > self.unseen_place_m:
+            self._since_unseen = None
         elif evidence_frame:
             self._since_unseen += 1
 

@@ -450,7 +450,13 @@ class ParticleFilter:
         )
         if est.converged and transit:
             est = est.with_converged(False)
-        self.odometry_check.add(raw.x, raw.y, raw.theta_rad, est.converged)
+        # A run of frames on the way to a gain is held to the odometry as a fix is: its
+        # estimates are anchors while it lasts (a new run starts without the last's).
+        streak = self._gate.streak
+        if not est.converged and streak <= 1:
+            self.odometry_check.drop_candidates()
+        candidate = not est.converged and streak > 0
+        self.odometry_check.add(raw.x, raw.y, raw.theta_rad, est.converged, candidate)
         if self.evidence is not None:
             est = with_alternatives(est, self.evidence.hypotheses(), share)
         if est.converged:

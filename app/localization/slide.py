@@ -65,8 +65,9 @@ class OdometryCheck:
         """Forget the history (odometry lost, the belief started over or moved elsewhere)."""
         #: Dead reckoning: the odometry composed since the last reset.
         self._reckoned: Pose = (0.0, 0.0, 0.0)
-        #: Per frame: the dead reckoning then, and the converged estimate (None if not).
-        self._past: deque[tuple[Pose, Pose | None]] = deque(maxlen=SLIDE_FRAMES)
+        #: Per frame: the dead reckoning then, the estimate kept as an anchor (None if
+        #: not), and whether it is a candidate's (see :meth:`add`).
+        self._past: deque[tuple[Pose, Pose | None, bool]] = deque(maxlen=SLIDE_FRAMES)
 
     def moved(self, odometry: Odometry) -> None:
         """The person moved by ``odometry``."""
@@ -92,7 +93,7 @@ class OdometryCheck:
         first = next(anchors, None)
         if first is None:
             return 0.0
-        reckoned_then, estimate_then = self._past[first]
+        reckoned_then, estimate_then, _ = self._past[first]
         assert estimate_then is not None
         # The dead reckoning's motion since then, in its own pose then ...
         rx, ry, rt = reckoned_then
@@ -110,9 +111,24 @@ class OdometryCheck:
             self.heading_tolerance_rad,
         )
 
-    def add(self, x: float, y: float, theta: float, converged: bool) -> None:
-        """Record this frame's estimate (kept as an anchor only when converged)."""
-        self._past.append((self._reckoned, (x, y, theta) if converged else None))
+    def add(
+        self, x: float, y: float, theta: float, converged: bool, candidate: bool = False
+    ) -> None:
+        """Record this frame's estimate, kept as an anchor when converged or a
+        ``candidate``: one of a run of frames on the way to gaining converged (the
+        gate's streak). A gain is checked against the run's first estimates as a fix
+        is held against its own: a cloud dragged off while no fix was held (a moved
+        object pulling it) is not gained mid-drag. :meth:`drop_candidates` forgets
+        the run's when it breaks."""
+        anchor = converged or candidate
+        self._past.append((self._reckoned, (x, y, theta) if anchor else None, candidate))
+
+    def drop_candidates(self) -> None:
+        """Forget the candidates' anchors (their run broke: they were not confirmed)."""
+        past = self._past
+        for k, (reckoned, estimate, candidate) in enumerate(past):
+            if candidate and estimate is not None:
+                past[k] = (reckoned, None, False)
 
     def checkpoint(self) -> dict[str, Any]:
         return {"reckoned": self._reckoned, "past": list(self._past)}
@@ -123,8 +139,9 @@ class OdometryCheck:
         if state is None:
             return
         self._reckoned = _pose(state["reckoned"])
-        for reckoned, estimate in state["past"]:
-            self._past.append((_pose(reckoned), None if estimate is None else _pose(estimate)))
+        for reckoned, estimate, *kind in state["past"]:
+            pose = None if estimate is None else _pose(estimate)
+            self._past.append((_pose(reckoned), pose, bool(kind[0]) if kind else False))
 
 
 def _pose(value: Any) -> Pose:

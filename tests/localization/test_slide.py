@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 import pytest
 
 from app.localization.convergence import ConvergenceGate, FitQuality
@@ -94,3 +95,61 @@ def test_the_gate_lets_go_of_a_sliding_estimate_and_does_not_take_it() -> None:
     for _ in range(gate.frames + 1):
         est = gate.confirm(_estimate(), quality=fit, searched_ago=0, slide_m=1.0)
     assert not est.converged
+
+
+def test_candidates_are_anchors_until_their_run_breaks() -> None:
+    """Estimates on their way to a gain are held to the odometry too: a cloud dragged
+    off while nothing was converged slides against the run's first estimates (the
+    stale office gained a fix mid-drag, 0.7 m off and falling further behind)."""
+    check = OdometryCheck(scale_tolerance=0.0)
+    x, y = 2.0, 1.0
+    for _ in range(SLIDE_FRAMES):
+        check.moved(STEP)
+        y += 0.1 - 0.03
+        check.add(x, y, math.pi / 2, converged=False, candidate=True)
+    check.moved(STEP)
+    assert check.slide_m(x, y + 0.07) == pytest.approx(0.03 * SLIDE_FRAMES, abs=1e-9)
+    copy = OdometryCheck(scale_tolerance=0.0)
+    copy.restore(check.checkpoint())
+    assert copy.slide_m(x, y + 0.07) == check.slide_m(x, y + 0.07)
+    check.drop_candidates()
+    assert check.slide_m(x, y + 0.07) == 0.0
+    # A converged anchor stays when the candidates go.
+    check.add(x, y, math.pi / 2, converged=True)
+    for _ in range(MIN_FRAMES):
+        check.moved(STEP)
+        check.add(x, y, math.pi / 2, converged=False, candidate=True)
+    check.drop_candidates()
+    assert check.slide_m(x, y) > 0.0
+
+
+def test_the_filter_holds_a_run_towards_a_gain_to_the_odometry() -> None:
+    """The filter passes its gate's run (streak) to the odometry check as candidates."""
+    from app.localization.filter import ParticleFilter
+    from app.maps.model import parse_map
+
+    room = parse_map(
+        {
+            "name": "room",
+            "walls": [
+                {"x1": 0, "y1": 0, "x2": 6, "y2": 0},
+                {"x1": 6, "y1": 0, "x2": 6, "y2": 6},
+                {"x1": 6, "y1": 6, "x2": 0, "y2": 6},
+                {"x1": 0, "y1": 6, "x2": 0, "y2": 0},
+            ],
+            "objects": [{"class": "door", "x": 6, "y": 3}],
+        }
+    )
+    pf = ParticleFilter(room, rng=np.random.default_rng(0))
+    seen: list[tuple[bool, bool]] = []
+    original = pf.odometry_check.add
+
+    def spy(x: float, y: float, theta: float, converged: bool, candidate: bool = False) -> None:
+        seen.append((converged, candidate))
+        original(x, y, theta, converged, candidate)
+
+    pf.odometry_check.add = spy  # type: ignore[method-assign]
+    pf._gate.confirm = lambda raw, *a, **k: raw.with_converged(False)  # type: ignore[method-assign]
+    pf._gate._streak = 3
+    pf.step(None, [])
+    assert seen == [(False, True)]
