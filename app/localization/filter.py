@@ -399,7 +399,16 @@ class ParticleFilter:
         searched_ago: int | None = 0
         transit = self.floors is not None and self.floors.between_floors(raw.x, raw.y)
         if transit:
-            self._gate.reset()  # between floors: nobody is located
+            # Between floors nobody is located (converged is withheld below), and the
+            # convergence test starts afresh, except that a fix held as the barometer
+            # called the person between floors keeps being tested by the hold rules
+            # until a level does change: a poor barometer's noise calls a walking
+            # person between floors for a frame or two now and then, and that fix,
+            # never moved, is as good after as before.
+            floors = self.floors
+            assert floors is not None
+            if floors.blind or floors.changed or not self._gate.held:
+                self._gate.reset()
             inject = 0.0  # the barometer, not the view, moves the cloud then
         if self.evidence is not None and not transit:
             raw, w, ess = self._weigh_alternatives(odometry, raw, w, ess, heading)
