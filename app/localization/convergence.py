@@ -259,6 +259,11 @@ class ConvergenceGate:
         return self._streak
 
     @property
+    def held(self) -> bool:
+        """Whether ``converged`` was given in the last :meth:`confirm` (and not reset)."""
+        return self._held
+
+    @property
     def _unseen_cleared(self) -> bool:
         """Whether the last unseen-object contradiction (if any) is long enough past."""
         since = self._since_unseen

@@ -184,6 +184,9 @@ class ParticleFilter:
             self.geometry.set_prior(start, initial_pose.std_xy_m)
         # A global start with recovery on seeds its cloud from the first evidence.
         self._seed_from_observation = initial_pose is None and self.config.recovery
+        # ... and on a map with several levels weighs a draw as dense as a one-level
+        # map's first (see _wide_start).
+        self._wide_first = initial_pose is None and self.floors is not None
         self._recovery.reset()
         self._gate.reset()
         if self.evidence is not None:
@@ -243,6 +246,7 @@ class ParticleFilter:
         self.x, self.y, self.theta = self._anywhere(n)
         self.log_w = np.zeros(n, dtype=np.float64)
         self._seed_from_observation = self.config.recovery
+        self._wide_first = self.floors is not None
         self._recovery.reset()
         self._gate.reset()
         self.geometry.reset()
@@ -273,6 +277,14 @@ class ParticleFilter:
             self.frames_without_evidence += 1
             return 0.0, None
         self.frames_without_evidence = 0
+        if self._wide_first:
+            mean_ll = self._wide_start(obs)
+            per_class = mean_ll / max(obs.group_kappa.size, 1)
+            if not np.isfinite(per_class):
+                per_class = -1e3
+            if not self.config.recovery:
+                return 0.0, None
+            return self._recovery.update(per_class), None
         if self._seed_from_observation:
             self._seed_cloud(obs)
         log_lik = self.observation_log_likelihood(obs)
@@ -304,6 +316,35 @@ class ParticleFilter:
         x, y, th = self.sensor.sample_poses(n_obs, obs, self.rng)
         self.x[:n_obs], self.y[:n_obs], self.theta[:n_obs] = x, y, th
         self.log_w[:] = 0.0
+
+    def _wide_start(self, obs: Observation) -> float:
+        """Global start on a map with several levels, first evidence: importance
+        sampling at a one-level map's density.
+
+        ``config.particles`` spread over every level put a level's share of them on the
+        person's floor, and the first fix came later than on that floor's map alone.
+        Here (levels x particles) candidates are drawn as a global start draws its
+        particles (``SEED_SHARE`` of them from this observation, the rest uniform over
+        the free space of every level), weighed by this frame's detections, and
+        ``config.particles`` of them drawn by systematic resampling: the cloud the
+        larger filter would hold after this frame, at the steady filter's size and
+        cost from the next frame on. The frame is weighed once (the drawn particles
+        come with equal weights) and only when it has detections; with few or
+        ambiguous ones the weights stay flat and so does the share of every level.
+        Returns the log of the candidates' mean likelihood (what the recovery's
+        averages take)."""
+        self._wide_first = False
+        m = len(self.map.layout.levels) * self.n
+        x, y, theta = self._anywhere(m)
+        if self._seed_from_observation:
+            self._seed_from_observation = False
+            n_obs = int(SEED_SHARE * m)
+            x[:n_obs], y[:n_obs], theta[:n_obs] = self.sensor.sample_poses(n_obs, obs, self.rng)
+        w, lse = weights_and_log_sum_exp(self.sensor.log_likelihood(x, y, theta, obs))
+        idx = systematic_resample(w, self.n, self.rng)
+        self.x, self.y, self.theta = x[idx], y[idx], theta[idx]
+        self.log_w = np.zeros(self.n, dtype=np.float64)
+        return lse - float(np.log(m))
 
     def resample(self, inject_share: float = 0.0) -> bool:
         """Resample when the ESS is low or particles are to be injected; True if done."""
@@ -420,7 +461,16 @@ class ParticleFilter:
         searched_ago: int | None = 0
         transit = self.floors is not None and self.floors.between_floors(raw.x, raw.y)
         if transit:
-            self._gate.reset()  # between floors: nobody is located
+            # Between floors nobody is located (converged is withheld below), and the
+            # convergence test starts afresh, except that a fix held as the barometer
+            # called the person between floors keeps being tested by the hold rules
+            # until a level does change: a poor barometer's noise calls a walking
+            # person between floors for a frame or two now and then, and that fix,
+            # never moved, is as good after as before.
+            floors = self.floors
+            assert floors is not None
+            if floors.blind or floors.changed or not self._gate.held:
+                self._gate.reset()
             inject = 0.0  # the barometer, not the view, moves the cloud then
         if self.evidence is not None and not transit:
             raw, w, ess = self._weigh_alternatives(odometry, raw, w, ess, heading)
@@ -564,6 +614,7 @@ class ParticleFilter:
             state["odometry_bias"] = self.odometry_bias.checkpoint()
         if self.floors is not None:  # maps with several levels only
             state["floors"] = self.floors.checkpoint()
+            state["wide_first"] = self._wide_first
         return state
 
     def restore(self, state: Mapping[str, Any]) -> None:
@@ -579,6 +630,7 @@ class ParticleFilter:
         self._recovery.w_slow, self._recovery.w_fast = (float(v) for v in state["recovery"])
         self._gate.restore(state["gate"])
         self._seed_from_observation = bool(state["seed_from_observation"])
+        self._wide_first = bool(state.get("wide_first", False))
         self.quality = from_plain(FitQuality | None, state["quality"])
         self._had_odometry = bool(state["had_odometry"])
         self._bad_run = int(state.get("bad_run", 0))

@@ -26,11 +26,14 @@ While the smoothed altitude is more than ``DRIFT_SHARE`` of a storey from the an
 rises or falls as fast as a lift does, and some of the belief stands in a connector's
 stop (nobody rides a lift from the middle of a shop floor: elsewhere such a reading is
 the barometer's noise), the person is between floors
-(:attr:`FloorTracker.in_transit`): the filter then calls nobody located, starts its
-convergence test afresh, and neither injects particles nor lets the evidence search move
-the cloud (a lift car looks the same on every floor; the barometer, not the view, says
-where a ride ends), so every particle the change meets descends from the ones that
-entered the connector.
+(:attr:`FloorTracker.in_transit`; once started, until the altitude is back within
+``RATE_ENTRY_M`` of the anchor or a level has changed): the filter then calls nobody
+located, starts its convergence test afresh (a fix it held when the barometer called the
+person between floors is only withheld, and goes on being tested, until a level changes:
+a poor barometer's noise does that to a walking person now and then), and neither
+injects particles nor lets the evidence search move the cloud (a lift car looks the same
+on every floor; the barometer, not the view, says where a ride ends), so every particle
+the change meets descends from the ones that entered the connector.
 
 Without altitude, a particle in a stop moves to a level its connector reaches with a
 small probability per frame (``BLIND_RATE``), and what is seen on each level decides;
@@ -141,6 +144,8 @@ class FloorTracker:
         #: Whether the barometer says the person is between floors (the smoothed
         #: altitude more than ``DRIFT_SHARE`` of a storey from the anchor).
         self.in_transit = False
+        #: Whether a level has changed since the person was last not between floors.
+        self._changed_in_transit = False
         #: The level of the last converged estimate, and whether this step confirmed
         #: a level other than the one before (the first fix included).
         self.confirmed_level: int | None = None
@@ -206,6 +211,7 @@ class FloorTracker:
         if altitude is None:
             self.carried_level = None
             self.in_transit = False
+            self._changed_in_transit = False
             return self._blind(x, y, rng), log_w, False
         self._readings.append(float(altitude.relative_m))
         recent = list(self._readings)
@@ -230,11 +236,21 @@ class FloorTracker:
             # now and then at rest); it keeps one going through a floor passed without
             # stopping, where the altitude is back near a level's.
             ride_rate = moving and (self.in_transit or abs(delta) >= RATE_ENTRY_M)
-            self.in_transit = (abs(delta) >= band or ride_rate) and self._share_in_stops(
+            riding = abs(delta) >= band or ride_rate
+            # A transit that has changed no level yet ends only once the altitude is back
+            # within RATE_ENTRY_M of the anchor (which meanwhile follows it as it does at
+            # rest): a ride slower than the rate test, started by it, does not drop out
+            # of transit for the frames before the altitude reaches the band; the
+            # barometer's noise settles back.
+            settling = self.in_transit and not self._changed_in_transit
+            settling = settling and abs(delta) >= RATE_ENTRY_M
+            self.in_transit = (riding or settling) and self._share_in_stops(
                 x, y, log_w
             ) >= CONTRADICTED_SHARE
-            if not self.in_transit:
+            if not (self.in_transit and riding):
                 self.anchor_m += DRIFT_GAIN * delta
+            if not self.in_transit:
+                self._changed_in_transit = False
             return x, log_w, False
         self.in_transit = True
         up = delta > 0
@@ -264,6 +280,7 @@ class FloorTracker:
             self.anchor_m += threshold * 2.0 if up else -threshold * 2.0
         self.changes += 1
         self.changed = True
+        self._changed_in_transit = True
         if moved_share < CONTRADICTED_SHARE:
             self.carried_level = None
         return new_x, log_w, moved_share < CONTRADICTED_SHARE
@@ -347,6 +364,7 @@ class FloorTracker:
             "changes": self.changes,
             "level_probability": self.level_probability,
             "in_transit": self.in_transit,
+            "changed_in_transit": self._changed_in_transit,
             "confirmed_level": self.confirmed_level,
             "carried_level": self.carried_level,
             "blind": self.blind,
@@ -360,6 +378,7 @@ class FloorTracker:
         p = state["level_probability"]
         self.level_probability = None if p is None else float(p)
         self.in_transit = bool(state["in_transit"])
+        self._changed_in_transit = bool(state.get("changed_in_transit", False))
         confirmed = state["confirmed_level"]
         self.confirmed_level = None if confirmed is None else int(confirmed)
         self.newly_confirmed = False

@@ -12,7 +12,9 @@ from app.localization.floors import (
     AltitudeReading,
     FloorTracker,
 )
+from app.localization.types import Detection, InitialPose, Odometry, Pose
 from app.maps.model import SemanticMap
+from app.simulation.camera import CameraModel, visible_objects
 from app.simulation.simulator import SimulationConfig
 from app.simulation.venue import venue_legs, venue_map
 from app.simulation.venue_walk import Barometer, Ride, Walk, simulate_venue
@@ -207,6 +209,58 @@ def test_a_noisy_barometer_at_rest_in_the_lift_starts_no_ride() -> None:
     # The same rise carried on (a lift leaving): between floors.
     feed(tracker, x, y, [100.6, 100.9, 101.2])
     assert tracker.in_transit
+
+
+def test_a_fix_called_between_floors_by_the_barometers_noise_is_kept() -> None:
+    # Localized, standing in the stairs' stop on the Ground Floor; a second of readings
+    # 0.7 m up (a lift's rate, or a poor barometer's noise) and back: between floors
+    # (nobody located) while they last, located again at once after, as no level
+    # changed. Before, the fix had to be gained again from scratch (5 frames or more).
+    pose = Pose(22.0, 2.0, 0.0)
+    idx, bearing = visible_objects(VENUE, pose, CameraModel(360.0, 15.0))
+    seen = [
+        Detection(VENUE.class_of(int(j)), float(b), 1.0) for j, b in zip(idx, bearing, strict=True)
+    ]
+    start = InitialPose(pose.x, pose.y, pose.theta_rad, 0.3, 0.1)
+    pf = ParticleFilter(
+        VENUE, FilterConfig(particles=2000), rng=np.random.default_rng(0), initial_pose=start
+    )
+    assert pf.floors is not None
+    converged, transit = [], []
+    for r in [100.0] * 30 + [100.7] * 5 + [100.0] * 10:
+        est = pf.step(Odometry(), seen, altitude=AltitudeReading(r, 0.5))
+        converged.append(est.converged)
+        transit.append(pf.floors.in_transit)
+    assert converged[29] and not any(transit[:30])
+    between = [i for i, t in enumerate(transit) if t]
+    assert between and pf.floors.changes == 0
+    assert not any(converged[i] for i in between)
+    assert all(converged[between[-1] + 1 :])
+
+
+def test_a_ride_started_by_the_rate_test_stays_between_floors_until_the_level_changes() -> None:
+    # A second's jump of 0.7 m (the rate test starts a ride), then a climb at 0.3 m/s, too
+    # slow for the rate test to keep the ride going: still between floors all the way to
+    # the First Floor, not located in the stairs for the frames before the altitude
+    # reaches the band.
+    tracker = FloorTracker(VENUE)
+    x, y = particles(22.0, 2.0, 0)
+    rng = np.random.default_rng(0)
+    log_w = np.zeros(x.size)
+    climb = list(100.7 + 0.06 * np.arange(1, 80))
+    flags = []
+    for r in [100.0] * 10 + [100.7] * 5 + climb:
+        x, log_w, _ = tracker.apply(x, y, log_w, AltitudeReading(float(r), 0.5), rng)
+        flags.append((tracker.in_transit, tracker.changes))
+    first = next(i for i, (t, _) in enumerate(flags) if t)
+    changed = next(i for i, (_, c) in enumerate(flags) if c)
+    assert first < changed and all(t for t, _ in flags[first:changed])
+    # After a level change the altitude need only come within the band: a storey 0.6 m
+    # taller than the map says ends the ride as it would otherwise.
+    tracker = FloorTracker(VENUE)
+    x, y = particles(1.5, 1.5, 0)
+    x, _, _ = feed(tracker, x, y, [100.0] * 10 + list(np.linspace(100.0, 105.1, 26)) + [105.1] * 10)
+    assert tracker.changes == 1 and not tracker.in_transit
 
 
 def test_the_evidence_search_keeps_no_alternative_in_another_floors_lift_car() -> None:
