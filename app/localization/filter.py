@@ -11,6 +11,7 @@ structure of arrays (x, y, theta, log-weight); nothing loops over particles in P
 from __future__ import annotations
 
 import functools
+import math
 from collections.abc import Mapping, Sequence
 from dataclasses import replace
 from typing import Any
@@ -81,6 +82,14 @@ BAD_FRAME_FIT = 8.0
 BAD_FRAMES_IN_A_ROW = 2
 #: Steps of the heading slack a bad frame is re-checked with (degrees).
 SLACK_STEP_DEG = 2.0
+#: Where a ride between levels lets the person off, as a known start for the evidence
+#: tracker's alternatives: the cloud rode along (an escalator or a flight of stairs is
+#: a metre or so wide, a lift car one or two across), its heading carried by the
+#: odometry. Three stds (2.25 m) keep every place the ride could have ended at; the top
+#: of the parallel escalator 3.3 m away (measured: a look-alike holding 0.14-0.32 of
+#: the probability for 3 s after the ride) is excluded.
+RIDE_START_STD_M = 0.75
+RIDE_START_STD_RAD = math.radians(45.0)
 #: Alternatives are searched for while the heaviest cluster is at most this wide (m).
 SEARCH_MAX_SPREAD_M = 0.5
 #: An unreported object in clear view of a converged estimate is taken for gone from
@@ -429,6 +438,7 @@ class ParticleFilter:
         altitude: AltitudeReading | None = None,
     ) -> None:
         """:meth:`step` in capture time: ``odometry`` is the motion between captures."""
+        rode = False  # a ride between levels ended with this frame's level change
         self.predict(odometry)
         if odometry is not None:
             self.geometry.moved(odometry)
@@ -447,8 +457,10 @@ class ParticleFilter:
                 self.odometry_check.reset()  # the ride is no walk the odometry saw
                 if self.evidence is not None:
                     # The alternatives were carried by the walk's odometry, not the ride:
-                    # none of them rode along. The next search looks afresh.
+                    # none of them rode along. The next search looks afresh, at what
+                    # the ride says: the person is where this connector let them off.
                     self.evidence.reset()
+                    rode = True
         inject, w = self._correct(detections)
         if heading is not None:
             self.log_w = self.log_w + compass_log_likelihood(self.theta, heading)
@@ -457,6 +469,14 @@ class ParticleFilter:
             w = self.weights
         ess = effective_sample_size(w)
         raw = estimate_pose(self.x, self.y, self.theta, w, ess=ess, rng=self.rng)
+        if rode and self.evidence is not None:
+            # A look-alike place elsewhere on the new level (the top of the other
+            # escalator) is no alternative for someone who just rode this connector:
+            # the ride is a known start there, as loose as a stop is wide (its prior
+            # odds exclude places far from it, as a known start's do).
+            self.evidence.set_prior(
+                InitialPose(raw.x, raw.y, raw.theta_rad, RIDE_START_STD_M, RIDE_START_STD_RAD)
+            )
         share, confirmed = 0.0, 0.0
         searched_ago: int | None = 0
         transit = self.floors is not None and self.floors.between_floors(raw.x, raw.y)
