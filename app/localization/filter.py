@@ -537,7 +537,8 @@ class ParticleFilter:
             # size: a fix no geometry pins down is still somewhere on the map). Residuals
             # larger than the noise and bias explain, and a slide away from the odometry,
             # widen it (convergence.widened_radius).
-            radius = max(radius, min(fix_m, self._map_span_m))
+            reach = self.geometry.reach_m(raw.x, raw.y, fix_m)
+            radius = max(radius, min(max(fix_m, reach), self._map_span_m))
             fit = None if self.quality is None else self.quality.fit
             est = est.with_protection(widened_radius(radius, fit, slide_m))
         if self.floors is not None:
