@@ -64,10 +64,84 @@ RIDGE_CAP = 8.0
 RIDGE_MAX_M = 10.0
 #: Halvings of the step that left the bias (a 2^-5 share of it).
 RIDGE_BISECTIONS = 5
+#: Cameras this wide or wider see objects on every side, which pin the position along
+#: any one line of sight: the ridge is searched for narrower ones only (degrees).
+RIDGE_FOV_DEG = 180.0
 #: Lines (each searched both ways) the ridge is looked for along, evenly spaced.
 RIDGE_DIRECTIONS = 4
 #: sqrt of the 99 % quantile of chi-square with 2 degrees of freedom.
 Q99_2D = math.sqrt(-2.0 * math.log(0.01))
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _excess(
+    fx, fy, ox, oy, w, base, x, y, step, ux, uy, limit, frames
+):  # fmt: skip  # pragma: no cover - compiled
+    """:meth:`BearingGeometry._ridge_reference`'s ``excess``: the recent walk moved by
+    ``step`` along (ux, uy), its heading re-solved (three Gauss-Newton steps), less the
+    bias's limit: the frames' mean weighted squared bearing change minus ``limit``."""
+    n = fx.shape[0]
+    two_pi = 2.0 * np.pi
+    turn = 0.0
+    for _ in range(3):
+        c, s = math.cos(turn), math.sin(turn)
+        hess = 0.0
+        grad = 0.0
+        for i in range(n):
+            rx, ry = fx[i] - x, fy[i] - y
+            qx, qy = c * rx - s * ry, s * rx + c * ry
+            dx, dy = ox[i] - x - qx - step * ux, oy[i] - y - qy - step * uy
+            d2 = max(dx * dx + dy * dy, 1e-6)
+            res = math.atan2(dy, dx) - turn - base[i]
+            res = res - two_pi * np.round(res / two_pi)
+            jac = -(dx * qx + dy * qy) / d2 - 1.0
+            hess += w[i] * jac * jac
+            grad += w[i] * jac * res
+        if not hess > 0.0:
+            break
+        turn -= grad / hess
+    c, s = math.cos(turn), math.sin(turn)
+    total = 0.0
+    for i in range(n):
+        rx, ry = fx[i] - x, fy[i] - y
+        px = x + c * rx - s * ry + step * ux
+        py = y + s * rx + c * ry + step * uy
+        res = math.atan2(oy[i] - py, ox[i] - px) - turn - base[i]
+        res = res - two_pi * np.round(res / two_pi)
+        total += w[i] * res * res
+    return total / frames - limit
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _ridge(
+    fx, fy, ox, oy, w, x, y, ux, uy, linear, limit, frames, cap, bisections
+):  # fmt: skip  # pragma: no cover - compiled
+    """:meth:`BearingGeometry._ridge_reference`, compiled (the same steps, in loops)."""
+    n = fx.shape[0]
+    base = np.empty(n)
+    for i in range(n):
+        base[i] = math.atan2(oy[i] - fy[i], ox[i] - fx[i])
+    best = 0.0
+    for sign in (1.0, -1.0):
+        lo, hi = 0.0, linear
+        while (
+            _excess(fx, fy, ox, oy, w, base, x, y, sign * hi, ux, uy, limit, frames) <= 0.0
+            and hi < cap
+        ):
+            lo, hi = hi, min(2.0 * hi, cap)
+        if (
+            hi >= cap
+            and _excess(fx, fy, ox, oy, w, base, x, y, sign * hi, ux, uy, limit, frames) <= 0.0
+        ):
+            return cap
+        for _ in range(bisections):
+            mid = 0.5 * (lo + hi)
+            if _excess(fx, fy, ox, oy, w, base, x, y, sign * mid, ux, uy, limit, frames) <= 0.0:
+                lo = mid
+            else:
+                hi = mid
+        best = max(best, lo)
+    return best
 
 
 class BearingGeometry:
@@ -222,6 +296,8 @@ class BearingGeometry:
         recent geometry's searched without linearizing (:meth:`_reach_m`). The gate keeps
         the linearized one: the ridge on the gate cost availability (office_suite
         vio-pinhole66 0.61 -> 0.48) and removed no wrong fix."""
+        if self.config.fov_deg >= RIDGE_FOV_DEG:
+            return bound  # objects on every side: no long ridge for the line to miss
         linear = self._geometry_radius_m(x, y)
         if not math.isfinite(linear) or bound < linear:  # the carried fix is tighter
             return bound
@@ -247,12 +323,33 @@ class BearingGeometry:
         ux, uy = (q, low - p) if abs(p - low) > abs(r - low) else (low - r, q)
         start = math.atan2(uy, ux) if math.hypot(ux, uy) > 0.0 else 0.0
         reach = linear
+        points = self._points()
         for k in range(RIDGE_DIRECTIONS):
             angle = start + math.pi * k / RIDGE_DIRECTIONS
-            reach = max(reach, self._ridge_m(x, y, math.cos(angle), math.sin(angle), linear))
+            ux, uy = math.cos(angle), math.sin(angle)
+            reach = max(reach, self._ridge_m(points, x, y, ux, uy, linear))
         return reach
 
-    def _ridge_m(self, x: float, y: float, ux: float, uy: float, linear: float) -> float:
+    def _ridge_m(
+        self,
+        points: tuple[NDArray[np.float64], ...],
+        x: float,
+        y: float,
+        ux: float,
+        uy: float,
+        linear: float,
+    ) -> float:
+        """:meth:`_ridge_reference` (on :meth:`_points`), compiled (:func:`_ridge`)."""
+        fx, fy, ox, oy, w = points
+        return float(
+            _ridge(
+                fx, fy, ox, oy, w, float(x), float(y), float(ux), float(uy), float(linear),
+                (Q99_2D * self.bias_rad) ** 2, float(len(self._frames)),
+                min(RIDGE_CAP * linear, RIDGE_MAX_M), RIDGE_BISECTIONS,
+            )
+        )  # fmt: skip
+
+    def _ridge_reference(self, x: float, y: float, ux: float, uy: float, linear: float) -> float:
         """How far along +-(ux, uy) the recent walk, moved rigidly (the heading re-solved
         for each step), keeps its bearings within the bias: the mean over frames of the
         weighted squared bearing change at most ``(Q99_2D * bias)^2`` (what the

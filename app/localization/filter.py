@@ -851,3 +851,8 @@ def warm_up() -> None:
     # The unseen-object check's answer from its counts alone (a restored session's); not
     # an assert, which python -O would strip with the compile.
     _ = UnseenObjects(tiny, FilterConfig()).contradicted
+    # The narrow camera's ridge search of the protection radius (dilution._ridge).
+    ridge_points = tuple(np.array([v]) for v in (0.0, 0.0, 2.0, 1.0, 1.0))
+    _ = BearingGeometry(tiny, FilterConfig(fov_deg=66.0))._ridge_m(
+        ridge_points, 0.0, 0.0, 1.0, 0.0, 0.5
+    )

@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 
 from app.localization.config import FilterConfig
 from app.localization.dilution import Q99_2D, BearingGeometry
@@ -110,7 +111,7 @@ def test_the_bound_reaches_as_far_back_along_a_narrow_cone_as_the_bearings_allow
         {"class": "table", "x": 17.0, "y": 10.0},
     ]
     m = room(cone)
-    cfg = FilterConfig(visibility=False)
+    cfg = FilterConfig(visibility=False, fov_deg=66.0)
     geo = BearingGeometry(m, cfg)
     poses = [(10.0 + 0.1 * k, 10.0, 0.0) for k in range(10)]
     for x, y, t in poses:
@@ -155,3 +156,29 @@ def _weakest(geo: BearingGeometry, x: float, y: float) -> float:
     info /= len(geo._frames)
     schur = info[:2, :2] - np.outer(info[:2, 2], info[2, :2]) / info[2, 2]
     return float(np.linalg.eigvalsh(schur)[0])
+
+
+def test_the_compiled_ridge_search_is_its_numpy_reference() -> None:
+    """The compiled search (:func:`dilution._ridge`) takes the reference's steps: the
+    same reach along every ray, to float64 rounding; and a 360-degree camera, with
+    objects on every side, is not searched at all."""
+    cone = [
+        {"class": "door", "x": 15.0, "y": 9.0},
+        {"class": "window", "x": 15.0, "y": 11.5},
+        {"class": "table", "x": 18.0, "y": 10.5},
+    ]
+    m = room(cone)
+    cfg = FilterConfig(visibility=False, fov_deg=66.0)
+    geo = BearingGeometry(m, cfg)
+    for k in range(12):
+        x, y, t = 10.0 + 0.1 * k, 10.0 + 0.02 * k, 0.05
+        geo.add(x, y, t, prepare_observation(seen_from(m, x, y, t), m, cfg), None)
+    points = geo._points()
+    linear = 0.5
+    for angle in np.radians(np.arange(0.0, 180.0, 22.5)):
+        ux, uy = math.cos(angle), math.sin(angle)
+        want = geo._ridge_reference(x, y, ux, uy, linear)
+        got = geo._ridge_m(points, x, y, ux, uy, linear)
+        assert got == pytest.approx(want, rel=1e-9, abs=1e-12), (angle, got, want)
+    wide = BearingGeometry(m, FilterConfig(visibility=False))
+    assert wide.reach_m(x, y, 0.3) == 0.3
