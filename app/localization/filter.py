@@ -537,7 +537,8 @@ class ParticleFilter:
             # size: a fix no geometry pins down is still somewhere on the map). Residuals
             # larger than the noise and bias explain, and a slide away from the odometry,
             # widen it (convergence.widened_radius).
-            radius = max(radius, min(fix_m, self._map_span_m))
+            reach = self.geometry.reach_m(raw.x, raw.y, fix_m)
+            radius = max(radius, min(max(fix_m, reach), self._map_span_m))
             fit = None if self.quality is None else self.quality.fit
             est = est.with_protection(widened_radius(radius, fit, slide_m))
         if self.floors is not None:
@@ -850,3 +851,8 @@ def warm_up() -> None:
     # The unseen-object check's answer from its counts alone (a restored session's); not
     # an assert, which python -O would strip with the compile.
     _ = UnseenObjects(tiny, FilterConfig()).contradicted
+    # The narrow camera's ridge search of the protection radius (dilution._ridge).
+    ridge_points = tuple(np.array([v]) for v in (0.0, 0.0, 2.0, 1.0, 1.0))
+    _ = BearingGeometry(tiny, FilterConfig(fov_deg=66.0))._ridge_m(
+        ridge_points, 0.0, 0.0, 1.0, 0.0, 0.5
+    )

@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 
 from app.localization.config import FilterConfig
 from app.localization.dilution import Q99_2D, BearingGeometry
@@ -96,3 +97,88 @@ def test_the_bound_covers_a_real_bias_and_does_not_shrink_with_repetition() -> N
         worst = max(worst, math.hypot(xs[j] - 10.0, ys[j] - 10.0))
     assert worst > 1.0  # the bias does move the fix ...
     assert worst < r5 / Q99_2D * 1.5  # ... by about one std of the bound, not more
+
+
+def test_the_bound_reaches_as_far_back_along_a_narrow_cone_as_the_bearings_allow() -> None:
+    """Stepping back from a few objects in a narrow cone ahead changes their bearings
+    far less than stepping towards them: the linearization at the estimate is symmetric
+    and too short behind it (paper_office seed 3, a 66-degree camera: 0.48 m where a
+    fix 1.03 m off kept the bearings within the bias). The bound reaches at least as
+    far back as a walk moved rigidly there keeps every bearing within the bias."""
+    cone = [
+        {"class": "door", "x": 15.0, "y": 9.0},
+        {"class": "window", "x": 15.0, "y": 11.0},
+        {"class": "table", "x": 17.0, "y": 10.0},
+    ]
+    m = room(cone)
+    cfg = FilterConfig(visibility=False, fov_deg=66.0)
+    geo = BearingGeometry(m, cfg)
+    poses = [(10.0 + 0.1 * k, 10.0, 0.0) for k in range(10)]
+    for x, y, t in poses:
+        geo.add(x, y, t, prepare_observation(seen_from(m, x, y, t), m, cfg), None)
+    x, y, _ = poses[-1]
+    r = geo.reach_m(x, y, geo.radius_m(x, y, 0.0))
+
+    def mean_square(back_m: float) -> float:
+        """The mean over frames of the squared bearing changes with the walk moved back
+        by ``back_m`` and turned about the last pose by the best of a fine grid."""
+        best = math.inf
+        for turn in np.radians(np.arange(-10.0, 10.0, 0.01)):
+            c, s = math.cos(turn), math.sin(turn)
+            total = 0.0
+            for px, py, _ in poses:
+                qx = x + c * (px - x) - s * (py - y) - back_m
+                qy = y + s * (px - x) + c * (py - y)
+                for ox, oy in m.object_xy:
+                    change = math.atan2(oy - qy, ox - qx) - turn - math.atan2(oy - py, ox - px)
+                    total += change * change
+            best = min(best, total / len(poses))
+        return best
+
+    limit = (Q99_2D * geo.bias_rad) ** 2
+    linear = Q99_2D * geo.bias_rad / math.sqrt(_weakest(geo, x, y))
+    reach = 0.0
+    while mean_square(reach + 0.1) <= limit:
+        reach += 0.1
+    assert reach > 1.2 * linear, (linear, reach)
+    assert r >= 0.95 * reach, (r, reach)  # the search halves the last step 5 times
+
+
+def _weakest(geo: BearingGeometry, x: float, y: float) -> float:
+    """The linearized information along the weakest direction (the Schur complement's
+    smaller eigenvalue), from the frames' rows."""
+    info = np.zeros((3, 3))
+    for fx, fy, rows in geo._frames:
+        a, b, w = rows[:, 0], rows[:, 1], rows[:, 2]
+        c = -1.0 - a * (fy - y) + b * (fx - x)
+        j = np.stack([a, b, c], axis=1)
+        info += (j * w[:, None]).T @ j
+    info /= len(geo._frames)
+    schur = info[:2, :2] - np.outer(info[:2, 2], info[2, :2]) / info[2, 2]
+    return float(np.linalg.eigvalsh(schur)[0])
+
+
+def test_the_compiled_ridge_search_is_its_numpy_reference() -> None:
+    """The compiled search (:func:`dilution._ridge`) takes the reference's steps: the
+    same reach along every ray, to float64 rounding; and a 360-degree camera, with
+    objects on every side, is not searched at all."""
+    cone = [
+        {"class": "door", "x": 15.0, "y": 9.0},
+        {"class": "window", "x": 15.0, "y": 11.5},
+        {"class": "table", "x": 18.0, "y": 10.5},
+    ]
+    m = room(cone)
+    cfg = FilterConfig(visibility=False, fov_deg=66.0)
+    geo = BearingGeometry(m, cfg)
+    for k in range(12):
+        x, y, t = 10.0 + 0.1 * k, 10.0 + 0.02 * k, 0.05
+        geo.add(x, y, t, prepare_observation(seen_from(m, x, y, t), m, cfg), None)
+    points = geo._points()
+    linear = 0.5
+    for angle in np.radians(np.arange(0.0, 180.0, 22.5)):
+        ux, uy = math.cos(angle), math.sin(angle)
+        want = geo._ridge_reference(x, y, ux, uy, linear)
+        got = geo._ridge_m(points, x, y, ux, uy, linear)
+        assert got == pytest.approx(want, rel=1e-9, abs=1e-12), (angle, got, want)
+    wide = BearingGeometry(m, FilterConfig(visibility=False))
+    assert wide.reach_m(x, y, 0.3) == 0.3
