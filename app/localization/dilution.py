@@ -73,7 +73,7 @@ RIDGE_DIRECTIONS = 4
 Q99_2D = math.sqrt(-2.0 * math.log(0.01))
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
 def _excess(
     fx, fy, ox, oy, w, base, x, y, step, ux, uy, limit, frames
 ):  # fmt: skip  # pragma: no cover - compiled
@@ -339,8 +339,10 @@ class BearingGeometry:
         uy: float,
         linear: float,
     ) -> float:
-        """:meth:`_ridge_reference` (on :meth:`_points`), compiled (:func:`_ridge`)."""
-        fx, fy, ox, oy, w = points
+        """:meth:`_ridge_reference` (on :meth:`_points`), compiled (:func:`_ridge`). The
+        arrays are made contiguous (a row's weight is a strided column) so that the
+        kernel compiled at start-up is the one every step calls."""
+        fx, fy, ox, oy, w = (np.ascontiguousarray(v, dtype=np.float64) for v in points)
         return float(
             _ridge(
                 fx, fy, ox, oy, w, float(x), float(y), float(ux), float(uy), float(linear),
