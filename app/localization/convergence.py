@@ -76,8 +76,11 @@ class ConvergenceGate:
     geometry still pins the fix within ``hold_geometry_m``,
     the alternatives stay below ``hold_alternatives`` (counting those that survived
     their probation), and the estimate does not slide more than ``hold_slide_m``. Only
-    frames with detections count towards a light cluster (frames without any leave
-    freshly injected particles unweighed). A false detection
+    frames with two detections or more count towards a light cluster: frames without
+    any leave freshly injected particles unweighed, and a lone bearing fits a whole
+    curve of poses, over which it spreads the weight (measured: through a 66-degree
+    camera, 8 of 14 releases of a right fix on the office suite were a cluster lightened
+    by frames seeing one object). A false detection
     explained by clutter does not count against the estimate; a kidnap, a pose
     drifting away from the evidence, or an alternative place gaining probability does.
 
@@ -187,6 +190,7 @@ class ConvergenceGate:
         evidence_frame: bool = True,
         geometry_m: float = 0.0,
         slide_m: float = 0.0,
+        lone_detection: bool = False,
     ) -> Estimate:
         """``raw`` with ``converged`` decided by the rules above."""
         last = self._last
@@ -197,7 +201,7 @@ class ConvergenceGate:
         if self._held:
             top = raw.hypotheses[0] if raw.hypotheses else None
             light = top is None or top.weight < self.hold_mass
-            if light and evidence_frame:
+            if light and evidence_frame and not lone_detection:
                 self._light += 1
             elif not light:
                 self._light = 0

@@ -515,6 +515,7 @@ class ParticleFilter:
             motion_lost=lost,
             confirmed_alternatives=confirmed,
             evidence_frame=self.frames_without_evidence == 0,
+            lone_detection=len(detections) == 1,
             geometry_m=(fix_m := self.geometry.radius_m(raw.x, raw.y, raw.theta_rad)),
             slide_m=slide_m,
         )

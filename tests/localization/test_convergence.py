@@ -136,3 +136,25 @@ def test_residuals_beyond_the_noise_widen_the_radius() -> None:
 def test_a_slide_away_from_the_odometry_adds_to_the_radius() -> None:
     assert math.isclose(widened_radius(0.3, 0.5, 0.35), 0.65)
     assert math.isclose(widened_radius(0.3, 4.0, 0.2), 0.8)
+
+
+def _light() -> Estimate:
+    """The same cluster, holding less than ``hold_mass`` of the weight."""
+    light = ConvergenceGate.hold_mass / 2
+    return Estimate(
+        2.0, 3.0, 0.0, 0.05, 0.05, 0.02, True, (Hypothesis(2.0, 3.0, 0.0, light, 0.05),)
+    )
+
+
+def test_frames_seeing_one_object_do_not_count_towards_a_light_cluster() -> None:
+    """A lone bearing fits a whole curve of poses and spreads the weight over it: however
+    many such frames lighten the cluster, the fix is kept; frames seeing two objects or
+    more that leave it light release it as before."""
+    gate = _held_gate()
+    for _ in range(3 * gate.hold_light_frames):
+        est = gate.confirm(_light(), quality=GOOD, searched_ago=0, lone_detection=True)
+        assert est.converged
+    for k in range(gate.hold_light_frames):
+        est = gate.confirm(_light(), quality=GOOD, searched_ago=0)
+        assert est.converged == (k < gate.hold_light_frames - 1)
+    assert gate.lost_because == ("light",)
