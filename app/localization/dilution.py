@@ -266,10 +266,10 @@ class BearingGeometry:
         self._frames.append(frame)
         self._sums.append(_frame_sums(*frame))
 
-    def _geometry_radius_m(self, x: float, y: float) -> float:
-        """The bound of the bearings' geometry alone (module docstring)."""
-        if not self._frames:
-            return math.inf
+    def _position_information(self, x: float, y: float) -> tuple[float, float, float] | None:
+        """The position block of the recent geometry's information about (x, y), the
+        heading solved out (the Schur complement: p, q, r of a symmetric 2 x 2), or None
+        when the heading is not pinned at all."""
         frames = len(self._sums)
         aa, ab, bb, ac0, bc0, c0c0 = (
             sum(column) / frames for column in zip(*self._sums, strict=True)
@@ -280,16 +280,24 @@ class BearingGeometry:
         ac = ac0 + y * aa - x * ab
         bc = bc0 + y * ab - x * bb
         cc = c0c0 + y * y * aa + x * x * bb + 2.0 * (y * ac0 - x * bc0 - x * y * ab)
-        # The position block of the inverse: the Schur complement of the heading, and
-        # its smaller eigenvalue (a symmetric 2 x 2, in closed form).
         if cc <= 0.0:
+            return None
+        return aa - ac * ac / cc, ab - ac * bc / cc, bb - bc * bc / cc
+
+    def _geometry_radius_m(self, x: float, y: float) -> float:
+        """The bound of the bearings' geometry alone (module docstring)."""
+        if not self._frames:
             return math.inf
-        p, q, r = aa - ac * ac / cc, ab - ac * bc / cc, bb - bc * bc / cc
+        block = self._position_information(x, y)
+        if block is None:
+            return math.inf
+        p, q, r = block
+        # The position block of the inverse's major axis: the smaller eigenvalue of the
+        # information's (a symmetric 2 x 2, in closed form).
         low = 0.5 * (p + r) - math.hypot(0.5 * (p - r), q)
         if not low > 1e-12:
             return math.inf
-        linear = Q99_2D * self.bias_rad / math.sqrt(low)
-        return linear
+        return Q99_2D * self.bias_rad / math.sqrt(low)
 
     def reach_m(self, x: float, y: float, bound: float) -> float:
         """The protection's bound: ``bound`` (:meth:`radius_m`'s, this frame) with the
@@ -307,16 +315,10 @@ class BearingGeometry:
         """How far the recent walk moved rigidly keeps its bearings within the bias,
         searched along rays from the weak direction round (the ridge along the sight
         need not be the weakest one)."""
-        if linear > RIDGE_MAX_M:
+        block = self._position_information(x, y)
+        if linear > RIDGE_MAX_M or block is None:
             return linear
-        frames = len(self._sums)
-        aa, ab, bb, ac0, bc0, c0c0 = (
-            sum(column) / frames for column in zip(*self._sums, strict=True)
-        )
-        ac = ac0 + y * aa - x * ab
-        bc = bc0 + y * ab - x * bb
-        cc = c0c0 + y * y * aa + x * x * bb + 2.0 * (y * ac0 - x * bc0 - x * y * ab)
-        p, q, r = aa - ac * ac / cc, ab - ac * bc / cc, bb - bc * bc / cc
+        p, q, r = block
         low = 0.5 * (p + r) - math.hypot(0.5 * (p - r), q)
         # Rays from the weak direction (the eigenvector of ``low``) round, searched
         # without linearizing: the ridge along the sight need not be the weakest one.

@@ -287,13 +287,7 @@ class ParticleFilter:
             return 0.0, None
         self.frames_without_evidence = 0
         if self._wide_first:
-            mean_ll = self._wide_start(obs)
-            per_class = mean_ll / max(obs.group_kappa.size, 1)
-            if not np.isfinite(per_class):
-                per_class = -1e3
-            if not self.config.recovery:
-                return 0.0, None
-            return self._recovery.update(per_class), None
+            return self._recover(self._wide_start(obs), obs), None
         if self._seed_from_observation:
             self._seed_cloud(obs)
         log_lik = self.observation_log_likelihood(obs)
@@ -304,13 +298,17 @@ class ParticleFilter:
         self.log_w = self.log_w + log_lik
         # log of the prior-weighted mean likelihood: lse(w + l) - lse(w)
         w, after = weights_and_log_sum_exp(self.log_w)
-        mean_ll = after - before
+        return self._recover(after - before, obs), w
+
+    def _recover(self, mean_ll: float, obs: Observation) -> float:
+        """The share of particles to inject (augmented MCL), from the log of this
+        frame's mean likelihood, per class seen; 0 with recovery off."""
         per_class = mean_ll / max(obs.group_kappa.size, 1)
         if not np.isfinite(per_class):
             per_class = -1e3
         if not self.config.recovery:
-            return 0.0, w
-        return self._recovery.update(per_class), w
+            return 0.0
+        return self._recovery.update(per_class)
 
     def _seed_cloud(self, obs: Observation) -> None:
         """Global start, first evidence: draw most particles from the observation.
