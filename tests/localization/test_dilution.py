@@ -99,23 +99,32 @@ def test_the_bound_covers_a_real_bias_and_does_not_shrink_with_repetition() -> N
     assert worst < r5 / Q99_2D * 1.5  # ... by about one std of the bound, not more
 
 
+def cone_geometry(
+    objects: tuple[tuple[float, float], ...], poses: list[tuple[float, float, float]]
+) -> tuple[SemanticMap, BearingGeometry]:
+    """A room with a door, a window and a table at ``objects``, and the geometry of a
+    66-degree camera's views of them from ``poses``."""
+    m = room(
+        [
+            {"class": c, "x": x, "y": y}
+            for c, (x, y) in zip(("door", "window", "table"), objects, strict=True)
+        ]
+    )
+    cfg = FilterConfig(visibility=False, fov_deg=66.0)
+    geo = BearingGeometry(m, cfg)
+    for x, y, t in poses:
+        geo.add(x, y, t, prepare_observation(seen_from(m, x, y, t), m, cfg), None)
+    return m, geo
+
+
 def test_the_bound_reaches_as_far_back_along_a_narrow_cone_as_the_bearings_allow() -> None:
     """Stepping back from a few objects in a narrow cone ahead changes their bearings
     far less than stepping towards them: the linearization at the estimate is symmetric
     and too short behind it (paper_office seed 3, a 66-degree camera: 0.48 m where a
     fix 1.03 m off kept the bearings within the bias). The bound reaches at least as
     far back as a walk moved rigidly there keeps every bearing within the bias."""
-    cone = [
-        {"class": "door", "x": 15.0, "y": 9.0},
-        {"class": "window", "x": 15.0, "y": 11.0},
-        {"class": "table", "x": 17.0, "y": 10.0},
-    ]
-    m = room(cone)
-    cfg = FilterConfig(visibility=False, fov_deg=66.0)
-    geo = BearingGeometry(m, cfg)
     poses = [(10.0 + 0.1 * k, 10.0, 0.0) for k in range(10)]
-    for x, y, t in poses:
-        geo.add(x, y, t, prepare_observation(seen_from(m, x, y, t), m, cfg), None)
+    m, geo = cone_geometry(((15.0, 9.0), (15.0, 11.0), (17.0, 10.0)), poses)
     x, y, _ = poses[-1]
     r = geo.reach_m(x, y, geo.radius_m(x, y, 0.0))
 
@@ -162,17 +171,9 @@ def test_the_compiled_ridge_search_is_its_numpy_reference() -> None:
     """The compiled search (:func:`dilution._ridge`) takes the reference's steps: the
     same reach along every ray, to float64 rounding; and a 360-degree camera, with
     objects on every side, is not searched at all."""
-    cone = [
-        {"class": "door", "x": 15.0, "y": 9.0},
-        {"class": "window", "x": 15.0, "y": 11.5},
-        {"class": "table", "x": 18.0, "y": 10.5},
-    ]
-    m = room(cone)
-    cfg = FilterConfig(visibility=False, fov_deg=66.0)
-    geo = BearingGeometry(m, cfg)
-    for k in range(12):
-        x, y, t = 10.0 + 0.1 * k, 10.0 + 0.02 * k, 0.05
-        geo.add(x, y, t, prepare_observation(seen_from(m, x, y, t), m, cfg), None)
+    poses = [(10.0 + 0.1 * k, 10.0 + 0.02 * k, 0.05) for k in range(12)]
+    m, geo = cone_geometry(((15.0, 9.0), (15.0, 11.5), (18.0, 10.5)), poses)
+    x, y, _ = poses[-1]
     points = geo._points()
     linear = 0.5
     for angle in np.radians(np.arange(0.0, 180.0, 22.5)):

@@ -30,8 +30,8 @@ def weight_near(pf: ParticleFilter, pose: Pose, radius_m: float = 1.0) -> float:
     return float(pf.weights[near].sum())
 
 
-def test_the_first_frame_weighs_a_candidate_per_particle_and_level() -> None:
-    pf = ParticleFilter(VENUE, FilterConfig(particles=500), rng=np.random.default_rng(0))
+def count_weighings(pf: ParticleFilter) -> list[int]:
+    """A list the number of poses of each of the filter's sensor weighings is added to."""
     sizes: list[int] = []
     weigh = pf.sensor.log_likelihood
 
@@ -40,6 +40,12 @@ def test_the_first_frame_weighs_a_candidate_per_particle_and_level() -> None:
         return weigh(x, y, theta, obs)
 
     pf.sensor.log_likelihood = counted  # type: ignore[method-assign]
+    return sizes
+
+
+def test_the_first_frame_weighs_a_candidate_per_particle_and_level() -> None:
+    pf = ParticleFilter(VENUE, FilterConfig(particles=500), rng=np.random.default_rng(0))
+    sizes = count_weighings(pf)
     pf.step(None, [])  # no detections: nothing to weigh, the start waits
     assert sizes == [] and pf.n == 500
     seen = seen_from(Pose(6.0, 11.0, 0.0))
@@ -95,14 +101,7 @@ def test_a_known_start_or_a_one_level_map_draws_no_wide_start(level_map: bool) -
     pf = ParticleFilter(
         semantic_map, FilterConfig(particles=300), rng=np.random.default_rng(0), initial_pose=start
     )
-    sizes: list[int] = []
-    weigh = pf.sensor.log_likelihood
-
-    def counted(x, y, theta, obs):  # type: ignore[no-untyped-def]
-        sizes.append(int(np.size(x)))
-        return weigh(x, y, theta, obs)
-
-    pf.sensor.log_likelihood = counted  # type: ignore[method-assign]
+    sizes = count_weighings(pf)
     pf.step(None, seen_from(Pose(6.0, 11.0, 0.0)))
     assert sizes == [300]
     if level_map:  # one-level checkpoints as they were
