@@ -18,6 +18,11 @@ It reports:
   every 20 ms, a session counts once Redis holds a frame of it at least as late as the
   last one its client had been answered when Redis started (the checkpoint's or the
   journal's); and the worker's own figure (``bearings_store_recovery_seconds``);
+* how many people the first worker had admitted when Redis was killed: a worker whose
+  core is saturated answers new sessions 503 ``busy`` (come back later), and a person
+  still waiting when that worker is killed never had a session; they are counted as
+  ``never_admitted``, apart from ``failed_clients`` (people with a session whose stream
+  failed), and the storage figures are over the admitted sessions;
 * the fail-over: for each session, the seconds from its connection dropping to its
   next answer, and whether it went on where it was: the second worker's ``frames`` for
   it is the number its client had been answered, or one more (a frame sent but whose
@@ -229,6 +234,7 @@ async def run(args: argparse.Namespace, store: Redis, workers: list[str]) -> dic
     tasks = [asyncio.create_task(stream(p, workers, frames, args)) for p in people]
     await asyncio.sleep(args.warmup)
     t_kill = time.perf_counter()
+    admitted = sum(bool(p.sid) for p in people)
     health = None
     if args.outage > 0:  # (0: no outage, the fail-over alone, to compare)
         store.kill()
@@ -238,7 +244,7 @@ async def run(args: argparse.Namespace, store: Redis, workers: list[str]) -> dic
         await asyncio.sleep(max(0.0, t_kill + args.outage - time.perf_counter()))
         await asyncio.to_thread(store.start)
     t_back = time.perf_counter()
-    due = {p.sid: p.answered for p in people}
+    due = {p.sid: p.answered for p in people if p.sid}
     client = redis.Redis(port=store.port)
     stored_again_s = None
     while time.perf_counter() - t_back < args.settle:
@@ -271,7 +277,11 @@ async def run(args: argparse.Namespace, store: Redis, workers: list[str]) -> dic
         "outage_s": args.outage,
         "walk_frames": len(frames),
         "error_answers": sum(a.error is not None for a in answers),
-        "failed_clients": sum(isinstance(r, BaseException) for r in results),
+        "admitted_before_outage": admitted,
+        "never_admitted": sum(not p.sid for p in people),
+        "failed_clients": sum(
+            isinstance(r, BaseException) and bool(p.sid) for p, r in zip(people, results)
+        ),
         "healthz_during_outage": health,
         "phases": {name: quantiles_ms(got) for name, got in phases.items()},
         "stored_again_s": None if stored_again_s is None else round(stored_again_s, 3),
