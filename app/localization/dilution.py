@@ -42,7 +42,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-from app.localization.config import STEADY_BIAS_DEG, FilterConfig
+from app.localization.config import NARROW_CAMERA_FOV_DEG, STEADY_BIAS_DEG, FilterConfig
 from app.localization.sensor import Observation
 from app.localization.types import Odometry
 from app.maps.model import SemanticMap
@@ -66,7 +66,7 @@ RIDGE_MAX_M = 10.0
 RIDGE_BISECTIONS = 5
 #: Cameras this wide or wider see objects on every side, which pin the position along
 #: any one line of sight: the ridge is searched for narrower ones only (degrees).
-RIDGE_FOV_DEG = 180.0
+RIDGE_FOV_DEG = NARROW_CAMERA_FOV_DEG
 #: Lines (each searched both ways) the ridge is looked for along, evenly spaced.
 RIDGE_DIRECTIONS = 4
 #: sqrt of the 99 % quantile of chi-square with 2 degrees of freedom.

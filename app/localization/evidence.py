@@ -340,8 +340,8 @@ class EvidenceTracker:
             return np.empty(0)
         # Tempered: a real detector's errors repeat from frame to frame (a box's bias, a
         # stale object), so a log-ratio summed over frames overstates the evidence
-        # (FilterConfig.evidence_temper).
-        ev = self.config.evidence_temper * self.evidence
+        # (FilterConfig.evidence_temper, FilterConfig.evidence_weight).
+        ev = self.config.evidence_weight * self.evidence
         top = max(0.0, float(ev.max()))
         e = np.exp(ev - top)
         return e / (np.exp(-top) + e.sum())

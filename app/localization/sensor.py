@@ -41,7 +41,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-from app.localization.config import FilterConfig
+from app.localization.config import NARROW_CAMERA_FOV_DEG, FilterConfig
 from app.localization.types import Detection
 from app.maps.model import SemanticMap
 
@@ -68,7 +68,8 @@ class Observation:
         det_score: detection scores, shape (K,).
         det_group: class group of each detection, shape (K,).
         group_kappa: von Mises concentration per group, shape (G,).
-        group_weight: 1 / size(O_i) per group (eq. 2), shape (G,).
+        group_weight: 1 / size(O_i) per group (eq. 2), shape (G,), times the class's
+            share of the log-likelihood that counts (FilterConfig.likelihood_share).
         group_log_floor: log of the relative clutter density eps * I0e(kappa), -inf
             when clutter is off, shape (G,).
         group_log_keep: log(1 - eps) (0 when clutter is off), shape (G,).
@@ -107,8 +108,9 @@ def _class_terms(std_rad: float, eps: float) -> tuple[float, float, float]:
 
 
 #: A frame's class groups: kappa, log floor and log keep per group, then member_start
-#: and members (:class:`Observation`'s fields of those names).
-_Layout = tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.int64], NDArray[np.int64]]  # fmt: skip  # noqa: E501
+#: and members (:class:`Observation`'s fields of those names), and each group's share of
+#: its log-likelihood that counts (:meth:`FilterConfig.likelihood_share`).
+_Layout = tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.int64], NDArray[np.int64], NDArray[np.float64]]  # fmt: skip  # noqa: E501
 
 
 def _class_layout(
@@ -120,7 +122,7 @@ def _class_layout(
     and config terms. Nothing writes into an observation's arrays."""
 
     def make() -> _Layout:
-        kappa, floor, keep, starts, members = [], [], [], [0], []
+        kappa, floor, keep, starts, members, share = [], [], [], [0], [], []
         for cls in classes:
             k, log_floor, log_keep = _class_terms(config.bearing_std_rad(cls), eps)
             kappa.append(k)
@@ -128,17 +130,21 @@ def _class_layout(
             keep.append(log_keep)
             members.extend(semantic_map.class_members[cls].tolist())
             starts.append(len(members))
+            share.append(config.likelihood_share(cls))
         return (
             np.array(kappa, dtype=np.float64),
             np.array(floor, dtype=np.float64),
             np.array(keep, dtype=np.float64),
             np.array(starts, dtype=np.int64),
             np.array(members, dtype=np.int64),
+            np.array(share, dtype=np.float64),
         )
 
     std_deg = config.bearing_std_deg
     per_class = tuple(config.class_bearing_std_deg.items())
-    return semantic_map.derived_value(("observation", classes, eps, std_deg, per_class), make)
+    shares = config.likelihood_bias_deg, config.fov_deg < NARROW_CAMERA_FOV_DEG
+    key = ("observation", classes, eps, std_deg, per_class, shares)
+    return semantic_map.derived_value(key, make)
 
 
 def prepare_observation(
@@ -193,7 +199,7 @@ def _assemble(
     """An observation from its detections' arrays and its classes: the class groups'
     arrays come from the map (:func:`_class_layout`)."""
     eps = config.floor_prob if config.clutter else 0.0
-    kappa, floor, keep, starts, members = _class_layout(semantic_map, config, classes, eps)
+    kappa, floor, keep, starts, members, share = _class_layout(semantic_map, config, classes, eps)
     return Observation(
         det_bearing=bearing,
         det_cos=cos,
@@ -201,7 +207,7 @@ def _assemble(
         det_score=score,
         det_group=group,
         group_kappa=kappa,
-        group_weight=weight,
+        group_weight=weight * share if config.likelihood_bias_deg else weight,
         group_log_floor=floor,
         group_log_keep=keep,
         member_start=starts,

@@ -29,6 +29,7 @@ from app.guidance import DestinationSpec, Plan, plan_for
 from app.localization.config import (
     ODOMETRY_NOISE,
     REAL_DETECTOR_FIT_BIAS_DEG,
+    REAL_DETECTOR_LIKELIHOOD_BIAS_DEG,
     REAL_DETECTOR_SLACK_DEG,
     REAL_DETECTOR_TEMPER,
     FilterConfig,
@@ -305,6 +306,7 @@ class SessionManager:
             class_error=sensor.class_error,
             evidence_temper=REAL_DETECTOR_TEMPER,
             fit_bias_deg=REAL_DETECTOR_FIT_BIAS_DEG,
+            likelihood_bias_deg=REAL_DETECTOR_LIKELIHOOD_BIAS_DEG,
             heading_slack_deg=REAL_DETECTOR_SLACK_DEG,
             trans_noise_frac=ODOMETRY_NOISE[request.odometry_source][0],
             rot_noise_frac=ODOMETRY_NOISE[request.odometry_source][1],

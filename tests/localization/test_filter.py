@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import replace
 
 import numpy as np
+import pytest
 
 from app.localization.config import FilterConfig
 from app.localization.filter import ParticleFilter
@@ -168,3 +169,16 @@ def test_a_tight_known_start_is_a_prior_standing_still(paper_office: SemanticMap
         assert first < 5, f"seed {seed}: located at frame {first + 1}"
         for e in estimates:
             assert all(np.hypot(h.x - x, h.y - y) < 0.5 for h in e.hypotheses), e.hypotheses
+
+
+def test_a_likelihood_bias_leaves_the_alternatives_evidence_as_tempered() -> None:
+    """The alternatives' log-ratios are made of the likelihood's shares
+    (FilterConfig.likelihood_bias_deg): their weight makes up for it, so distinct places
+    are told apart as before, never counting more than all of the evidence."""
+    base = FilterConfig(evidence_temper=0.25, fov_deg=66.0)
+    part = replace(base, likelihood_bias_deg=3.0)
+    assert replace(part, fov_deg=360.0).evidence_weight == 0.25  # (no share there)
+    assert base.evidence_weight == 0.25
+    assert part.evidence_weight * part.likelihood_share("") == pytest.approx(0.25, rel=4 * 2.0**-53)
+    assert part.evidence_weight == pytest.approx(0.25 * 13.0 / 4.0, rel=4 * 2.0**-53)
+    assert replace(part, evidence_temper=1.0).evidence_weight == 1.0

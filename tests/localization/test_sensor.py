@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -311,3 +313,47 @@ def test_residuals_are_zero_at_the_true_pose_and_three_for_a_three_sigma_error(
     off = [Detection(d.cls, d.bearing_rad + 3 * cfg.bearing_std_rad(d.cls)) for d in dets[:1]]
     r = normalized_residuals(*truth, prepare_observation(off, small_room, cfg), small_room, cfg)
     assert r[0] == pytest.approx(3.0, rel=0, abs=within)
+
+
+def test_a_likelihood_bias_counts_a_share_of_each_class_log_likelihood(
+    small_room: SemanticMap,
+) -> None:
+    dets = observe(small_room, 2.5, 1.5, 0.4)
+    per_class = {"table": 4.0}
+    narrow = FilterConfig(class_bearing_std_deg=per_class, fov_deg=120.0)
+    bare = prepare_observation(dets, small_room, narrow)
+    cfg = replace(narrow, likelihood_bias_deg=3.0)
+    part = prepare_observation(dets, small_room, cfg)
+    # A wide camera's objects lie on every side: the bare noise weighs them.
+    wide = prepare_observation(dets, small_room, replace(cfg, fov_deg=180.0))
+    assert np.array_equal(wide.group_weight, bare.group_weight)
+    assert bare.classes == part.classes and len(part.classes) >= 2
+    # What counts as explained stays where the noise puts it.
+    assert np.array_equal(bare.group_kappa, part.group_kappa)
+    assert np.array_equal(bare.group_log_floor, part.group_log_floor)
+    for g, cls in enumerate(part.classes):
+        std = per_class.get(cls, 2.0)
+        share = std**2 / (std**2 + 9.0)
+        assert part.group_weight[g] == pytest.approx(bare.group_weight[g] * share, rel=4 * U64)
+
+
+def test_a_likelihood_bias_shrinks_the_gap_between_nearby_poses_by_the_std_ratio(
+    small_room: SemanticMap,
+) -> None:
+    """A pose a steady bias favours no longer buries the truth: the gap between two
+    poses' log-likelihoods shrinks by std^2 / (std^2 + bias^2), 4 / 13 for 2 and 3
+    degrees, as a Gaussian widened by the bias would weigh it."""
+    truth, near = (2.5, 1.5, 0.4), (2.9, 1.3, 0.45)
+    dets = observe(small_room, *truth, fov=120.0)
+    bare = FilterConfig(fov_deg=120.0)
+    part = replace(bare, likelihood_bias_deg=3.0)
+    gaps = []
+    slack = 0.0
+    for cfg in (bare, part):
+        a, b = loglik(small_room, cfg, *truth, dets), loglik(small_room, cfg, *near, dets)
+        gaps.append(float(a[0] - b[0]))
+        slack += float(
+            tol(small_room, cfg, *truth, dets, a)[0] + tol(small_room, cfg, *near, dets, b)[0]
+        )
+    assert gaps[0] > 10 * slack  # the bare model tells the two apart
+    assert gaps[1] == pytest.approx(gaps[0] * 4.0 / 13.0, rel=0, abs=slack)
