@@ -117,7 +117,10 @@ def _walk_frames(camera: dict | None, boxes: bool, *, heading: bool = False, n: 
 def test_boxes_localize_like_bearings(client: TestClient, camera: dict) -> None:
     start = {"x": 3.0, "y": 2.0, "theta_deg": 0.0, "std_xy_m": 0.5, "std_theta_deg": 20.0}
     sid = _session(client, camera=camera, initial_pose=start)
-    for frame in _walk_frames(camera, boxes=True):
+    # Standing still from a loose start: through a narrow camera the likelihood counts a
+    # share of itself (FilterConfig.likelihood_bias_deg), so the cloud narrows to a fix
+    # in about 8 s rather than 5 (measured: frame 39 against 24).
+    for frame in _walk_frames(camera, boxes=True, n=50):
         r = _frame(client, sid, frame)
         assert r.status_code == 200, r.text
     res = r.json()
