@@ -280,7 +280,8 @@ async def run(args: argparse.Namespace, store: Redis, workers: list[str]) -> dic
         "admitted_before_outage": admitted,
         "never_admitted": sum(not p.sid for p in people),
         "failed_clients": sum(
-            isinstance(r, BaseException) and bool(p.sid) for p, r in zip(people, results, strict=True)
+            isinstance(r, BaseException) and bool(p.sid)
+            for p, r in zip(people, results, strict=True)
         ),
         "healthz_during_outage": health,
         "phases": {name: quantiles_ms(got) for name, got in phases.items()},
