@@ -111,6 +111,31 @@ def initial_on_levels(
     return replace(initial, x=initial.x + float(layout.offsets(first))), tuple(free)
 
 
+def filter_config(request: SessionSpec, particles: int) -> FilterConfig:
+    """The filter a session of ``request`` runs with ``particles``: the sensor (or camera)
+    as the client describes it, a real phone detector's tolerances, and the motion noise
+    and odometry bias prior of the declared odometry source. The one place the service's
+    filter is configured (the experiments that stand for a real phone use it too)."""
+    sensor = request.sensor
+    camera = request.camera
+    return FilterConfig(
+        particles=particles,
+        bearing_std_deg=sensor.bearing_std_deg,
+        class_bearing_std_deg=dict(sensor.class_bearing_std_deg),
+        # A camera fixes the field of view (and where its middle points).
+        fov_deg=sensor.fov_deg if camera is None else camera.fov_deg,
+        fov_centre_deg=0.0 if camera is None else camera.fov_centre_deg,
+        class_error=sensor.class_error,
+        evidence_temper=REAL_DETECTOR_TEMPER,
+        fit_bias_deg=REAL_DETECTOR_FIT_BIAS_DEG,
+        likelihood_bias_deg=REAL_DETECTOR_LIKELIHOOD_BIAS_DEG,
+        heading_slack_deg=REAL_DETECTOR_SLACK_DEG,
+        trans_noise_frac=ODOMETRY_NOISE[request.odometry_source][0],
+        rot_noise_frac=ODOMETRY_NOISE[request.odometry_source][1],
+        odometry_source=request.odometry_source,
+    )
+
+
 class SessionManager:
     """Creates, finds, feeds and expires sessions, within the service's limits and quotas."""
 
@@ -294,24 +319,8 @@ class SessionManager:
                 f"({self.settings.max_particles})",
                 code="too_many_particles",
             )
-        sensor = request.sensor
         camera = request.camera
-        config = FilterConfig(
-            particles=particles,
-            bearing_std_deg=sensor.bearing_std_deg,
-            class_bearing_std_deg=dict(sensor.class_bearing_std_deg),
-            # A camera fixes the field of view (and where its middle points).
-            fov_deg=sensor.fov_deg if camera is None else camera.fov_deg,
-            fov_centre_deg=0.0 if camera is None else camera.fov_centre_deg,
-            class_error=sensor.class_error,
-            evidence_temper=REAL_DETECTOR_TEMPER,
-            fit_bias_deg=REAL_DETECTOR_FIT_BIAS_DEG,
-            likelihood_bias_deg=REAL_DETECTOR_LIKELIHOOD_BIAS_DEG,
-            heading_slack_deg=REAL_DETECTOR_SLACK_DEG,
-            trans_noise_frac=ODOMETRY_NOISE[request.odometry_source][0],
-            rot_noise_frac=ODOMETRY_NOISE[request.odometry_source][1],
-            odometry_source=request.odometry_source,
-        )
+        config = filter_config(request, particles)
         seed = request.seed if request.seed is not None else secrets.randbits(63)
         initial, levels = initial_on_levels(semantic_map, request)
         pf = ParticleFilter(

@@ -201,7 +201,9 @@ _STREAMS = (
 )
 
 
-def _streams(rng: np.random.Generator) -> dict[str, np.random.Generator]:
+def phone_streams(rng: np.random.Generator) -> dict[str, np.random.Generator]:
+    """One random stream per effect, spawned from ``rng`` (:func:`phone_frames` draws
+    from them)."""
     return dict(zip(_STREAMS, rng.spawn(len(_STREAMS)), strict=True))
 
 
@@ -234,14 +236,29 @@ def _phone_poses(
     xyz = np.array([[p.x, p.y, p.theta_rad] for p, _, _ in ticks], dtype=np.float64)
     blocked = np.array([b for _, b, _ in ticks], dtype=bool)
     carried = np.array([c for _, _, c in ticks], dtype=bool)
+    add_sway(xyz, walk.rate_hz, effects, rng)
+    return xyz, blocked, carried
+
+
+def add_sway(
+    xyz: NDArray[np.float64],
+    rate_hz: float,
+    effects: PhoneEffects,
+    rng: np.random.Generator,
+    striding: NDArray[np.bool_] | None = None,
+) -> None:
+    """Turn the camera headings ``xyz[:, 2]`` (in place) by the hand's sway at the stride
+    frequency, on the ticks the phone moved (and, given ``striding``, where it is true:
+    a person standing on an escalator moves without striding)."""
     if effects.sway_deg > 0.0 and len(xyz) > 1:
-        t = np.arange(len(xyz)) / walk.rate_hz
+        t = np.arange(len(xyz)) / rate_hz
         phase = rng.uniform(0.0, 2.0 * np.pi)
         walking = np.zeros(len(xyz), dtype=bool)
         walking[1:] = np.hypot(*np.diff(xyz[:, :2], axis=0).T) > 1e-9
+        if striding is not None:
+            walking &= striding
         sway = np.radians(effects.sway_deg) * np.sin(2.0 * np.pi * effects.sway_hz * t + phase)
         xyz[:, 2] = wrap_angle(xyz[:, 2] + np.where(walking, sway, 0.0))
-    return xyz, blocked, carried
 
 
 def _pose_at(xyz: NDArray[np.float64], tick: float) -> Pose:
@@ -409,12 +426,35 @@ def simulate_phone(
     ``walk.duration_s``. The first frame, and a frame right after a kidnap, carry no
     odometry.
     """
-    streams = _streams(rng)
+    streams = phone_streams(rng)
     world = semantic_map
     if effects.stale is not None:
         world = stale_world(semantic_map, effects.stale, streams["stale"])
-    camera = _camera_model(walk)
     xyz, blocked, carried = _phone_poses(walk, semantic_map, effects, streams["sway"], facing_deg)
+    return phone_frames(world, xyz, blocked, carried, walk, effects, streams)
+
+
+def phone_frames(
+    world: SemanticMap,
+    xyz: NDArray[np.float64],
+    blocked: NDArray[np.bool_],
+    carried: NDArray[np.bool_],
+    walk: SimulationConfig,
+    effects: PhoneEffects,
+    streams: dict[str, np.random.Generator],
+    plane_x: NDArray[np.float64] | None = None,
+) -> list[PhoneFrame]:
+    """The frames a phone sends from the phone's true poses, one per tick of ``walk``'s
+    rate: ``xyz`` (T, 3), sway included (:func:`add_sway`), in the frame the odometry
+    measures in, with whether the view is blocked and whether the person was just carried
+    there (no odometry) per tick; ``streams`` from :func:`phone_streams`.
+
+    ``plane_x``: on a map with levels, per tick the plane x offset of the level the phone
+    is on (:meth:`~app.maps.levels.LevelLayout.offsets`): the camera sees, and the truth
+    is, in the plane, while the odometry never sees an offset. A dropped frame's tick is
+    missing from the result (``frame.t * walk.rate_hz`` gives a frame's tick).
+    """
+    camera = _camera_model(walk)
     steps = _increments(xyz, walk, effects, streams["odometry"])
     n = len(xyz)
     lat = streams["latency"]
@@ -423,6 +463,13 @@ def simulate_phone(
     drop_u = streams["drop"].random(n)
     bias_share = streams["bias"].uniform(-1.0, 1.0, world.object_count)
     dt = 1.0 / walk.rate_hz
+
+    def shifted(pose: Pose, tick: float) -> Pose:
+        if plane_x is None:
+            return pose
+        k = min(max(round(tick), 0), n - 1)
+        return Pose(pose.x + float(plane_x[k]), pose.y, pose.theta_rad)
+
     frames: list[PhoneFrame] = []
     last = 0
     for i in range(n):
@@ -432,12 +479,13 @@ def simulate_phone(
         if effects.latency_s is not None:
             lo, hi = effects.latency_s
             age = round(float(np.clip(base_age + jitter[i], lo, hi)), 3)
-        seen_at = _pose_at(xyz, i - age / dt)
+        seen_tick = i - age / dt
+        seen_at = shifted(_pose_at(xyz, seen_tick), seen_tick)
         dets, widths, sources = _detections(
             world, seen_at, bool(blocked[i]), walk, camera, effects, bias_share, streams
         )
         odo = None if i == 0 or carried[i] else _compose(steps[last + 1 : i + 1])
-        truth = Pose(float(xyz[i, 0]), float(xyz[i, 1]), float(xyz[i, 2]))
+        truth = shifted(Pose(float(xyz[i, 0]), float(xyz[i, 1]), float(xyz[i, 2])), i)
         known = effects.latency_s is not None and effects.latency_known
         frames.append(
             PhoneFrame(

@@ -27,7 +27,9 @@ from app.localization.types import Pose
 from app.maps.geometry import wrap_angle
 from app.maps.model import SemanticMap
 from app.simulation.camera import CameraModel
+from app.simulation.phone import PhoneEffects, add_sway, phone_frames, phone_streams
 from app.simulation.simulator import SimFrame, SimulationConfig, _detections, _odometry
+from app.simulation.stale import stale_world
 
 
 @dataclass(frozen=True)
@@ -163,6 +165,25 @@ def _truth(
     return out
 
 
+def _barometer(
+    altitudes: list[float], barometer: Barometer | None, rng: np.random.Generator, dt: float
+) -> list[AltitudeReading | None]:
+    """The barometer's reading per tick of the true ``altitudes`` (None without one)."""
+    if barometer is None:
+        return [None] * len(altitudes)
+    offset = float(rng.uniform(-50.0, 50.0))
+    rate = float(rng.uniform(-1.0, 1.0) * barometer.drift_rate_mps)
+    drift = 0.0
+    out: list[AltitudeReading | None] = []
+    for i, alt in enumerate(altitudes):
+        if i:
+            step_m = barometer.walk_m_per_sqrt_s * dt**0.5
+            drift += rate * dt + float(rng.normal(0.0, step_m))
+        value = alt + offset + drift + float(rng.normal(0.0, barometer.noise_m))
+        out.append(AltitudeReading(value, barometer.reported_std_m))
+    return out
+
+
 def simulate_venue(
     semantic_map: SemanticMap,
     start_level: str,
@@ -177,12 +198,7 @@ def simulate_venue(
     truth = _truth(semantic_map, start_level, legs, config)
     baro_rng = rng.spawn(1)[0]
     dt = 1.0 / config.rate_hz
-    drift = 0.0
-    rate = 0.0
-    offset = 0.0
-    if barometer is not None:
-        offset = float(baro_rng.uniform(-50.0, 50.0))
-        rate = float(baro_rng.uniform(-1.0, 1.0) * barometer.drift_rate_mps)
+    readings = _barometer([alt for *_, alt, _, _ in truth], barometer, baro_rng, dt)
     frames: list[VenueFrame] = []
     prev: Pose | None = None
     for i, (x, y, th, level, alt, k, riding) in enumerate(truth):
@@ -193,13 +209,53 @@ def simulate_venue(
         odo = None if prev is None else _odometry(prev, file_pose, config, rng)
         prev = file_pose
         dets, widths = _detections(semantic_map, plane_pose, False, config, camera, rng)
-        reading = None
-        if barometer is not None:
-            if i:
-                step_m = barometer.walk_m_per_sqrt_s * dt**0.5
-                drift += rate * dt + float(baro_rng.normal(0.0, step_m))
-            value = alt + offset + drift + float(baro_rng.normal(0.0, barometer.noise_m))
-            reading = AltitudeReading(value, barometer.reported_std_m)
         frame = SimFrame(round(t, 6), plane_pose, odo, dets, False, tuple(widths))
-        frames.append(VenueFrame(frame, file_pose, level, alt, reading, k, riding))
+        frames.append(VenueFrame(frame, file_pose, level, alt, readings[i], k, riding))
+    return frames
+
+
+def simulate_venue_phone(
+    semantic_map: SemanticMap,
+    start_level: str,
+    legs: list[Leg],
+    config: SimulationConfig,
+    effects: PhoneEffects,
+    rng: np.random.Generator,
+    barometer: Barometer | None = Barometer(),
+) -> list[VenueFrame]:
+    """The walk of :func:`simulate_venue` as a real phone sends it: the effects of
+    :mod:`app.simulation.phone` (latency, duplicates, class confusion, detection falling
+    with distance, box-centre bias, dropped frames, the odometry's grade, the hand's sway,
+    false detections) on the same true walk, with the barometer of :func:`simulate_venue`.
+
+    Each frame is a :class:`~app.simulation.phone.PhoneFrame` (its ``detections_age_s``
+    too); a dropped frame is missing (the next one carries its motion). The sway turns the
+    camera while the person walks or climbs stairs, not while standing in a lift or on an
+    escalator. ``config`` gives the rate, speed, field of view, range, bearing noise and
+    independent misses (``miss_prob``); ``effects.false_rate`` the false detections.
+    """
+    layout = semantic_map.layout
+    truth = _truth(semantic_map, start_level, legs, config)
+    baro_rng = rng.spawn(1)[0]
+    streams = phone_streams(rng)
+    world = semantic_map
+    if effects.stale is not None:
+        world = stale_world(semantic_map, effects.stale, streams["stale"])
+    xyz = np.array([row[:3] for row in truth], dtype=np.float64)
+    level = np.array([row[3] for row in truth], dtype=np.int64)
+    striding = np.array(
+        [not riding or getattr(legs[k], "kind", "") == "stairs" for *_, k, riding in truth]
+    )
+    add_sway(xyz, config.rate_hz, effects, streams["sway"], striding)
+    none = np.zeros(len(truth), dtype=bool)
+    phone = phone_frames(
+        world, xyz, none, none, config, effects, streams, plane_x=layout.offsets(level)
+    )
+    readings = _barometer([row[4] for row in truth], barometer, baro_rng, 1.0 / config.rate_hz)
+    frames: list[VenueFrame] = []
+    for f in phone:
+        i = round(f.t * config.rate_hz)
+        x, y, th = (float(v) for v in xyz[i])
+        _, _, _, lv, alt, k, riding = truth[i]
+        frames.append(VenueFrame(f, Pose(x, y, th), lv, alt, readings[i], k, riding))
     return frames

@@ -4,7 +4,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from app.experiments.venue import _availability, leg_availability
+from app.experiments.venue import CONDITIONS, _availability, filter_config, leg_availability
+from app.localization.config import FilterConfig
+from app.service.metrics import Metrics
+from app.service.sessions import SessionManager
+from app.service.types import SessionSpec
+from app.simulation.venue import VENUE_NAME, venue_map
+from tests.helpers import make_settings
 
 
 def test_located_frames_start_at_the_later_first_fix_for_both_filters() -> None:
@@ -25,3 +31,12 @@ def test_a_leg_one_filter_never_fixes_has_no_located_frames() -> None:
     a = _availability([leg])
     assert a["frames"] == 4 and a["one_level"] == 1.0 and a["venue"] == 0.0
     assert np.isnan(a["venue_located"])  # no frame to judge, not a perfect score
+
+
+def test_the_phone_condition_filters_as_a_service_session_with_vio_odometry() -> None:
+    manager = SessionManager({VENUE_NAME: venue_map()}, make_settings(), Metrics())
+    session = manager.build(SessionSpec(map_name=VENUE_NAME, particles=1000, odometry_source="vio"))
+    assert filter_config(CONDITIONS["phone-vio"], 1000) == session.filter.config
+    assert session.filter.config.odometry_source == "vio"
+    # The idealized conditions keep the library's default filter.
+    assert filter_config(CONDITIONS["barometer"], 1000) == FilterConfig(particles=1000)
