@@ -18,7 +18,8 @@ duplicates 15 %, class confusion 3 %, detection falling with distance, box-centr
 false detections a frame; :func:`~app.simulation.venue_walk.simulate_venue_phone`) with
 the barometer, through a filter configured as the service configures a session with
 ``odometry.source: vio`` (:func:`app.service.sessions.filter_config`), for the venue and
-for the one-level maps alike.
+for the one-level maps alike; ``phone-vio-180`` and ``phone-vio-66`` are that phone with
+a camera of 180 and 66 degrees (a phone held in the hand) instead of 360.
 
 Figures, pooled over the seeds:
 
@@ -83,6 +84,8 @@ class Condition:
     false_rate: float = 0.2
     barometer_noise_m: float = Barometer().noise_m
     phone: PhoneEffects | None = None
+    #: The camera's field of view (degrees, centred on the heading).
+    fov_deg: float = 360.0
 
 
 CONDITIONS: dict[str, Condition] = {
@@ -96,6 +99,9 @@ CONDITIONS: dict[str, Condition] = {
     # A real phone with visual-inertial tracking (the phone suite's vio-360: its misses
     # are the detector's falling with distance), a service session's filter.
     "phone-vio": Condition(True, miss_prob=0.0, phone=vio_phone()),
+    # The same phone held in the hand: a camera of 180 deg, and of 66 deg (most phones).
+    "phone-vio-180": Condition(True, miss_prob=0.0, phone=vio_phone(), fov_deg=180.0),
+    "phone-vio-66": Condition(True, miss_prob=0.0, phone=vio_phone(), fov_deg=66.0),
 }
 
 
@@ -181,7 +187,12 @@ def single_level_map(level_id: str) -> SemanticMap:
 def _walk(seed: int, cond: Condition) -> tuple[SemanticMap, list[VenueFrame], list[Leg]]:
     m = venue_map()
     start, legs = venue_legs()
-    cfg = SimulationConfig(path=((0.0, 0.0),), miss_prob=cond.miss_prob, false_rate=cond.false_rate)
+    cfg = SimulationConfig(
+        path=((0.0, 0.0),),
+        miss_prob=cond.miss_prob,
+        false_rate=cond.false_rate,
+        fov_deg=cond.fov_deg,
+    )
     baro = Barometer(noise_m=cond.barometer_noise_m)
     rng = np.random.default_rng(seed)
     if cond.phone is not None:
@@ -197,11 +208,13 @@ def filter_config(cond: Condition, particles: int) -> FilterConfig:
     if cond.phone is None:
         return FilterConfig(particles=particles)
     from app.service.sessions import filter_config as session_filter_config
-    from app.service.types import SessionSpec
+    from app.service.types import SensorSpec, SessionSpec
 
     grade = cond.phone.odometry
     source = grade.name if grade is not None else "unknown"
-    spec = SessionSpec(map_name=VENUE_NAME, odometry_source=source)
+    spec = SessionSpec(
+        map_name=VENUE_NAME, odometry_source=source, sensor=SensorSpec(fov_deg=cond.fov_deg)
+    )
     return session_filter_config(spec, particles)
 
 

@@ -214,6 +214,8 @@ class ParticleFilter:
         #: How often every particle became impossible and the filter started again.
         self.restarts = 0
         self.steps = 0
+        #: Whether the convergence gate held a fix when the last ride between levels began.
+        self._located_at_ride = False
         self.estimate: Estimate = estimate_pose(self.x, self.y, self.theta, self.weights)
 
     @functools.cached_property
@@ -449,7 +451,8 @@ class ParticleFilter:
             )
             if contradicted:
                 self._restart_global()
-            elif self.floors.changed:
+            self.log_w = self.floors.rule_out_levels(self.x, self.log_w)
+            if not contradicted and self.floors.changed:
                 # The fix the bearings' geometry gave rides along with the person.
                 self.geometry.shift_x(self.floors.shift_x_m)
                 self.odometry_check.reset()  # the ride is no walk the odometry saw
@@ -458,7 +461,14 @@ class ParticleFilter:
                     # none of them rode along. The next search looks afresh, at what
                     # the ride says: the person is where this connector let them off.
                     self.evidence.reset()
-                    rode = True
+                    # The exit is a known start only for a belief that was located as
+                    # the ride began: a cloud that had lost the person in the lift car
+                    # (its view blocked) rode along wherever it was, and a prior there
+                    # would rule out the true exit (measured through a 180-degree camera
+                    # on the venue suite: a fix 4.5 m off, gained after a lift ride).
+                    if self.floors.first_change:
+                        self._located_at_ride = self._gate.held
+                    rode = self._located_at_ride
         inject, w = self._correct(detections)
         if heading is not None:
             self.log_w = self.log_w + compass_log_likelihood(self.theta, heading)
@@ -634,6 +644,7 @@ class ParticleFilter:
             state["odometry_bias"] = self.odometry_bias.checkpoint()
         if self.floors is not None:  # maps with several levels only
             state["floors"] = self.floors.checkpoint()
+            state["located_at_ride"] = self._located_at_ride
             state["wide_first"] = self._wide_first
         return state
 
@@ -660,6 +671,7 @@ class ParticleFilter:
             self.unseen.restore(state["unseen"])
         if self.floors is not None and state.get("floors") is not None:
             self.floors.restore(state["floors"])
+        self._located_at_ride = bool(state.get("located_at_ride", False))
         self.frames_without_evidence = int(state["frames_without_evidence"])
         self.restarts = int(state["restarts"])
         self.steps = int(state["steps"])

@@ -131,6 +131,9 @@ class FloorTracker:
         self._reach = reach
         elevations = np.array([lv.elevation_m for lv in layout.levels])
         self._elevation = elevations
+        #: Per level, its storey: the rank of its elevation among the levels' (a ride's
+        #: step moves a person one storey).
+        self._storey = np.searchsorted(np.unique(elevations), elevations).astype(np.int64)
         steps = np.abs(np.diff(np.sort(elevations)))
         self.storey_m = float(max(steps.min() if steps.size else MIN_STOREY_M, MIN_STOREY_M))
         self.reset()
@@ -140,6 +143,9 @@ class FloorTracker:
         self._readings: deque[float] = deque(maxlen=RATE_FRAMES)
         self.anchor_m: float | None = None
         self.changes = 0
+        #: Storeys the barometer's steps have taken the person up (down: negative) since
+        #: the chain of readings began (a frame without altitude breaks it).
+        self.net_storeys = 0
         self.level_probability: float | None = None
         #: Whether the barometer says the person is between floors (the smoothed
         #: altitude more than ``DRIFT_SHARE`` of a storey from the anchor).
@@ -157,6 +163,7 @@ class FloorTracker:
         #: how far the heaviest particle that changed moved in the plane (metres).
         self.blind = False
         self.changed = False
+        self.first_change = False
         self.shift_x_m = 0.0
 
     # ------------------------------------------------------------ the particles
@@ -207,11 +214,13 @@ class FloorTracker:
         than ``CONTRADICTED_SHARE`` of the weight could make it)."""
         self.blind = altitude is None
         self.changed = False
+        self.first_change = False
         self.shift_x_m = 0.0
         if altitude is None:
             self.carried_level = None
             self.in_transit = False
             self._changed_in_transit = False
+            self.net_storeys = 0  # (the person may have changed level unseen)
             return self._blind(x, y, rng), log_w, False
         self._readings.append(float(altitude.relative_m))
         recent = list(self._readings)
@@ -279,7 +288,11 @@ class FloorTracker:
         else:
             self.anchor_m += threshold * 2.0 if up else -threshold * 2.0
         self.changes += 1
+        self.net_storeys += 1 if up else -1
         self.changed = True
+        #: Whether this change is the first of its ride (a ride of several floors makes
+        #: several).
+        self.first_change = not self._changed_in_transit
         self._changed_in_transit = True
         if moved_share < CONTRADICTED_SHARE:
             self.carried_level = None
@@ -298,14 +311,42 @@ class FloorTracker:
         totals = np.bincount(to[mine], weights=w[mine], minlength=len(self.layout.levels))
         return int(np.argmax(totals))
 
+    def level_allowed(self) -> NDArray[np.bool_] | None:
+        """Per level, whether the barometer's steps since its chain of readings began
+        leave the person possibly on it (None: every level). Gone up a storey from
+        wherever they started, a person is on no lowest floor: a belief that missed the
+        ride (a cloud not yet located, all of it outside the lift's stop) must not
+        settle there on a look-alike place. Counted in storeys, not metres: the
+        barometer wanders by metres over an hour, a ride's steps do not."""
+        if self.net_storeys == 0:
+            return None
+        start = self._storey - self.net_storeys
+        return (start >= 0) & (start <= int(self._storey.max()))
+
+    def rule_out_levels(
+        self, x: NDArray[np.float64], log_w: NDArray[np.float64]
+    ) -> NDArray[np.float64]:
+        """``log_w`` with the particles on a level :meth:`level_allowed` rules out
+        weighed as unlikely as one that stayed put through a level change."""
+        allowed = self.level_allowed()
+        if allowed is None:
+            return log_w
+        level = self.layout.level_of_plane_x(x)
+        return log_w + np.where(allowed[level], 0.0, np.log(STAY_LIKELIHOOD))
+
     def place_allowed(self, x: float, y: float) -> bool:
         """Whether the evidence search may keep an alternative at plane point (x, y):
-        not in a connector's stop on a level other than the one the barometer carries
+        not on a level the barometer's steps rule out (:meth:`level_allowed`), nor in a
+        connector's stop on a level other than the one the barometer carries
         a confirmed fix to (a lift car looks the same on every floor; the barometer
         tells them apart). Anywhere while no level is carried."""
+        level = int(self.layout.level_of_plane_x(np.array(x)))
+        allowed = self.level_allowed()
+        if allowed is not None and not allowed[level]:
+            return False
         if self.carried_level is None or self.blind:
             return True
-        if int(self.layout.level_of_plane_x(np.array(x))) == self.carried_level:
+        if level == self.carried_level:
             return True
         return bool(self.stop_of(np.array([x]), np.array([y]))[0] < 0)
 
@@ -362,6 +403,7 @@ class FloorTracker:
             "readings": list(self._readings),
             "anchor_m": self.anchor_m,
             "changes": self.changes,
+            "net_storeys": self.net_storeys,
             "level_probability": self.level_probability,
             "in_transit": self.in_transit,
             "changed_in_transit": self._changed_in_transit,
@@ -375,6 +417,7 @@ class FloorTracker:
         anchor = state["anchor_m"]
         self.anchor_m = None if anchor is None else float(anchor)
         self.changes = int(state["changes"])
+        self.net_storeys = int(state.get("net_storeys", 0))  # (older: no chain known)
         p = state["level_probability"]
         self.level_probability = None if p is None else float(p)
         self.in_transit = bool(state["in_transit"])

@@ -9,6 +9,7 @@ from app.localization.config import FilterConfig
 from app.localization.filter import ParticleFilter
 from app.localization.floors import (
     BLIND_RATE,
+    STAY_LIKELIHOOD,
     AltitudeReading,
     FloorTracker,
 )
@@ -300,3 +301,33 @@ def test_a_ride_carries_the_bearings_geometry_fix_along() -> None:
     # The fix rode up with the person: small on the First Floor's car, not on the Ground's.
     assert pf.geometry.radius_m(1.5 + PITCH, 1.5, 0.0) < 1.0
     assert pf.geometry.radius_m(1.5, 1.5, 0.0) > PITCH / 2
+
+
+def test_a_ride_the_belief_missed_rules_out_the_floors_it_cannot_have_reached() -> None:
+    """Gone up a storey from wherever they started, a person is on no lowest floor: a
+    belief that was all outside the lift (not yet located) must not settle on a
+    look-alike place there. Counted in storeys: hours of drift rule out nothing."""
+    tracker = FloorTracker(VENUE)
+    x, y = particles(6.0, 11.0, 0)  # in the hall: none of the belief in a stop
+    x, log_w, contradicted = feed(tracker, x, y, [0.0] * 5 + list(np.linspace(0, 4.5, 25)))
+    assert contradicted and tracker.net_storeys == 1
+    allowed = tracker.level_allowed()
+    assert allowed is not None and allowed.tolist() == [False, True, True]
+    # The filter starts again over every level; the barometer weighs the ground floor out.
+    everywhere = np.concatenate([particles(6.0, 11.0, lv, 10)[0] for lv in range(3)])
+    ruled = tracker.rule_out_levels(everywhere, np.zeros(30))
+    assert (ruled[:10] == np.log(STAY_LIKELIHOOD)).all() and (ruled[10:] == 0.0).all()
+    assert not tracker.place_allowed(6.0, 11.0) and tracker.place_allowed(6.0 + PITCH, 11.0)
+    # Down again: every level is possible once more.
+    xb, yb = particles(6.0, 11.0, 1)
+    feed(tracker, xb, yb, [4.5] * 10 + list(np.linspace(4.5, 0.0, 25)))
+    assert tracker.net_storeys == 0 and tracker.level_allowed() is None
+    # Slow drift of 3 m over the walk is no ride: nothing is ruled out.
+    drifting = FloorTracker(VENUE)
+    feed(drifting, *particles(6.0, 11.0, 0), list(np.linspace(0.0, 3.0, 3000)))
+    assert drifting.net_storeys == 0 and drifting.level_allowed() is None
+    # A frame without altitude breaks the chain: the person may have changed level unseen.
+    tracker = FloorTracker(VENUE)
+    feed(tracker, *particles(6.0, 11.0, 0), [0.0] * 5 + list(np.linspace(0, 4.5, 25)))
+    tracker.apply(x, y, log_w, None, np.random.default_rng(0))
+    assert tracker.level_allowed() is None
