@@ -29,6 +29,7 @@ from app.localization.convergence import (
     widened_radius,
 )
 from app.localization.dilution import BearingGeometry
+from app.localization.dilution import warm_up as warm_up_dilution
 from app.localization.estimate import estimate_pose, with_alternatives
 from app.localization.evidence import EvidenceTracker
 from app.localization.floors import AltitudeReading, FloorTracker
@@ -855,3 +856,4 @@ def warm_up() -> None:
     _ = BearingGeometry(tiny, FilterConfig(fov_deg=66.0))._ridge_m(
         ridge_points, 0.0, 0.0, 1.0, 0.0, 0.5
     )
+    warm_up_dilution()  # a frame's sums of the bearing geometry
