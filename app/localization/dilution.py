@@ -43,6 +43,7 @@ from numba import njit
 from numpy.typing import NDArray
 
 from app.localization.config import STEADY_BIAS_DEG, FilterConfig
+from app.localization.fastmath import PAIRWISE_BLOCK, pairwise_sum
 from app.localization.sensor import Observation
 from app.localization.types import Odometry
 from app.maps.model import SemanticMap
@@ -542,42 +543,6 @@ def warm_up() -> None:
     _frame_sums(0.0, 0.0, rows)
 
 
-#: Up to this many values numpy's ``add.reduce`` sums in one block (its pairwise
-#: summation's ``PW_BLOCKSIZE``): :func:`_block_sum` follows it that far.
-PAIRWISE_BLOCK = 128
-
-
-@njit(cache=True, nogil=True, inline="always")
-def _block_sum(v, n):  # fmt: skip  # pragma: no cover - compiled
-    """``np.add.reduce(v[:n])`` to the last bit for ``n <= PAIRWISE_BLOCK``: numpy's
-    pairwise summation, which adds fewer than 8 values in turn from 0.0, and more in
-    eight running sums (a stride of 8) joined pairwise, then the rest in turn."""
-    if n < 8:
-        res = 0.0
-        for i in range(n):
-            res += v[i]
-        return res
-    r0, r1, r2, r3 = v[0], v[1], v[2], v[3]
-    r4, r5, r6, r7 = v[4], v[5], v[6], v[7]
-    i = 8
-    end = n - n % 8
-    while i < end:
-        r0 += v[i]
-        r1 += v[i + 1]
-        r2 += v[i + 2]
-        r3 += v[i + 3]
-        r4 += v[i + 4]
-        r5 += v[i + 5]
-        r6 += v[i + 6]
-        r7 += v[i + 7]
-        i += 8
-    res = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
-    while i < n:
-        res += v[i]
-        i += 1
-    return res
-
-
 @njit(cache=True, nogil=True)
 def _frame_sums_compiled(fx, fy, rows):  # fmt: skip  # pragma: no cover - compiled
     """:func:`_frame_sums_reference` for at most ``PAIRWISE_BLOCK`` rows: numpy's
@@ -599,6 +564,6 @@ def _frame_sums_compiled(fx, fy, rows):  # fmt: skip  # pragma: no cover - compi
         p[4, i] = wb * c0
         p[5, i] = (w * c0) * c0
     return (
-        _block_sum(p[0], n), _block_sum(p[1], n), _block_sum(p[2], n),
-        _block_sum(p[3], n), _block_sum(p[4], n), _block_sum(p[5], n),
+        pairwise_sum(p[0], n), pairwise_sum(p[1], n), pairwise_sum(p[2], n),
+        pairwise_sum(p[3], n), pairwise_sum(p[4], n), pairwise_sum(p[5], n),
     )  # fmt: skip
