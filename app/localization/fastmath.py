@@ -140,3 +140,40 @@ def softplus(z: float) -> float:  # pragma: no cover - compiled
     for c in _ATANH_SERIES:
         series = series * s2 + c
     return max(z, 0.0) + 2.0 * s * series
+
+
+#: Up to this many values numpy's ``add.reduce`` sums in one block (its pairwise
+#: summation's ``PW_BLOCKSIZE``): :func:`pairwise_sum` follows it that far.
+PAIRWISE_BLOCK = 128
+
+
+@njit(cache=True, nogil=True, inline="always")
+def pairwise_sum(v, n):  # fmt: skip  # pragma: no cover - compiled
+    """``np.add.reduce(v[:n])`` to the last bit for ``n <= PAIRWISE_BLOCK`` (no fastmath:
+    numpy's order of additions): numpy's pairwise summation, which adds fewer than 8
+    values in turn from 0.0, and more in eight running sums (a stride of 8) joined
+    pairwise, then the rest in turn. Callers with more values use numpy."""
+    if n < 8:
+        res = 0.0
+        for i in range(n):
+            res += v[i]
+        return res
+    r0, r1, r2, r3 = v[0], v[1], v[2], v[3]
+    r4, r5, r6, r7 = v[4], v[5], v[6], v[7]
+    i = 8
+    end = n - n % 8
+    while i < end:
+        r0 += v[i]
+        r1 += v[i + 1]
+        r2 += v[i + 2]
+        r3 += v[i + 3]
+        r4 += v[i + 4]
+        r5 += v[i + 5]
+        r6 += v[i + 6]
+        r7 += v[i + 7]
+        i += 8
+    res = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
+    while i < n:
+        res += v[i]
+        i += 1
+    return res

@@ -8,7 +8,13 @@ import numpy as np
 import pytest
 
 from app.localization.config import FilterConfig
-from app.localization.dilution import Q99_2D, BearingGeometry
+from app.localization.dilution import (
+    PAIRWISE_BLOCK,
+    Q99_2D,
+    BearingGeometry,
+    _frame_sums,
+    _frame_sums_reference,
+)
 from app.localization.sensor import prepare_observation
 from app.localization.types import Detection
 from app.maps.model import SemanticMap, parse_map
@@ -183,3 +189,37 @@ def test_the_compiled_ridge_search_is_its_numpy_reference() -> None:
         assert got == pytest.approx(want, rel=1e-9, abs=1e-12), (angle, got, want)
     wide = BearingGeometry(m, FilterConfig(visibility=False))
     assert wide.reach_m(x, y, 0.3) == 0.3
+
+
+def test_the_compiled_frame_sums_are_numpys_to_the_last_bit() -> None:
+    """A frame's sums (:func:`dilution._frame_sums`, compiled up to numpy's pairwise
+    block, numpy's beyond it) are the numpy reference's bits: rows from none to past
+    the block, magnitudes over eight decades, signed zeros, read-only rows too."""
+    rng = np.random.default_rng(7)
+    for k in range(3000):
+        n = int(rng.integers(0, PAIRWISE_BLOCK + 20)) if k % 10 == 0 else int(rng.integers(0, 40))
+        rows = rng.standard_normal((n, 3)) * 10.0 ** rng.uniform(-4.0, 4.0, (n, 3))
+        if n and k % 5 == 0:
+            rows[rng.integers(0, n), rng.integers(0, 3)] = -0.0
+        if k % 3 == 0:
+            rows.flags.writeable = False
+        fx, fy = float(rng.normal(0.0, 30.0)), float(rng.normal(0.0, 30.0))
+        got = np.array(_frame_sums(fx, fy, rows))
+        want = np.array(_frame_sums_reference(fx, fy, rows))
+        assert np.array_equal(got.view(np.int64), want.view(np.int64)), (n, got, want)
+
+
+def test_the_kept_means_are_the_frames_sums_averaged_until_a_frame_comes_or_goes() -> None:
+    _, geo = cone_geometry(
+        ((15.0, 9.0), (15.0, 11.5), (18.0, 10.5)),
+        [(10.0 + 0.1 * k, 10.0 + 0.02 * k, 0.05) for k in range(25)],
+    )
+    frames = len(geo._sums)
+    assert frames == geo._frames.maxlen  # the window is full: frames have gone too
+    want = tuple(sum(column) / frames for column in zip(*geo._sums, strict=True))
+    assert geo._means() == want
+    geo.shift_x(3.0)
+    shifted = tuple(sum(column) / frames for column in zip(*geo._sums, strict=True))
+    assert shifted != want and geo._means() == shifted
+    geo.clear_frames()
+    assert geo._sum_means is None

@@ -182,3 +182,29 @@ def test_a_likelihood_bias_leaves_the_alternatives_evidence_as_tempered() -> Non
     assert part.evidence_weight * part.likelihood_share("") == pytest.approx(0.25, rel=4 * 2.0**-53)
     assert part.evidence_weight == pytest.approx(0.25 * 13.0 / 4.0, rel=4 * 2.0**-53)
     assert replace(part, evidence_temper=1.0).evidence_weight == 1.0
+
+
+def test_the_compiled_fit_sums_are_numpys_to_the_last_bit() -> None:
+    """The fit's sums (:func:`~app.localization.filter.fit_sums`, compiled up to numpy's
+    pairwise block, numpy's beyond it) are the numpy reference's bits: none to past the
+    block of detections, residuals on and around the cutoff, infinite and NaN ones,
+    read-only scores."""
+    from app.localization.fastmath import PAIRWISE_BLOCK
+    from app.localization.filter import fit_sums, fit_sums_reference
+
+    rng = np.random.default_rng(11)
+    for k in range(3000):
+        n = int(rng.integers(0, PAIRWISE_BLOCK + 20)) if k % 10 == 0 else int(rng.integers(0, 40))
+        r = np.abs(rng.standard_normal(n)) * 10.0 ** rng.uniform(-3.0, 2.0, n)
+        cutoff = np.full(n, 3.0) if k % 2 else rng.uniform(1.0, 6.0, n)
+        if n and k % 4 == 0:
+            r[rng.integers(0, n)] = cutoff[0]  # exactly on the cutoff
+            r[rng.integers(0, n)] = (np.inf, np.nan, 0.0)[k % 3]
+        score = rng.uniform(0.0, 1.0, n)
+        if k % 3 == 0:
+            score.flags.writeable = False
+        got = np.array(fit_sums(r, cutoff, score))
+        want = np.array(fit_sums_reference(r, cutoff, score))
+        nan = np.isnan(want)  # (a NaN's sign and payload are not compared)
+        assert np.array_equal(np.isnan(got), nan), (n, got, want)
+        assert np.array_equal(got[~nan].view(np.int64), want[~nan].view(np.int64)), (n, got, want)
