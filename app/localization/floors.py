@@ -35,6 +35,13 @@ injects particles nor lets the evidence search move the cloud (a lift car looks 
 on every floor; the barometer, not the view, says where a ride ends), so every particle
 the change meets descends from the ones that entered the connector.
 
+The ride's steps are also counted (:attr:`FloorTracker.net_storeys`, up positive): a
+person gone up a storey from wherever they started stands on no lowest floor, so a
+belief that missed a ride (not yet located, none of it in the lift's stop: the filter
+starts again over every level) is kept off the levels no start could reach
+(:meth:`FloorTracker.level_allowed`). Storeys, not metres: the barometer wanders by
+metres over an hour, a ride's steps do not; a frame without altitude breaks the count.
+
 Without altitude, a particle in a stop moves to a level its connector reaches with a
 small probability per frame (``BLIND_RATE``), and what is seen on each level decides;
 an estimate inside a stop is then between floors too (nothing tells the floor there).
