@@ -26,9 +26,16 @@ Figures, pooled over the seeds:
 * **level right**: share of converged frames whose level is the true one;
 * **confidently wrong**: converged frames more than 1 m from the truth or on another
   level (a wrong level is a wrong position);
-* **confirm after ride**: for each ride, the time from leaving the connector (the end
-  of the ride, door wait included) to the first converged frame on the new level (0
-  when it was confirmed before the person left); the share within 5 s;
+* **level confirmed after a ride**: for each ride, the time from leaving the connector
+  (the end of the ride, door wait included) to the first frame from the ride's start on
+  that confirms the new level (the level the feedback announces,
+  :meth:`~app.localization.floors.FloorTracker.after_estimate`: a converged fix on it,
+  or the barometer's count of storeys from a fix, once the belief agrees; 0 when it was
+  confirmed before the person left); the share within 5 s;
+* **wrong level announced**: frames confirming a level other than the person's (each
+  would be a wrong "You are on ..." or a wrong fix): never expected;
+* **located after a ride**: the same time to the first converged frame on the new
+  level within 1 m of the truth (the place on it, not only the floor);
 * **availability per level**: share of a level's walking frames that are converged
   and right (within 1 m, on the level), against the same frames given to a filter on
   that level alone (a map of that level only, a one-level map): with a known start at
@@ -45,6 +52,7 @@ Figures, pooled over the seeds:
 from __future__ import annotations
 
 import json
+import math
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -138,8 +146,10 @@ class VenueRun:
     converged: np.ndarray
     leg: np.ndarray
     riding: np.ndarray
-    #: Per ride: (kind, end time s, to level, confirm time s or inf).
-    rides: list[tuple[str, float, int, float]]
+    #: Per ride: (kind, end time s, to level, level confirmed s, located s; inf: never).
+    rides: list[tuple[str, float, int, float, float]]
+    #: Frames confirming a level other than the person's.
+    wrong_level_confirmed: int
     legs: list[LegAvailability]
     step_ms: np.ndarray
 
@@ -250,6 +260,8 @@ def run_condition(condition: str, seed: int, particles: int) -> VenueRun:
     err = np.zeros(n)
     conv = np.zeros(n, dtype=bool)
     step_ms = np.zeros(n)
+    # Per frame, the level this step confirmed (-1: none).
+    confirmed = np.full(n, -1, dtype=np.int64)
     for i, vf in enumerate(frames):
         f = vf.frame
         started = time.perf_counter()
@@ -258,6 +270,9 @@ def run_condition(condition: str, seed: int, particles: int) -> VenueRun:
         est_level[i] = int(m.layout.level_of_plane_x(np.array(est.x)))
         err[i] = float(np.hypot(est.x - f.truth.x, est.y - f.truth.y))
         conv[i] = est.converged
+        floors = pf.floors
+        if floors is not None and floors.confirmed_now and floors.confirmed_level is not None:
+            confirmed[i] = floors.confirmed_level
     t = np.array([vf.frame.t for vf in frames])
     level = np.array([vf.level for vf in frames])
     leg = np.array([vf.leg for vf in frames])
@@ -269,11 +284,14 @@ def run_condition(condition: str, seed: int, particles: int) -> VenueRun:
             continue
         end_i = int(np.flatnonzero(leg == k)[-1])
         to = m.layout.level_index(spec.to_level)
-        # First frame from the ride's last on which the new level is confirmed (the
-        # filter may have confirmed it during the door wait: then it holds at the end).
+        start_i = int(np.flatnonzero(leg == k)[0])
+        # The first frame from the ride's start confirming the new level (during the
+        # door wait: 0), and the first from its last frame on converged and right there.
+        said = np.flatnonzero(confirmed[start_i:] == to)
+        level_s = max(float(t[start_i + said[0]] - t[end_i]), 0.0) if said.size else math.inf
         ok = np.flatnonzero(right[end_i:] & (level[end_i:] == to))
-        confirm = float(t[end_i + ok[0]] - t[end_i]) if ok.size else float("inf")
-        rides.append((spec.kind, float(t[end_i]), to, confirm))
+        located_s = float(t[end_i + ok[0]] - t[end_i]) if ok.size else math.inf
+        rides.append((spec.kind, float(t[end_i]), to, level_s, located_s))
     leg_rows = []
     for k, spec in enumerate(legs):
         if isinstance(spec, Ride):
@@ -294,8 +312,21 @@ def run_condition(condition: str, seed: int, particles: int) -> VenueRun:
             close = float(np.hypot(est.x - fp.x, est.y - fp.y)) <= WRONG_M
             one_right[i] = est.converged and close
         leg_rows.append(leg_availability(lv, t[idx], right[idx], one_right, known is None))
+    wrong_said = int(np.sum((confirmed >= 0) & (confirmed != level)))
     return VenueRun(
-        condition, seed, t, level, est_level, err, conv, leg, riding, rides, leg_rows, step_ms
+        condition,
+        seed,
+        t,
+        level,
+        est_level,
+        err,
+        conv,
+        leg,
+        riding,
+        rides,
+        wrong_said,
+        leg_rows,
+        step_ms,
     )
 
 
@@ -315,15 +346,20 @@ def summarize(runs: list[VenueRun]) -> list[dict[str, object]]:
         err = np.concatenate([r.err_m for r in mine])
         wrong = conv & (~lvl_ok | (err > WRONG_M))
         rides = [ride for r in mine for ride in r.rides]
-        confirm = np.array([c for *_, c in rides])
+        confirm = np.array([ride[3] for ride in rides])
+        located = np.array([ride[4] for ride in rides])
         by_kind = {}
         for kind in sorted({k for k, *_ in rides}):
             c = np.array([ride[3] for ride in rides if ride[0] == kind])
+            p = np.array([ride[4] for ride in rides if ride[0] == kind])
             by_kind[kind] = {
                 "rides": int(c.size),
                 "median_s": float(np.median(c)),
                 "max_s": float(np.max(c)),
                 "within_5s": int(np.sum(c <= CONFIRM_S)),
+                "located_median_s": float(np.median(p)),
+                "located_max_s": float(np.max(p)),
+                "located_within_5s": int(np.sum(p <= CONFIRM_S)),
             }
         per_level = {
             name: _availability([g for r in mine for g in r.legs if g.level == lv])
@@ -347,6 +383,10 @@ def summarize(runs: list[VenueRun]) -> list[dict[str, object]]:
                 "confirmed_within_5s": int(np.sum(confirm <= CONFIRM_S)),
                 "median_confirm_s": float(np.median(confirm)),
                 "max_confirm_s": float(np.max(confirm)),
+                "wrong_level_confirmed_frames": sum(r.wrong_level_confirmed for r in mine),
+                "located_within_5s": int(np.sum(located <= CONFIRM_S)),
+                "median_located_s": float(np.median(located)),
+                "max_located_s": float(np.max(located)),
                 "by_kind": by_kind,
                 "availability": per_level,
                 "first_fix": first_fix,
@@ -395,8 +435,9 @@ def _f(v: float, fmt: str) -> str:
 def markdown_table(rows: list[dict[str, object]]) -> str:
     lines = [
         "| condition | converged frames | level right | wrong-level frames | confidently "
-        "wrong | rides confirmed <= 5 s | median / max confirm (s) | step (ms, median) |",
-        "|---|---|---|---|---|---|---|---|",
+        "wrong | level confirmed <= 5 s after a ride | median / max (s) | wrong level "
+        "confirmed | located <= 5 s after a ride | median / max (s) | step (ms, median) |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
         lines.append(
@@ -404,6 +445,8 @@ def markdown_table(rows: list[dict[str, object]]) -> str:
             f"{100 * float(r['level_right_share']):.2f} % | {r['wrong_level_frames']} | "  # type: ignore[arg-type]
             f"{r['confidently_wrong_frames']} | {r['confirmed_within_5s']} of {r['rides']} | "
             f"{_f(float(r['median_confirm_s']), '.1f')} / {_f(float(r['max_confirm_s']), '.1f')} | "  # type: ignore[arg-type]
+            f"{r['wrong_level_confirmed_frames']} | {r['located_within_5s']} of {r['rides']} | "
+            f"{_f(float(r['median_located_s']), '.1f')} / {_f(float(r['max_located_s']), '.1f')} | "  # type: ignore[arg-type]
             f"{float(r['median_step_ms']):.2f} |"  # type: ignore[arg-type]
         )
     return "\n".join(lines)
@@ -421,14 +464,20 @@ def markdown(rows: list[dict[str, object]], *, seconds: float, particles: int, s
         "",
         "## Confirming the level after each ride",
         "",
-        "| condition | connector | rides | confirmed <= 5 s | median (s) | max (s) |",
-        "|---|---|---|---|---|---|",
+        "The level (what the feedback announces) and the place on it (converged and "
+        "right), seconds after leaving the connector.",
+        "",
+        "| condition | connector | rides | level confirmed <= 5 s | median / max (s) | "
+        "located <= 5 s | median / max (s) |",
+        "|---|---|---|---|---|---|---|",
     ]
     for r in rows:
         for kind, k in r["by_kind"].items():  # type: ignore[attr-defined]
             out.append(
                 f"| {r['condition']} | {kind} | {k['rides']} | {k['within_5s']} | "
-                f"{_f(k['median_s'], '.1f')} | {_f(k['max_s'], '.1f')} |"
+                f"{_f(k['median_s'], '.1f')} / {_f(k['max_s'], '.1f')} | "
+                f"{k['located_within_5s']} | "
+                f"{_f(k['located_median_s'], '.1f')} / {_f(k['located_max_s'], '.1f')} |"
             )
     out += [
         "",

@@ -42,6 +42,11 @@ starts again over every level) is kept off the levels no start could reach
 (:meth:`FloorTracker.level_allowed`). Storeys, not metres: the barometer wanders by
 metres over an hour, a ride's steps do not; a frame without altitude breaks the count.
 
+The same count says the floor a ride ends on: from the last converged fix's level (or,
+without one, when the count leaves a single level possible), the level so many storeys
+up or down is confirmed, and announced, once the belief agrees
+(:meth:`FloorTracker.after_estimate`), before the view has found the place on it.
+
 Without altitude, a particle in a stop moves to a level its connector reaches with a
 small probability per frame (``BLIND_RATE``), and what is seen on each level decides;
 an estimate inside a stop is then between floors too (nothing tells the floor there).
@@ -92,6 +97,13 @@ CONTRADICTED_SHARE = 0.01
 BLIND_RATE = 0.02
 #: The smallest storey height believed, metres (levels closer than this are one storey).
 MIN_STOREY_M = 1.0
+#: A level the barometer counted storeys to from a fix is confirmed without a new fix
+#: once at least this share of the belief has stood on it for ``LEVEL_SURE_FRAMES``
+#: frames in a row (at 5 frames/s, one second): the person hears the floor while the
+#: view, through a phone's narrow camera leaving a lift car, has yet to show where on it
+#: they are.
+LEVEL_SURE_SHARE = 0.99
+LEVEL_SURE_FRAMES = 5
 
 
 @dataclass(frozen=True, slots=True)
@@ -159,10 +171,18 @@ class FloorTracker:
         self.in_transit = False
         #: Whether a level has changed since the person was last not between floors.
         self._changed_in_transit = False
-        #: The level of the last converged estimate, and whether this step confirmed
-        #: a level other than the one before (the first fix included).
+        #: The level last confirmed (:meth:`after_estimate`), and whether this step
+        #: confirmed a level other than the one before (the first fix included).
         self.confirmed_level: int | None = None
         self.newly_confirmed = False
+        #: Whether this step confirmed the estimate's level (again or anew).
+        self.confirmed_now = False
+        #: Frames in a row the belief has stood on the counted level (``LEVEL_SURE_*``).
+        self._sure_frames = 0
+        #: The storey the chain of readings began on, as the last converged fix implies
+        #: (its level's storey less the storeys counted by then); None: no fix since
+        #: the chain began.
+        self._start_storey: int | None = None
         #: The level the barometer carries a confirmed fix to (None: none confirmed,
         #: or the chain broke: a frame without altitude, a contradiction).
         self.carried_level: int | None = None
@@ -228,6 +248,7 @@ class FloorTracker:
             self.in_transit = False
             self._changed_in_transit = False
             self.net_storeys = 0  # (the person may have changed level unseen)
+            self._start_storey = None
             return self._blind(x, y, rng), log_w, False
         self._readings.append(float(altitude.relative_m))
         recent = list(self._readings)
@@ -389,20 +410,53 @@ class FloorTracker:
             return False
         return bool(self.stop_of(np.array([x]), np.array([y]))[0] >= 0)
 
+    def counted_level(self) -> int | None:
+        """The level the barometer's steps lead to: from the last converged fix, that
+        fix's storey plus the storeys counted since; without one, the only level
+        :meth:`level_allowed` leaves (two storeys up in a three-storey venue: the top
+        floor, wherever the person started). None: neither says, or no single level
+        stands on that storey."""
+        if self._start_storey is None:
+            allowed = self.level_allowed()
+            only = np.flatnonzero(allowed) if allowed is not None else np.array([])
+            return int(only[0]) if only.size == 1 else None
+        on = np.flatnonzero(self._storey == self._start_storey + self.net_storeys)
+        return int(on[0]) if on.size == 1 else None
+
     def after_estimate(
         self, x: NDArray[np.float64], w: NDArray[np.float64], estimate_x: float, converged: bool
     ) -> None:
         """Keep the share of the weight on the estimate's level
-        (:attr:`level_probability`) and, when the estimate is converged, its level as
-        :attr:`confirmed_level` (:attr:`newly_confirmed` when that changed)."""
+        (:attr:`level_probability`) and confirm that level (:attr:`confirmed_level`,
+        :attr:`newly_confirmed` when it changed) when the estimate is converged, or when
+        it is the level the barometer's steps lead to from the last fix
+        (:meth:`counted_level`) and the belief has agreed (``LEVEL_SURE_SHARE``) for
+        ``LEVEL_SURE_FRAMES`` frames while nobody is between floors. The second is the
+        floor without the place: the storeys counted from a fix say which floor the
+        person left the lift or the stairs on, while through a narrow camera the place
+        on it takes a few more seconds of looking (the cloud may even have lost the
+        person in the lift car). Without a fix since the chain began (a global start not
+        yet located, a frame without altitude) nothing is counted, and a look-alike
+        floor the belief merely drifted to is never confirmed this way."""
         level = self.layout.level_of_plane_x(x)
         mine = int(self.layout.level_of_plane_x(np.array(estimate_x)))
         self.level_probability = float(np.sum(w[level == mine]))
-        self.newly_confirmed = converged and mine != self.confirmed_level
-        if converged:
+        counted = (
+            not converged
+            and not self.blind
+            and not self.in_transit
+            and self.counted_level() == mine
+            and self.level_probability >= LEVEL_SURE_SHARE
+        )
+        self._sure_frames = self._sure_frames + 1 if counted else 0
+        confirmed = converged or self._sure_frames >= LEVEL_SURE_FRAMES
+        self.confirmed_now = confirmed
+        self.newly_confirmed = confirmed and mine != self.confirmed_level
+        if confirmed:
             self.confirmed_level = mine
-            if not self.blind:
-                self.carried_level = mine
+        if converged and not self.blind:
+            self.carried_level = mine
+            self._start_storey = int(self._storey[mine]) - self.net_storeys
 
     # ------------------------------------------------------------ checkpoints
     def checkpoint(self) -> dict[str, Any]:
@@ -415,6 +469,8 @@ class FloorTracker:
             "in_transit": self.in_transit,
             "changed_in_transit": self._changed_in_transit,
             "confirmed_level": self.confirmed_level,
+            "sure_frames": self._sure_frames,
+            "start_storey": self._start_storey,
             "carried_level": self.carried_level,
             "blind": self.blind,
         }
@@ -432,6 +488,10 @@ class FloorTracker:
         confirmed = state["confirmed_level"]
         self.confirmed_level = None if confirmed is None else int(confirmed)
         self.newly_confirmed = False
+        self.confirmed_now = False
+        self._sure_frames = int(state.get("sure_frames", 0))  # (older: none counted)
+        start = state.get("start_storey")
+        self._start_storey = None if start is None else int(start)
         carried = state["carried_level"]
         self.carried_level = None if carried is None else int(carried)
         self.blind = bool(state["blind"])

@@ -9,6 +9,7 @@ from app.localization.config import FilterConfig
 from app.localization.filter import ParticleFilter
 from app.localization.floors import (
     BLIND_RATE,
+    LEVEL_SURE_FRAMES,
     STAY_LIKELIHOOD,
     AltitudeReading,
     FloorTracker,
@@ -331,3 +332,69 @@ def test_a_ride_the_belief_missed_rules_out_the_floors_it_cannot_have_reached() 
     feed(tracker, *particles(6.0, 11.0, 0), [0.0] * 5 + list(np.linspace(0, 4.5, 25)))
     tracker.apply(x, y, log_w, None, np.random.default_rng(0))
     assert tracker.level_allowed() is None
+
+
+def _agree(tracker: FloorTracker, level: int, frames: int) -> list[bool]:
+    """``frames`` steps of a belief all on ``level``, never converged: whether each
+    confirmed that level."""
+    x, _ = particles(6.0, 11.0, level)
+    out = []
+    for _ in range(frames):
+        tracker.after_estimate(x, np.full(x.size, 1.0 / x.size), float(x[0]), False)
+        out.append(tracker.confirmed_now)
+    return out
+
+
+def _fix_then_ride_up(tracker: FloorTracker) -> None:
+    """A converged fix on the ground floor's lift car, then a ride of one storey up."""
+    x, y = particles(1.5, 1.5, 0)
+    feed(tracker, x, y, [0.0] * 5)
+    tracker.after_estimate(x, np.full(x.size, 1.0 / x.size), float(x[0]), True)
+    assert tracker.confirmed_level == 0 and tracker.newly_confirmed
+    feed(tracker, x, y, list(np.linspace(0, 4.5, 25)) + [4.5] * 10)
+    assert tracker.net_storeys == 1 and not tracker.in_transit
+
+
+def test_the_floor_the_barometer_counted_from_a_fix_is_confirmed_once_the_belief_agrees() -> None:
+    """Through a phone's narrow camera the place on the new floor takes seconds of
+    looking after a lift ride; the floor does not: one storey up from a fix on the
+    ground floor is the first floor, said once the belief has agreed for a second."""
+    tracker = FloorTracker(VENUE)
+    _fix_then_ride_up(tracker)
+    assert tracker.counted_level() == 1
+    said = _agree(tracker, 1, LEVEL_SURE_FRAMES + 2)
+    assert said == [False] * (LEVEL_SURE_FRAMES - 1) + [True] * 3
+    assert tracker.confirmed_level == 1
+    # A checkpoint keeps the count.
+    restored = FloorTracker(VENUE)
+    restored.restore(tracker.checkpoint())
+    assert restored.counted_level() == 1 and restored.confirmed_level == 1
+
+
+def test_a_belief_on_a_floor_the_count_does_not_lead_to_is_never_confirmed_by_it() -> None:
+    tracker = FloorTracker(VENUE)
+    _fix_then_ride_up(tracker)
+    assert _agree(tracker, 2, 3 * LEVEL_SURE_FRAMES) == [False] * (3 * LEVEL_SURE_FRAMES)
+    assert tracker.confirmed_level == 0
+    # Below LEVEL_SURE_SHARE of the belief on the counted level confirms nothing either.
+    x = np.concatenate([particles(6.0, 11.0, 1, 98)[0], particles(6.0, 11.0, 2, 2)[0]])
+    w = np.full(x.size, 1.0 / x.size)
+    for _ in range(2 * LEVEL_SURE_FRAMES):
+        tracker.after_estimate(x, w, float(x[0]), False)
+    assert tracker.confirmed_level == 0 and tracker.level_probability == pytest.approx(0.98)
+    # A frame without altitude breaks the count: the person may have changed floor unseen.
+    tracker.apply(x, np.full(x.size, 11.0), np.zeros(x.size), None, np.random.default_rng(0))
+    assert tracker.counted_level() is None
+
+
+def test_without_a_fix_only_a_ride_that_leaves_one_floor_possible_counts() -> None:
+    # One storey up from an unknown floor of three: the first or the second floor.
+    tracker = FloorTracker(VENUE)
+    x, y = particles(1.5, 1.5, 0)
+    feed(tracker, x, y, [0.0] * 5 + list(np.linspace(0, 4.5, 25)) + [4.5] * 10)
+    assert tracker.counted_level() is None
+    assert not any(_agree(tracker, 1, 2 * LEVEL_SURE_FRAMES))
+    # Two storeys up: the top floor, wherever the person started.
+    feed(tracker, x + PITCH, y, list(np.linspace(4.5, 9.0, 25)) + [9.0] * 10)
+    assert tracker.net_storeys == 2 and tracker.counted_level() == 2
+    assert _agree(tracker, 2, LEVEL_SURE_FRAMES)[-1] and tracker.confirmed_level == 2

@@ -18,6 +18,9 @@ from app.simulation.venue_walk import VenueFrame, simulate_venue
 from tests.helpers import make_settings
 
 VENUE = venue_map()
+#: A walk of the venue suite's phone-vio-66 condition whose first lift ride ends
+#: before the place on the new floor is found.
+SEED_66 = 0
 
 
 def manager() -> SessionManager:
@@ -78,3 +81,41 @@ def test_a_known_start_names_its_level_or_covers_every_level() -> None:
     with pytest.raises(InvalidSessionSpec, match="'L7' is not a level"):
         m.build(SessionSpec(map_name=VENUE_NAME, initial_pose=pose, initial_level="L7"))
     m.close()
+
+
+def test_through_a_narrow_camera_the_floor_is_said_after_a_ride_before_the_place_is_found() -> None:
+    """A phone held in the hand sees little in a lift car and loses the place there;
+    the barometer's count of storeys still says the floor on leaving it. The session
+    says it then ("You are on the Second Floor.") while not yet converged, and never
+    names a floor the person is not on."""
+    from app.experiments.venue import CONDITIONS, _walk
+    from app.service.types import SensorSpec
+
+    _, walk, legs = _walk(SEED_66, CONDITIONS["phone-vio-66"])
+    spec = SessionSpec(
+        map_name=VENUE_NAME,
+        particles=10_000,
+        seed=SEED_66 + 1,
+        sensor=SensorSpec(fov_deg=66.0),
+        odometry_source="vio",
+    )
+    session = manager().build(spec)
+    ride = next(k for k, leg in enumerate(legs) if hasattr(leg, "to_level"))
+    end = max(i for i, vf in enumerate(walk) if vf.leg == ride)
+    unlocated_floor = []
+    for i, vf in enumerate(walk[: end + 50]):
+        f = vf.frame
+        out = session.process_sync(
+            FrameInput(
+                odometry=None if i == 0 else f.odometry,
+                detections=tuple(f.detections),
+                altitude=vf.altitude,
+                detections_age_s=getattr(f, "detections_age_s", None) or 0.0,
+            )
+        )
+        for lv in VENUE.layout.levels:
+            if f"You are on the {lv.name}." in out.feedback.text:
+                assert lv.id == VENUE.layout.levels[vf.level].id, (i, out.feedback.text)
+                if i > end - 25 and not out.estimate.converged:
+                    unlocated_floor.append(i)
+    assert unlocated_floor, "the floor was not said before the place was found"
