@@ -205,15 +205,29 @@ def _located_between_floors(res: dict) -> bool:
 
 
 def _level_confirmed_s(ride: list[dict], after: list[dict], level_id: str) -> float:
-    """Seconds from the ride's last frame to the first frame converged on ``level_id``
-    (0 when the ride's last frames confirmed it already), and that frame says so."""
+    """Seconds from the ride's last frame to the first frame that says the person is on
+    ``level_id`` ("You are on the First Floor.": 0 when a frame of the ride said it). It
+    comes no later than the first frame converged there (the barometer's count of
+    storeys may confirm the floor before the place on it is found), and no frame of the
+    ride or after names another floor."""
     frames = [*ride, *after]
-    for i, res in enumerate(frames):
-        if res["converged"] and res["pose"]["level"]["id"] == level_id:
-            name = res["pose"]["level"]["name"]
-            assert f"You are on the {name}." in res["feedback"]["text"]
-            return max(0.0, (i - (len(ride) - 1)) * FRAME_S)
-    raise AssertionError(f"{level_id} was never confirmed")
+    names = {lv.id: lv.name for lv in LAYOUT.levels}
+    said = [
+        (i, lid)
+        for i, res in enumerate(frames)
+        for lid, name in names.items()
+        if f"You are on the {name}." in res["feedback"]["text"]
+    ]
+    assert all(lid == level_id for _, lid in said), said
+    fixed = [
+        i
+        for i, res in enumerate(frames)
+        if res["converged"] and res["pose"]["level"]["id"] == level_id
+    ]
+    if not said:
+        raise AssertionError(f"{level_id} was never confirmed")
+    assert not fixed or said[0][0] <= fixed[0]
+    return max(0.0, (said[0][0] - (len(ride) - 1)) * FRAME_S)
 
 
 def _arrived(res: dict) -> bool:
