@@ -25,6 +25,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
+from app.localization.fastmath import hypot
 from app.localization.resampling import systematic_indexes
 from app.localization.types import Estimate
 from app.maps.geometry import wrap_rad
@@ -195,7 +196,7 @@ class ConvergenceGate:
         """``raw`` with ``converged`` decided by the rules above."""
         last = self._last
         self._last = raw
-        step = float(np.hypot(raw.x - last.x, raw.y - last.y)) if last is not None else np.inf
+        step = hypot(raw.x - last.x, raw.y - last.y) if last is not None else np.inf
         turn = abs(wrap_rad(float(raw.theta_rad - last.theta_rad))) if last else np.pi
         self._count_unseen(quality, evidence_frame, step)
         if self._held:

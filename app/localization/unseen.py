@@ -47,6 +47,7 @@ from numba import njit
 from numpy.typing import NDArray
 
 from app.localization.config import FilterConfig
+from app.localization.fastmath import hypot
 from app.localization.sensor import Observation
 from app.maps.geometry import wrap_scalar as _wrap
 from app.maps.model import SemanticMap
@@ -187,7 +188,7 @@ class UnseenObjects:
         if obs.empty:
             return
         st = self.settings
-        if self._at is not None and np.hypot(x - self._at[0], y - self._at[1]) > st.jump_m:
+        if self._at is not None and hypot(x - self._at[0], y - self._at[1]) > st.jump_m:
             self.reset()
         self._at = (x, y)
         # The observation's class groups as the map's class indices.
