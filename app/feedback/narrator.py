@@ -14,6 +14,7 @@ region is announced. ``describe=True`` ("Where am I?") gives a full description 
 
 from __future__ import annotations
 
+import functools
 import math
 import time
 from collections.abc import Mapping, Sequence
@@ -270,19 +271,22 @@ class Narrator:
             estimate.protection_m is None or estimate.protection_m <= CERTAIN_PROTECTION_M
         )
         ordered, rel, dist = self._ordered_objects(estimate, detections, fov, observation)
-        shown = ordered[: opts.max_items]
-        turns = [math.atan2(dy, dx) - estimate.theta_rad for dx, dy in rel[shown].tolist()]
-        bearings = [math.degrees(wrap_rad(t)) for t in turns]
-        items = [
-            FeedbackItem(
-                self.map.class_of(n),
-                self.map.object_labels[n],
-                clock_from_bearing_deg(bearing),
-                round(bearing, 1),
-                round(far, 2),
+        # The few shown objects' offsets and distances read from plain lists: indexing
+        # the arrays with a list of them cost more than converting them whole.
+        rel_xy, dist_m = rel.tolist(), dist.tolist()
+        items = []
+        for n in ordered[: opts.max_items]:
+            dx, dy = rel_xy[n]
+            bearing = math.degrees(wrap_rad(math.atan2(dy, dx) - estimate.theta_rad))
+            items.append(
+                FeedbackItem(
+                    self.map.class_of(n),
+                    self.map.object_labels[n],
+                    clock_from_bearing_deg(bearing),
+                    round(bearing, 1),
+                    round(dist_m[n], 2),
+                )
             )
-            for n, bearing, far in zip(shown, bearings, dist[shown].tolist(), strict=True)
-        ]
         parts: list[str] = []
         if not self._was_converged:
             parts.append("Location found.")
@@ -355,7 +359,7 @@ class Narrator:
         order, rel, dist = _order_objects(
             float(estimate.x), float(estimate.y), float(np.cos(theta)), float(np.sin(theta)),
             self.map.object_xy, visible, fov_deg < 360.0,
-            float(np.cos(np.radians(fov_deg) / 2.0)), cos_b, sin_b, cls,
+            _cos_half_fov(fov_deg), cos_b, sin_b, cls,
             self.map.object_class,
         )  # fmt: skip
         return order.tolist(), rel, dist
@@ -384,6 +388,13 @@ class Narrator:
         if changed:
             self._said[key] = _Said(clock or 0, distance_m, now)
         return changed
+
+
+@functools.lru_cache(maxsize=16)
+def _cos_half_fov(fov_deg: float) -> float:
+    """cos(fov_deg / 2) by numpy, kept: a session's camera keeps its field of view, and
+    numpy's calls on a scalar cost more than the lookup every frame."""
+    return float(np.cos(np.radians(fov_deg) / 2.0))
 
 
 def _join(words: list[str]) -> str:

@@ -16,6 +16,7 @@ and by a slide away from the odometry, :func:`widened_radius`).
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -25,6 +26,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
+from app.localization.fastmath import hypot
 from app.localization.resampling import systematic_indexes
 from app.localization.types import Estimate
 from app.maps.geometry import wrap_rad
@@ -195,7 +197,7 @@ class ConvergenceGate:
         """``raw`` with ``converged`` decided by the rules above."""
         last = self._last
         self._last = raw
-        step = float(np.hypot(raw.x - last.x, raw.y - last.y)) if last is not None else np.inf
+        step = hypot(raw.x - last.x, raw.y - last.y) if last is not None else np.inf
         turn = abs(wrap_rad(float(raw.theta_rad - last.theta_rad))) if last else np.pi
         self._count_unseen(quality, evidence_frame, step)
         if self._held:
@@ -363,6 +365,15 @@ def _drawn_distances(x, y, w, n, u0, ex, ey, lo):  # fmt: skip  # pragma: no cov
     return ranked[lo - below], ranked[hi - below]
 
 
+@functools.lru_cache(maxsize=64)
+def _gaussian_radius_stds(need: float) -> float:
+    """sqrt(-2 ln(1 - need)), ``need`` at most 0.9999: the radius, in standard
+    deviations, of a round Gaussian that holds ``need`` of its probability. Kept: all
+    but the frames with alternatives ask for the same ``need``, and numpy's scalar
+    calls cost more than the lookup."""
+    return float(np.sqrt(-2.0 * np.log(1.0 - min(need, 0.9999))))
+
+
 def protection_radius(
     x: NDArray[np.float64],
     y: NDArray[np.float64],
@@ -396,7 +407,7 @@ def protection_radius(
     )  # fmt: skip
     r_particles = float(d_lo + (pos - lo) * (d_next - d_lo))
     sigma = max(estimate.std_x_m, estimate.std_y_m)
-    r_gauss = float(np.sqrt(-2.0 * np.log(1.0 - min(need, 0.9999)))) * sigma
+    r_gauss = _gaussian_radius_stds(need) * sigma
     r = PROTECTION_SCALE * max(r_particles, r_gauss) + PROTECTION_FLOOR_M
     if alternative_share >= 1.0 - q:
         r = max(r, alternatives_reach_m)

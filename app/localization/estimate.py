@@ -25,7 +25,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-from app.localization.fastmath import FAST, sincos
+from app.localization.fastmath import FAST, hypot, sincos
 from app.localization.resampling import systematic_indexes
 from app.localization.types import Estimate, Hypothesis
 
@@ -273,9 +273,7 @@ def estimate_pose(
         and max(sx, sy) <= settings.max_std_xy_m
         and st <= settings.max_std_theta_rad
     )
-    hypotheses = tuple(
-        Hypothesis(h[1], h[2], h[3], h[0], float(np.hypot(h[4], h[5]))) for h in hyps
-    )
+    hypotheses = tuple(Hypothesis(h[1], h[2], h[3], h[0], hypot(h[4], h[5])) for h in hyps)
     return Estimate(mx, my, mt, sx, sy, st, bool(converged), hypotheses, n, ess)
 
 

@@ -80,6 +80,7 @@ from app.localization.alternatives import (
     same_place,
 )
 from app.localization.compass import CompassReading, compass_log_likelihood
+from app.localization.fastmath import hypot
 from app.localization.models import MotionModel, SensorModel
 from app.localization.resampling import systematic_resample
 from app.localization.search import PlaceSearch
@@ -633,7 +634,7 @@ class EvidenceTracker:
         anchor = Hypothesis(ax, ay, at, 0.0)
         if same_place(main.x, main.y, main.theta_rad, anchor, st):
             close = (
-                np.hypot(ax - main.x, ay - main.y) < st.distinct_m / 2
+                hypot(ax - main.x, ay - main.y) < st.distinct_m / 2
                 and abs(wrap_rad(at - main.theta_rad)) < st.distinct_rad / 2
             )
             if not close:

@@ -142,6 +142,16 @@ def softplus(z: float) -> float:  # pragma: no cover - compiled
     return max(z, 0.0) + 2.0 * s * series
 
 
+@njit("float64(float64, float64)", cache=True, nogil=True, error_model="numpy")
+def hypot(x: float, y: float) -> float:  # pragma: no cover - compiled
+    """``np.hypot`` of two numbers, the same bits (both call the C library's ``hypot``;
+    ``math.hypot`` is Python's own and differs in the last bit now and then), at a third
+    of numpy's cost on a scalar pair (0.2 against 0.65 us): the filter takes the length
+    of a move or a step several times a frame. Compiled for float64 only (an integer
+    argument is converted), so no call waits for a compiler."""
+    return np.hypot(x, y)
+
+
 #: Up to this many values numpy's ``add.reduce`` sums in one block (its pairwise
 #: summation's ``PW_BLOCKSIZE``): :func:`pairwise_sum` follows it that far.
 PAIRWISE_BLOCK = 128

@@ -33,7 +33,7 @@ from app.localization.dilution import BearingGeometry
 from app.localization.dilution import warm_up as warm_up_dilution
 from app.localization.estimate import estimate_pose, with_alternatives
 from app.localization.evidence import EvidenceTracker
-from app.localization.fastmath import PAIRWISE_BLOCK, pairwise_sum
+from app.localization.fastmath import PAIRWISE_BLOCK, hypot, pairwise_sum
 from app.localization.floors import AltitudeReading, FloorTracker
 from app.localization.kld import kld_sample_size
 from app.localization.latency import DEFAULT_FRAME_S, CaptureClock, moved_forward
@@ -309,7 +309,7 @@ class ParticleFilter:
         """The share of particles to inject (augmented MCL), from the log of this
         frame's mean likelihood, per class seen; 0 with recovery off."""
         per_class = mean_ll / max(obs.group_kappa.size, 1)
-        if not np.isfinite(per_class):
+        if not math.isfinite(per_class):
             per_class = -1e3
         if not self.config.recovery:
             return 0.0
@@ -510,7 +510,7 @@ class ParticleFilter:
             if self.evidence.prior_confines:
                 searched_ago = 0  # a tight known start rules out every other place
         self._update_fit(raw)
-        moved = 1.0 if odometry is None else float(np.hypot(odometry.forward_m, odometry.left_m))
+        moved = 1.0 if odometry is None else hypot(odometry.forward_m, odometry.left_m)
         turned = np.pi if odometry is None else odometry.turn_rad
         lost = odometry is None and self._had_odometry
         self._had_odometry = odometry is not None

@@ -18,7 +18,7 @@ from numba import njit
 from numpy.typing import NDArray
 
 from app.localization.config import FilterConfig
-from app.localization.fastmath import FAST, fill_normal, grid_cell, sincos
+from app.localization.fastmath import FAST, fill_normal, grid_cell, hypot, sincos
 from app.localization.types import Odometry
 from app.maps.geometry import GEOMETRY_EPS, crosses_wall
 from app.maps.model import WALL_CLEARANCE_M, SemanticMap
@@ -70,10 +70,11 @@ def sample_motion(
         fwd = left = turn = 0.0
         std_t, std_r = NO_ODOMETRY_STD_M, float(NO_ODOMETRY_STD_RAD)
     else:
-        dist = float(np.hypot(odometry.forward_m, odometry.left_m))
+        dist = hypot(odometry.forward_m, odometry.left_m)
         std_t = config.trans_noise_frac * dist + config.trans_noise_floor_m
-        std_r = config.rot_noise_frac * abs(odometry.turn_rad) + float(
-            np.radians(config.rot_noise_floor_deg)
+        # (math.radians multiplies by the same pi / 180 as np.radians: the same bits)
+        std_r = config.rot_noise_frac * abs(odometry.turn_rad) + math.radians(
+            config.rot_noise_floor_deg
         )
         fwd, left, turn = odometry.forward_m, odometry.left_m, odometry.turn_rad
     n = x.shape[0]

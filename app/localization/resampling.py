@@ -8,6 +8,8 @@ and costs one ``searchsorted``.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numba import njit
 from numpy.typing import NDArray
@@ -44,10 +46,11 @@ def _shifted_exp(values: NDArray[np.floating]) -> tuple[float, NDArray[np.float6
     """The largest value and ``exp(values - largest)``; None instead of the exponentials
     when there is nothing finite to shift by (no value, or all -inf). The ufuncs' own
     reductions: the same as .max() and .sum(), without their Python wrappers (called
-    several times a frame)."""
+    several times a frame); ``math.isfinite`` of the largest, the same answer as
+    ``np.isfinite`` of a float without a ufunc call on a scalar (about 1 us)."""
     v = np.asarray(values, dtype=np.float64)
     top = np.maximum.reduce(v) if v.size else -np.inf
-    if not np.isfinite(top):
+    if not math.isfinite(top):
         return float(top), None
     return top, np.exp(v - top)
 

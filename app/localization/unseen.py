@@ -47,6 +47,7 @@ from numba import njit
 from numpy.typing import NDArray
 
 from app.localization.config import FilterConfig
+from app.localization.fastmath import hypot
 from app.localization.sensor import Observation
 from app.maps.geometry import wrap_scalar as _wrap
 from app.maps.model import SemanticMap
@@ -115,6 +116,11 @@ class UnseenObjects:
         #: Objects taken for gone from the world (a stale map, :meth:`forgive`): they
         #: flag nothing any more in this session.
         self.absent = np.zeros(semantic_map.object_count, dtype=bool)
+        # The camera's view as the frame's count takes it (rad): its centre off the
+        # body's forward, and the half-width in which an object is in clear view. The
+        # config and settings are frozen, so each frame would compute the same two.
+        self._fov_centre_rad = float(np.radians(config.fov_centre_deg))
+        self._clear_half_fov_rad = float(np.radians(config.fov_deg) / 2.0 - settings.margin_rad)
         self.reset()
 
     def reset(self) -> None:
@@ -187,7 +193,7 @@ class UnseenObjects:
         if obs.empty:
             return
         st = self.settings
-        if self._at is not None and np.hypot(x - self._at[0], y - self._at[1]) > st.jump_m:
+        if self._at is not None and hypot(x - self._at[0], y - self._at[1]) > st.jump_m:
             self.reset()
         self._at = (x, y)
         # The observation's class groups as the map's class indices.
@@ -210,8 +216,7 @@ class UnseenObjects:
             dx, dy, np.arctan2(dy, dx), float(theta), self.map.object_class, self.reported,
             np.ascontiguousarray(visible_row if with_row else self.reported, dtype=np.bool_),
             with_row, fov_check,
-            float(np.radians(self.config.fov_centre_deg)),
-            float(np.radians(self.config.fov_deg) / 2.0 - st.margin_rad),
+            self._fov_centre_rad, self._clear_half_fov_rad,
             obs.det_bearing, obs.det_group, group_class, obs.group_kappa,
             st.near_m, st.min_m, st.cutoff_sigmas, st.decay, st.min_expected, st.max_seen_share,
             self.reach_m, self.expected, self.seen, self.near, self.absent, self.rate_sums,

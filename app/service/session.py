@@ -40,7 +40,8 @@ def unknown_class_warnings(
     detections: tuple[Detection, ...], semantic_map: SemanticMap
 ) -> list[str]:
     """A warning for each detected class the map lacks (those detections are ignored)."""
-    unknown = sorted({d.cls for d in detections} - set(semantic_map.classes))
+    known = semantic_map.class_members  # keyed by the map's classes
+    unknown = sorted({d.cls for d in detections if d.cls not in known})
     return [
         f"class {c!r} is not on map {semantic_map.name!r}; its detections were ignored"
         for c in unknown
