@@ -54,7 +54,7 @@ from app.localization.resampling import (
 )
 from app.localization.search import PATTERN
 from app.localization.sensor import Observation, normalized_residuals, prepare_observation
-from app.localization.slide import OdometryCheck
+from app.localization.slide import SLIP_SCALE_STDS, OdometryCheck
 from app.localization.types import Detection, Estimate, InitialPose, Odometry
 from app.localization.unseen import UnseenObjects
 from app.maps.geometry import wrap_angle
@@ -166,7 +166,9 @@ class ParticleFilter:
         self.odometry_bias = None if source is None else OdometryBias(BIAS_PRIORS[source])
         #: Whether the estimate keeps to the odometry (:mod:`~app.localization.slide`).
         self.odometry_check = OdometryCheck(
-            self.config.trans_noise_frac, self.config.heading_slack_deg
+            self.config.trans_noise_frac,
+            self.config.heading_slack_deg,
+            None if source is None else SLIP_SCALE_STDS * BIAS_PRIORS[source].scale_std,
         )
         if state is None:
             self.reset(initial_pose)

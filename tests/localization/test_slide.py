@@ -153,3 +153,43 @@ def test_the_filter_holds_a_run_towards_a_gain_to_the_odometry() -> None:
     pf._gate._streak = 3
     pf.step(None, [])
     assert seen == [(False, True)]
+
+
+def _sideways(
+    check: OdometryCheck, frames: int, drift: float, heading_deg: float, stretch: float = 1.0
+) -> tuple[float, float]:
+    """Walk ``frames`` frames of 0.25 m by the odometry, the estimate moving ``stretch``
+    times that along its heading ``heading_deg`` and ``drift`` a frame to the left of it
+    (a moved object's pull); then the next frame's move, and the estimate it leads to."""
+    t = math.radians(heading_deg)
+    c, s = math.cos(t), math.sin(t)
+    x = y = 0.0
+    for k in range(frames + 1):
+        check.moved(Odometry(0.25, 0.0, 0.0))
+        x += 0.25 * stretch * c - drift * s
+        y += 0.25 * stretch * s + drift * c
+        if k < frames:
+            check.add(x, y, t, converged=True)
+    return x, y
+
+
+def test_a_drag_across_the_walk_hides_in_the_anchor_heading_but_not_in_the_slip() -> None:
+    """4 cm a frame sideways over 6 m of walking is 9 degrees off the anchor's heading,
+    within its tolerance; along the estimate's own heading of every frame it is a metre
+    the odometry never carried, 0.3 m of it allowed at VIO grade (5 % of 6 m)."""
+    walked = 0.25 * SLIDE_FRAMES
+    slip = 0.04 * SLIDE_FRAMES - 0.05 * walked
+    for heading in (0.0, 137.0):
+        plain = OdometryCheck(scale_tolerance=0.02)  # no source known: no slip
+        assert plain.slide_m(*_sideways(plain, SLIDE_FRAMES, 0.04, heading)) == 0.0
+        vio = OdometryCheck(scale_tolerance=0.02, slip_share=0.05)
+        now = _sideways(vio, SLIDE_FRAMES, 0.04, heading)
+        assert vio.slide_m(*now) == pytest.approx(slip, abs=1e-9) and slip > 0.5
+        # No drag, the odometry's scale 2 % short: within the allowance, no slip.
+        kept = OdometryCheck(scale_tolerance=0.1, slip_share=0.05)
+        assert kept.slide_m(*_sideways(kept, SLIDE_FRAMES, 0.0, heading, 1.02)) == 0.0
+    # A checkpoint keeps the moves the slip adds up.
+    copy = OdometryCheck(scale_tolerance=0.02, slip_share=0.05)
+    copy.restore(vio.checkpoint())
+    copy.moved(Odometry(0.25, 0.0, 0.0))
+    assert copy.slide_m(*now) == pytest.approx(slip, abs=1e-9)
