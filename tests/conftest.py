@@ -2,13 +2,19 @@
 
 from __future__ import annotations
 
+import atexit
 import os
+import shutil
 import tempfile
 
 import pytest
 
-# Before any Settings is built: tests never write to the user's ~/.cache.
-os.environ.setdefault("BEARINGS_CACHE_DIR", tempfile.mkdtemp(prefix="bearings-test-cache-"))
+# Before any Settings is built: tests never write to the user's ~/.cache. The process
+# that makes the directory removes it when it exits (pytest-xdist's workers and the
+# servers the tests start inherit the variable and share it).
+if "BEARINGS_CACHE_DIR" not in os.environ:
+    os.environ["BEARINGS_CACHE_DIR"] = tempfile.mkdtemp(prefix="bearings-test-cache-")
+    atexit.register(shutil.rmtree, os.environ["BEARINGS_CACHE_DIR"], ignore_errors=True)
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:

@@ -215,6 +215,12 @@ class ParticleFilter:
         self._had_odometry = False
         #: Frames with detections in a row that were bad on their own (see _update_fit).
         self._bad_run = 0
+        #: The last frame's estimate had nothing in clear view and explained nothing
+        #: (see _update_fit): its detections are clutter wherever the person is.
+        self._sees_nothing = False
+        #: A fix held in a connector's stop (a lift car) as its view went blind, still
+        #: seeing nothing there: detections are not weighed (see _step).
+        self._blind_hold = False
         self.frames_without_evidence = 0
         #: How often every particle became impossible and the filter started again.
         self.restarts = 0
@@ -265,6 +271,7 @@ class ParticleFilter:
         self._wide_first = self.floors is not None
         self._recovery.reset()
         self._gate.reset()
+        self._blind_hold = False
         self.geometry.reset()
         self.odometry_check.reset()
         if self.evidence is not None:
@@ -282,19 +289,25 @@ class ParticleFilter:
 
         A frame without usable detections changes nothing (no evidence).
         """
-        return self._correct(detections)[0]
+        mean_ll, _ = self._correct(detections)
+        return 0.0 if mean_ll is None else self._recover(mean_ll)
 
-    def _correct(self, detections: Sequence[Detection]) -> tuple[float, NDArray[np.float64] | None]:
-        """:meth:`correct`, and the normalized weights it computed on the way (None
-        when it did not weigh: :attr:`weights` then computes them)."""
+    def _correct(
+        self, detections: Sequence[Detection], weigh: bool = True
+    ) -> tuple[float | None, NDArray[np.float64] | None]:
+        """The log of this frame's mean likelihood (None: no detections, nothing
+        weighed), for the recovery (:meth:`_recover`), and the normalized weights
+        computed on the way (None when it did not weigh: :attr:`weights` then computes
+        them). With ``weigh`` false the detections are kept as the frame's observation
+        (what the estimate is checked against) and weigh nothing: no evidence."""
         obs = self.sensor.observe(detections)
         self.last_observation = obs
-        if obs.empty:
+        if obs.empty or not weigh:
             self.frames_without_evidence += 1
-            return 0.0, None
+            return None, None
         self.frames_without_evidence = 0
         if self._wide_first:
-            return self._recover(self._wide_start(obs), obs), None
+            return self._wide_start(obs), None
         if self._seed_from_observation:
             self._seed_cloud(obs)
         log_lik = self.observation_log_likelihood(obs)
@@ -305,11 +318,14 @@ class ParticleFilter:
         self.log_w = self.log_w + log_lik
         # log of the prior-weighted mean likelihood: lse(w + l) - lse(w)
         w, after = weights_and_log_sum_exp(self.log_w)
-        return self._recover(after - before, obs), w
+        return after - before, w
 
-    def _recover(self, mean_ll: float, obs: Observation) -> float:
+    def _recover(self, mean_ll: float) -> float:
         """The share of particles to inject (augmented MCL), from the log of this
-        frame's mean likelihood, per class seen; 0 with recovery off."""
+        frame's mean likelihood, per class seen (of :attr:`last_observation`); 0 with
+        recovery off."""
+        obs = self.last_observation
+        assert obs is not None
         per_class = mean_ll / max(obs.group_kappa.size, 1)
         if not math.isfinite(per_class):
             per_class = -1e3
@@ -368,8 +384,10 @@ class ParticleFilter:
     def _resample(self, w: NDArray[np.float64], ess: float, inject_share: float) -> bool:
         """:meth:`resample` with the normalized weights and their ESS already at hand."""
         n_target = self.n
-        if self.config.adaptive:
-            # Lost: keep every particle. Localized: as few as KLD-sampling allows.
+        if self.config.adaptive and not self._blind_hold:
+            # Lost: keep every particle. Localized: as few as KLD-sampling allows. (A
+            # blind hold weighs nothing: its cloud only spreads by the motion's noise,
+            # and is kept as it is.)
             n_target = self.config.particles
             if self.estimate.converged:
                 n_min = min(self.config.min_particles, self.config.particles)
@@ -474,7 +492,20 @@ class ParticleFilter:
                     if self.floors.first_change:
                         self._located_at_ride = self._gate.held
                     rode = self._located_at_ride
-        inject, w = self._correct(detections)
+        # A fix held in a lift car (a connector's stop) whose view is blind, still
+        # seeing nothing in clear view: every detection is clutter where it stands, and
+        # weighing them lets the few particles elsewhere that one happens to fit
+        # outweigh the whole fix (the sensor model has no term for the objects such a
+        # place would have shown and did not). Measured on the venue suite: a fix in a
+        # lift car thrown 14 m away by three false boxes of one frame during the door
+        # wait, and carried upstairs to the wrong place. Such frames are no evidence;
+        # the check of what is in view goes on. Only in a stop: a person walking with a
+        # narrow camera along a bare wall has odometry drifting, and what the estimate
+        # does not explain there may be what corrects it (measured, weighing nothing
+        # there cost 52 confidently-wrong frames at PDR grade through a 66-degree
+        # camera on the phone suite's two-wing floor).
+        mean_ll, w = self._correct(detections, weigh=not self._blind_hold)
+        still = False  # no particles injected this frame, whatever the recovery says
         if heading is not None:
             self.log_w = self.log_w + compass_log_likelihood(self.theta, heading)
             w = None  # the correction's weights no longer hold
@@ -504,7 +535,7 @@ class ParticleFilter:
             assert floors is not None
             if floors.blind or floors.changed or not self._gate.held:
                 self._gate.reset()
-            inject = 0.0  # the barometer, not the view, moves the cloud then
+            still = True  # the barometer, not the view, moves the cloud then
         if self.evidence is not None and not transit:
             raw, w, ess = self._weigh_alternatives(odometry, raw, w, ess, heading)
             share, searched_ago = self.evidence.alternative_share, self.evidence.searched_ago
@@ -534,6 +565,25 @@ class ParticleFilter:
         )
         if est.converged and transit:
             est = est.with_converged(False)
+        # Augmented MCL reads a frame that the belief explains poorly as a sign of a
+        # kidnap, and injects particles where the detections point. Where a held fix
+        # stands with nothing in clear view (a lift car, a wall ahead of a narrow
+        # camera), every detection is clutter whatever the place, and a poor frame says
+        # nothing: its few false boxes would otherwise pull the belief out to wherever
+        # they fit (measured on the venue suite: a fix in a lift car thrown 15-100 m
+        # away by a phone's false detections during the door wait, then carried to the
+        # wrong floor's look-alike). Such frames are no evidence for the recovery.
+        inject = 0.0
+        if mean_ll is not None and not (self._sees_nothing and self._gate.held):
+            inject = 0.0 if still else self._recover(mean_ll)
+        obs = self.last_observation
+        if obs is not None and not obs.empty:
+            self._blind_hold = (
+                self._sees_nothing
+                and (self._gate.held or self._blind_hold)
+                and self.floors is not None
+                and bool(self.floors.stop_of(np.array([raw.x]), np.array([raw.y]))[0] >= 0)
+            )
         # A run of frames on the way to a gain is held to the odometry as a fix is: its
         # estimates are anchors while it lasts (a new run starts without the last's).
         streak = self._gate.streak
@@ -576,10 +626,16 @@ class ParticleFilter:
         # A search serves the gate: it is only worth its cost while the main mode
         # explains the detections well enough to be (or become) converged.
         q = self.quality
+        # Nor is there anything to weigh the alternatives against during a blind hold
+        # (see _step): a place that happens to explain a false box is no likelier for
+        # it. (Elsewhere than in a stop, weighing and searching go on while a held fix
+        # sees nothing: measured, holding them there too cost 45 confidently-wrong
+        # frames at PDR grade through a 66-degree camera on the phone suite.)
         fits = (
             q is not None
             and q.fit <= self._gate.hold_fit
             and q.unexplained <= self._gate.hold_unexplained
+            and not self._blind_hold
         )
         particles = (self.x, self.y, self.theta, w)
         obs = self.last_observation
@@ -635,6 +691,8 @@ class ParticleFilter:
             "quality": self.quality,
             "had_odometry": self._had_odometry,
             "bad_run": self._bad_run,
+            "sees_nothing": self._sees_nothing,
+            "blind_hold": self._blind_hold,
             "evidence": None if self.evidence is None else self.evidence.checkpoint(),
             "unseen": None if self.unseen is None else self.unseen.checkpoint(),
             "frames_without_evidence": self.frames_without_evidence,
@@ -670,6 +728,9 @@ class ParticleFilter:
         self.quality = from_plain(FitQuality | None, state["quality"])
         self._had_odometry = bool(state["had_odometry"])
         self._bad_run = int(state.get("bad_run", 0))
+        # (checkpoints from before these were kept hold neither)
+        self._sees_nothing = bool(state.get("sees_nothing", False))
+        self._blind_hold = bool(state.get("blind_hold", False))
         if self.evidence is not None and state["evidence"] is not None:
             self.evidence.restore(state["evidence"])
         if self.unseen is not None and state.get("unseen") is not None:
@@ -712,7 +773,10 @@ class ParticleFilter:
         """
         obs = self.last_observation
         top = raw.hypotheses[0] if raw.hypotheses else None
-        if top is None or top.std_xy_m > FIT_MAX_SPREAD_M or obs is None or obs.empty:
+        if obs is None or obs.empty:
+            return  # (nor does a frame without detections say what is in view)
+        self._sees_nothing = False
+        if top is None or top.std_xy_m > FIT_MAX_SPREAD_M:
             return
         row = self._vis.row(raw.x, raw.y) if self._vis is not None else None
         if self.unseen is not None:
@@ -747,6 +811,7 @@ class ParticleFilter:
         if self.unseen is not None:
             if self.unseen.frame_expected == 0 and good == 0.0:
                 a_share = 0.0  # nothing in clear view, nothing explained: no evidence
+                self._sees_nothing = True
             elif not self.unseen.frame_contradicts:
                 unexplained = 0.0  # what the pose has in view was reported: clutter
         q = self.quality
