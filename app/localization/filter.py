@@ -468,6 +468,8 @@ class ParticleFilter:
             self.odometry_check.moved(odometry)
         else:  # the person may have been carried anywhere: nothing to compare with
             self.odometry_check.reset()
+            # ... nor to hold blind: out of the car, the detections are evidence again
+            self._blind_hold = False
         if self.floors is not None:
             self.x, self.log_w, contradicted = self.floors.apply(
                 self.x, self.y, self.log_w, altitude, self.rng

@@ -118,6 +118,20 @@ def test_walking_out_of_the_car_ends_the_hold() -> None:
     assert np.hypot(est.x - CAR.x, est.y - y) < 0.5
 
 
+def test_a_frame_without_odometry_ends_the_hold() -> None:
+    """The app lost its odometry (paused in the lift, opened again elsewhere): the person
+    may be anywhere, and what the camera now sees is weighed again."""
+    weighed: list[int] = []
+    pf, _ = into_the_car(3, weighed)
+    assert pf._blind_hold
+    rng = np.random.default_rng(5)
+    elsewhere = Pose(8.0, 6.0, 0.0)
+    pf.step(None, seen_from(elsewhere, rng), altitude=STILL)
+    assert not pf._blind_hold
+    assert weighed[-1] == pf.steps - 1
+    assert not pf.estimate.converged
+
+
 def test_a_one_level_map_never_holds_blind(small_room: SemanticMap) -> None:
     """Only a connector's stop (a lift car) holds blind: elsewhere what the estimate does
     not explain may be what corrects a drifting odometry."""
