@@ -494,20 +494,8 @@ class ParticleFilter:
                     if self.floors.first_change:
                         self._located_at_ride = self._gate.held
                     rode = self._located_at_ride
-        # A fix held in a lift car (a connector's stop) whose view is blind, still
-        # seeing nothing in clear view: every detection is clutter where it stands, and
-        # weighing them lets the few particles elsewhere that one happens to fit
-        # outweigh the whole fix (the sensor model has no term for the objects such a
-        # place would have shown and did not). Measured on the venue suite: a fix in a
-        # lift car thrown 14 m away by three false boxes of one frame during the door
-        # wait, and carried upstairs to the wrong place. Such frames are no evidence;
-        # the check of what is in view goes on. Only in a stop: a person walking with a
-        # narrow camera along a bare wall has odometry drifting, and what the estimate
-        # does not explain there may be what corrects it (measured, weighing nothing
-        # there cost 52 confidently-wrong frames at PDR grade through a 66-degree
-        # camera on the phone suite's two-wing floor).
+        # During a blind hold (decided below) the detections weigh nothing.
         mean_ll, w = self._correct(detections, weigh=not self._blind_hold)
-        still = False  # no particles injected this frame, whatever the recovery says
         if heading is not None:
             self.log_w = self.log_w + compass_log_likelihood(self.theta, heading)
             w = None  # the correction's weights no longer hold
@@ -537,7 +525,6 @@ class ParticleFilter:
             assert floors is not None
             if floors.blind or floors.changed or not self._gate.held:
                 self._gate.reset()
-            still = True  # the barometer, not the view, moves the cloud then
         if self.evidence is not None and not transit:
             raw, w, ess = self._weigh_alternatives(odometry, raw, w, ess, heading)
             share, searched_ago = self.evidence.alternative_share, self.evidence.searched_ago
@@ -567,24 +554,32 @@ class ParticleFilter:
         )
         if est.converged and transit:
             est = est.with_converged(False)
-        # Augmented MCL reads a frame that the belief explains poorly as a sign of a
-        # kidnap, and injects particles where the detections point. Where a held fix
-        # stands with nothing in clear view (a lift car, a wall ahead of a narrow
-        # camera), every detection is clutter whatever the place, and a poor frame says
-        # nothing: its few false boxes would otherwise pull the belief out to wherever
-        # they fit (measured on the venue suite: a fix in a lift car thrown 15-100 m
-        # away by a phone's false detections during the door wait, then carried to the
-        # wrong floor's look-alike). Such frames are no evidence for the recovery.
+        # Where a held fix has nothing in clear view (a lift car, a bare wall ahead of a
+        # narrow camera), every detection is clutter wherever the person stands, yet
+        # weighing them lets the few particles elsewhere that one happens to fit outweigh
+        # the whole fix (the sensor model has no term for the objects such a place would
+        # have shown and did not), and augmented MCL reads the poor frame as a kidnap and
+        # injects where the boxes point. Measured on the venue suite: a fix in a lift car
+        # thrown 14-100 m away by one frame of three false boxes during the door wait,
+        # then carried upstairs from the wrong place. So such a frame feeds no recovery,
+        # anywhere; and in a connector's stop the fix goes on in a blind hold until it
+        # sees something again: no weighing (above), no weighing of the alternatives and
+        # no search (_weigh_alternatives), no resizing (_resample). Only in a stop: along
+        # a bare wall the odometry drifts, and what the estimate does not explain may be
+        # what corrects it (measured, holding there too cost 45-52 confidently-wrong
+        # frames at PDR grade through a 66-degree camera on the phone suite).
+        # (Between floors the frames feed no recovery either: the barometer, not the
+        # view, moves the cloud then.)
         inject = 0.0
-        if mean_ll is not None and not (self._sees_nothing and self._gate.held):
-            inject = 0.0 if still else self._recover(mean_ll)
+        if mean_ll is not None and not transit and not (self._sees_nothing and self._gate.held):
+            inject = self._recover(mean_ll)
         obs = self.last_observation
         if obs is not None and not obs.empty:
             self._blind_hold = (
                 self._sees_nothing
                 and (self._gate.held or self._blind_hold)
                 and self.floors is not None
-                and bool(self.floors.stop_of(np.array([raw.x]), np.array([raw.y]))[0] >= 0)
+                and self.floors.in_stop(raw.x, raw.y)
             )
         # A run of frames on the way to a gain is held to the odometry as a fix is: its
         # estimates are anchors while it lasts (a new run starts without the last's).
@@ -628,11 +623,8 @@ class ParticleFilter:
         # A search serves the gate: it is only worth its cost while the main mode
         # explains the detections well enough to be (or become) converged.
         q = self.quality
-        # Nor is there anything to weigh the alternatives against during a blind hold
-        # (see _step): a place that happens to explain a false box is no likelier for
-        # it. (Elsewhere than in a stop, weighing and searching go on while a held fix
-        # sees nothing: measured, holding them there too cost 45 confidently-wrong
-        # frames at PDR grade through a 66-degree camera on the phone suite.)
+        # Nor during a blind hold (see _step): a place that happens to explain a false
+        # box is no likelier for it.
         fits = (
             q is not None
             and q.fit <= self._gate.hold_fit

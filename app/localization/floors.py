@@ -200,6 +200,11 @@ class FloorTracker:
             return np.full(x.shape, -1, dtype=np.int64)
         return first_polygon(np.column_stack([x, y]), self._edges, self._starts)
 
+    def in_stop(self, x: float, y: float) -> bool:
+        """Whether plane point (x, y) lies in a connector's stop (a lift car, the foot
+        or head of stairs or an escalator)."""
+        return bool(self.stop_of(np.array([x]), np.array([y]))[0] >= 0)
+
     def _share_in_stops(
         self, x: NDArray[np.float64], y: NDArray[np.float64], log_w: NDArray[np.float64]
     ) -> float:
@@ -376,7 +381,7 @@ class FloorTracker:
             return True
         if level == self.carried_level:
             return True
-        return bool(self.stop_of(np.array([x]), np.array([y]))[0] < 0)
+        return not self.in_stop(x, y)
 
     def _blind(
         self, x: NDArray[np.float64], y: NDArray[np.float64], rng: np.random.Generator
@@ -408,7 +413,7 @@ class FloorTracker:
             return True
         if not self.blind:
             return False
-        return bool(self.stop_of(np.array([x]), np.array([y]))[0] >= 0)
+        return self.in_stop(x, y)
 
     def counted_level(self) -> int | None:
         """The level the barometer's steps lead to: from the last converged fix, that
