@@ -265,14 +265,20 @@ def test_a_ride_started_by_the_rate_test_stays_between_floors_until_the_level_ch
     assert tracker.changes == 1 and not tracker.in_transit
 
 
-def test_the_evidence_search_keeps_no_alternative_in_another_floors_lift_car() -> None:
+def test_the_evidence_search_keeps_no_alternative_on_another_floor_once_one_is_carried() -> None:
     tracker = FloorTracker(VENUE)
     assert tracker.place_allowed(1.5 + PITCH, 1.5)  # nothing carried yet: anywhere
+    assert tracker.place_allowed(6.0 + PITCH, 11.0)
     tracker.blind = False
     tracker.carried_level = 2
     assert tracker.place_allowed(1.5 + 2 * PITCH, 1.5)  # the carried level's car
+    assert tracker.place_allowed(6.0 + 2 * PITCH, 11.0)  # and its hall
     assert not tracker.place_allowed(1.5 + PITCH, 1.5)  # the First Floor's car
-    assert tracker.place_allowed(6.0 + PITCH, 11.0)  # the First Floor's hall: may be
+    assert not tracker.place_allowed(6.0 + PITCH, 11.0)  # nor its look-alike hall
+    assert not tracker.place_allowed(6.0, 11.0)
+    # Without a barometer's readings nothing carries the floor: what is seen decides.
+    tracker.blind = True
+    assert tracker.place_allowed(6.0 + PITCH, 11.0) and tracker.place_allowed(1.5 + PITCH, 1.5)
 
 
 def test_without_a_barometer_a_pose_in_a_connector_is_between_floors() -> None:
