@@ -105,6 +105,10 @@ CONDITIONS: dict[str, Condition] = {
     "pdr-360": Condition(360.0, pdr_phone()),
     "pdr-pinhole66": Condition(PINHOLE_FOV_DEG, pdr_phone(), pinhole=True),
     "pdr-270": Condition(270.0, pdr_phone()),
+    "pdr-180": Condition(180.0, pdr_phone()),
+    # Beyond the list: a weaker detector (30 % of objects missed besides) in a
+    # phone held in the hand, with step-counting odometry.
+    "pdr-missed30-pinhole66": Condition(PINHOLE_FOV_DEG, pdr_phone(), pinhole=True, miss_prob=0.3),
     "vio-missed30-270": Condition(270.0, vio_phone(), miss_prob=0.3),
     "vio-stale-360": Condition(360.0, vio_phone(stale=StaleMap())),
     # A stale map through the cameras most people hold (fewer objects in view at once).
@@ -152,7 +156,15 @@ OFFICE_SUITE_WALK: tuple[tuple[float, float], ...] = (
     (18.0, 5.0),
 )
 #: The conditions run on every map.
-EVERY_MAP = ("vio-360", "vio-180", "vio-pinhole66", "pdr-360", "pdr-pinhole66")
+EVERY_MAP = (
+    "vio-360",
+    "vio-180",
+    "vio-pinhole66",
+    "pdr-360",
+    "pdr-180",
+    "pdr-pinhole66",
+    "pdr-missed30-pinhole66",
+)
 #: Map -> the conditions it gets besides :data:`EVERY_MAP`.
 EXTRA: dict[str, tuple[str, ...]] = {
     "paper_office": (
