@@ -193,8 +193,11 @@ class ConvergenceGate:
         geometry_m: float = 0.0,
         slide_m: float = 0.0,
         lone_detection: bool = False,
+        gain_alternatives: float | None = None,
     ) -> Estimate:
-        """``raw`` with ``converged`` decided by the rules above."""
+        """``raw`` with ``converged`` decided by the rules above; ``gain_alternatives``:
+        the alternatives' share a gain is held to, when stricter than ``alternatives``
+        (EvidenceTracker.gain_share)."""
         last = self._last
         self._last = raw
         step = hypot(raw.x - last.x, raw.y - last.y) if last is not None else np.inf
@@ -253,7 +256,7 @@ class ConvergenceGate:
             self._streak >= self.frames
             and searched_ago is not None
             and searched_ago < self._streak
-            and alternatives <= self.gain_alternatives
+            and max(alternatives, gain_alternatives or 0.0) <= self.gain_alternatives
             and self._unseen_cleared
         )
         return raw.with_converged(self._held)

@@ -335,14 +335,16 @@ class EvidenceTracker:
         """The evidence both counts agree on, shape (A,): what a swap takes."""
         return np.minimum(self.llr, self.seg)
 
-    def probabilities(self) -> NDArray[np.float64]:
-        """Each alternative's probability under the whole belief, shape (A,)."""
+    def probabilities(self, weights: NDArray[np.float64] | float = 1.0) -> NDArray[np.float64]:
+        """Each alternative's probability under the whole belief, shape (A,); with
+        ``weights`` (per alternative, or one for all), each evidence counted at that
+        share of itself besides the temper."""
         if not self.count:
             return np.empty(0)
         # Tempered: a real detector's errors repeat from frame to frame (a box's bias, a
         # stale object), so a log-ratio summed over frames overstates the evidence
         # (FilterConfig.evidence_temper, FilterConfig.evidence_weight).
-        ev = self.config.evidence_weight * self.evidence
+        ev = self.config.evidence_weight * weights * self.evidence
         top = max(0.0, float(ev.max()))
         e = np.exp(ev - top)
         return e / (np.exp(-top) + e.sum())
@@ -351,6 +353,17 @@ class EvidenceTracker:
     def alternative_share(self) -> float:
         """Probability that the person is at one of the alternatives, not the main mode."""
         return float(self.probabilities().sum()) if self.count else 0.0
+
+    @property
+    def gain_share(self) -> float:
+        """:attr:`alternative_share` with the evidence against each alternative tracked
+        for ``rival_frames`` or more counted at ``rival_weight`` of itself: what gaining
+        ``converged`` is held to (EvidenceSettings.rival_frames)."""
+        if not self.count:
+            return 0.0
+        st = self.settings
+        rival = np.where(self.age >= st.rival_frames, st.rival_weight, 1.0)
+        return float(self.probabilities(rival).sum())
 
     @property
     def confirmed_share(self) -> float:

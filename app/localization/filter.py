@@ -511,7 +511,7 @@ class ParticleFilter:
             self.evidence.set_prior(
                 InitialPose(raw.x, raw.y, raw.theta_rad, RIDE_START_STD_M, RIDE_START_STD_RAD)
             )
-        share, confirmed = 0.0, 0.0
+        share, confirmed, gain_share = 0.0, 0.0, 0.0
         searched_ago: int | None = 0
         transit = self.floors is not None and self.floors.between_floors(raw.x, raw.y)
         if transit:
@@ -528,7 +528,7 @@ class ParticleFilter:
         if self.evidence is not None and not transit:
             raw, w, ess = self._weigh_alternatives(odometry, raw, w, ess, heading)
             share, searched_ago = self.evidence.alternative_share, self.evidence.searched_ago
-            confirmed = self.evidence.confirmed_share
+            confirmed, gain_share = self.evidence.confirmed_share, self.evidence.gain_share
             if self.evidence.prior_confines:
                 searched_ago = 0  # a tight known start rules out every other place
         self._update_fit(raw)
@@ -551,6 +551,7 @@ class ParticleFilter:
             lone_detection=len(detections) == 1,
             geometry_m=(fix_m := self.geometry.radius_m(raw.x, raw.y, raw.theta_rad)),
             slide_m=slide_m,
+            gain_alternatives=gain_share,
         )
         if est.converged and transit:
             est = est.with_converged(False)

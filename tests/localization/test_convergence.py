@@ -158,3 +158,20 @@ def test_frames_seeing_one_object_do_not_count_towards_a_light_cluster() -> None
         est = gate.confirm(_light(), quality=GOOD, searched_ago=0)
         assert est.converged == (k < gate.hold_light_frames - 1)
     assert gate.lost_because == ("light",)
+
+
+def test_a_gain_is_held_to_the_stricter_share_and_a_hold_is_not() -> None:
+    """``gain_alternatives`` (the share with long-tracked look-alikes' evidence counted
+    at half weight) stops a gain; once held, only ``alternatives`` counts."""
+    gate = ConvergenceGate()
+    strict = 2.0 * gate.gain_alternatives  # above the gain's bound, below the hold's
+    for _ in range(gate.frames + 3):
+        out = gate.confirm(
+            _tight(), quality=GOOD, searched_ago=0, alternatives=0.0, gain_alternatives=strict
+        )
+        assert not out.converged
+    held = _held_gate()
+    out = held.confirm(
+        _tight(), quality=GOOD, searched_ago=0, alternatives=0.0, gain_alternatives=strict
+    )
+    assert out.converged

@@ -314,3 +314,28 @@ def test_the_trail_keeps_the_last_positions_in_order() -> None:
         assert len(trail) == len(want)
     trail.clear()
     assert len(trail) == 0 and not trail
+
+
+def test_a_long_tracked_look_alike_counts_at_half_its_evidence_for_a_gain(
+    paper_office: SemanticMap,
+) -> None:
+    """Refuted by a few units only after ``rival_frames`` of tracking, a look-alike keeps
+    a gain away that the same evidence against a newcomer would not."""
+    cfg = FilterConfig(particles=200)
+    models = (
+        BearingSensorModel(paper_office, cfg, paper_office.visibility),
+        OdometryMotionModel(paper_office, cfg),
+    )
+    tracker = EvidenceTracker(*models, np.random.default_rng(0))
+    st = tracker.settings
+    assert tracker.gain_share == 0.0  # nothing tracked
+    tracker.moves = np.zeros((2, 3))
+    tracker.llr = tracker.seg = np.array([-9.0, -30.0])
+    tracker.age = np.array([st.rival_frames - 1, 0])
+    # Young: the gain is held to the same share as everything else.
+    assert tracker.gain_share == pytest.approx(tracker.alternative_share, rel=1e-12)
+    tracker.age = np.array([st.rival_frames, st.rival_frames])
+    w = cfg.evidence_weight
+    want = [np.exp(st.rival_weight * w * -9.0), np.exp(st.rival_weight * w * -30.0)]
+    assert tracker.gain_share == pytest.approx(sum(want) / (1.0 + sum(want)), rel=1e-12)
+    assert tracker.alternative_share < 0.01 < tracker.gain_share
