@@ -19,7 +19,9 @@ false detections a frame; :func:`~app.simulation.venue_walk.simulate_venue_phone
 the barometer, through a filter configured as the service configures a session with
 ``odometry.source: vio`` (:func:`app.service.sessions.filter_config`), for the venue and
 for the one-level maps alike; ``phone-vio-180`` and ``phone-vio-66`` are that phone with
-a camera of 180 and 66 degrees (a phone held in the hand) instead of 360.
+a camera of 180 and 66 degrees (a phone held in the hand) instead of 360;
+``phone-pdr-180`` and ``phone-pdr-66`` the same phone with step-counting (PDR)
+odometry, its session configured with ``odometry.source: pdr``.
 
 Figures, pooled over the seeds:
 
@@ -63,7 +65,7 @@ from app.localization.config import FilterConfig
 from app.localization.filter import ParticleFilter
 from app.localization.types import Estimate, InitialPose
 from app.maps.model import SemanticMap, parse_map
-from app.simulation.phone import PhoneEffects, vio_phone
+from app.simulation.phone import PhoneEffects, pdr_phone, vio_phone
 from app.simulation.simulator import SimulationConfig
 from app.simulation.venue import VENUE_NAME, venue_legs, venue_map, venue_spec
 from app.simulation.venue_walk import (
@@ -110,6 +112,9 @@ CONDITIONS: dict[str, Condition] = {
     # The same phone held in the hand: a camera of 180 deg, and of 66 deg (most phones).
     "phone-vio-180": Condition(True, miss_prob=0.0, phone=vio_phone(), fov_deg=180.0),
     "phone-vio-66": Condition(True, miss_prob=0.0, phone=vio_phone(), fov_deg=66.0),
+    # The phones whose tracking counts steps (pedestrian dead reckoning).
+    "phone-pdr-180": Condition(True, miss_prob=0.0, phone=pdr_phone(), fov_deg=180.0),
+    "phone-pdr-66": Condition(True, miss_prob=0.0, phone=pdr_phone(), fov_deg=66.0),
 }
 
 

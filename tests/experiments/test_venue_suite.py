@@ -8,7 +8,7 @@ from app.experiments.venue import CONDITIONS, _availability, filter_config, leg_
 from app.localization.config import FilterConfig
 from app.service.metrics import Metrics
 from app.service.sessions import SessionManager
-from app.service.types import SessionSpec
+from app.service.types import SensorSpec, SessionSpec
 from app.simulation.venue import VENUE_NAME, venue_map
 from tests.helpers import make_settings
 
@@ -40,3 +40,17 @@ def test_the_phone_condition_filters_as_a_service_session_with_vio_odometry() ->
     assert session.filter.config.odometry_source == "vio"
     # The idealized conditions keep the library's default filter.
     assert filter_config(CONDITIONS["barometer"], 1000) == FilterConfig(particles=1000)
+
+
+def test_the_pdr_phone_conditions_filter_as_a_session_with_pdr_odometry() -> None:
+    manager = SessionManager({VENUE_NAME: venue_map()}, make_settings(), Metrics())
+    for name, fov in (("phone-pdr-180", 180.0), ("phone-pdr-66", 66.0)):
+        spec = SessionSpec(
+            map_name=VENUE_NAME,
+            particles=1000,
+            odometry_source="pdr",
+            sensor=SensorSpec(fov_deg=fov),
+        )
+        session = manager.build(spec)
+        assert filter_config(CONDITIONS[name], 1000) == session.filter.config
+        assert session.filter.config.odometry_source == "pdr"
