@@ -193,7 +193,7 @@ class ConvergenceGate:
         geometry_m: float = 0.0,
         slide_m: float = 0.0,
         lone_detection: bool = False,
-        gain_alternatives: float | None = None,
+        gain_alternatives: float = 0.0,
     ) -> Estimate:
         """``raw`` with ``converged`` decided by the rules above; ``gain_alternatives``:
         the alternatives' share a gain is held to, when stricter than ``alternatives``
@@ -256,7 +256,7 @@ class ConvergenceGate:
             self._streak >= self.frames
             and searched_ago is not None
             and searched_ago < self._streak
-            and max(alternatives, gain_alternatives or 0.0) <= self.gain_alternatives
+            and max(alternatives, gain_alternatives) <= self.gain_alternatives
             and self._unseen_cleared
         )
         return raw.with_converged(self._held)
