@@ -162,6 +162,7 @@ class Narrator:
         fov_centre_deg: float = 0.0,
         observation: Observation | None = None,
         odometry: Odometry | None = None,
+        gone: NDArray[np.bool_] | None = None,
     ) -> Feedback:
         """Feedback for one frame (see the module docstring for the rules).
 
@@ -169,13 +170,16 @@ class Narrator:
         of its middle relative to the body (a yawed phone camera). ``observation``: the
         filter's :func:`~app.localization.sensor.prepare_observation` of these very
         detections on this map, when at hand (its arrays are then used as they are).
+        ``gone``: per map object, whether the filter took it for moved or taken away
+        since the map was drawn (:meth:`app.localization.unseen.UnseenObjects.forgive`):
+        such an object is not said, since where the map has it is not where it is.
         """
         now = time.monotonic() if timestamp_s is None else float(timestamp_s)
         if estimate.converged:
             self._turned_rad = self._walked_m = 0.0
             self._suggested_at = None
             fov = (fov_deg, fov_centre_deg)
-            return self._located(estimate, detections, now, describe, fov, observation)
+            return self._located(estimate, detections, now, describe, fov, observation, gone)
         dets = [d for d in detections if d.score > 0 and d.cls in self.map.class_members]
         feedback = self._uncertain(estimate, dets, now, describe)
         suggestion = self._suggest(odometry, fov_deg)
@@ -265,12 +269,13 @@ class Narrator:
         describe: bool,
         fov: tuple[float, float],
         observation: Observation | None,
+        gone: NDArray[np.bool_] | None = None,
     ) -> Feedback:
         opts = self.options
         certain = max(estimate.std_x_m, estimate.std_y_m) <= CERTAIN_STD_M and (
             estimate.protection_m is None or estimate.protection_m <= CERTAIN_PROTECTION_M
         )
-        ordered, rel, dist = self._ordered_objects(estimate, detections, fov, observation)
+        ordered, rel, dist = self._ordered_objects(estimate, detections, fov, observation, gone)
         # The few shown objects' offsets and distances read from plain lists: indexing
         # the arrays with a list of them cost more than converting them whole.
         rel_xy, dist_m = rel.tolist(), dist.tolist()
@@ -319,9 +324,11 @@ class Narrator:
         detections: Sequence[Detection],
         fov: tuple[float, float],
         observation: Observation | None = None,
+        gone: NDArray[np.bool_] | None = None,
     ) -> tuple[list[int], NDArray[np.float64], NDArray[np.float64]]:
         """Objects matched to this frame's detections first (nearest first), then the
-        nearest visible others (the first object on a tie in distance).
+        nearest visible others (the first object on a tie in distance); none of the
+        objects ``gone``.
 
         Also each object's offset from the pose, shape (N, 2), and distance, shape (N,).
 
@@ -354,6 +361,8 @@ class Narrator:
             cls = np.array([self._class_index[d.cls] for d in by_class], dtype=np.int64)
         # Line of sight from the map's precomputed grid (the cell around the pose).
         visible = self.map.visibility.row(estimate.x, estimate.y)
+        if gone is not None and gone.any():
+            visible = visible & ~gone
         # The cosines and sines by numpy (its own SIMD versions: the compiled code's C
         # library may differ in the last bit), the rest compiled.
         order, rel, dist = _order_objects(

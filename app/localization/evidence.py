@@ -84,7 +84,7 @@ from app.localization.fastmath import hypot
 from app.localization.models import MotionModel, SensorModel
 from app.localization.resampling import systematic_resample
 from app.localization.search import PlaceSearch
-from app.localization.sensor import Observation, observation_columns, observations_from_columns
+from app.localization.sensor import Observation, observation_columns
 from app.localization.types import Hypothesis, InitialPose, Odometry
 from app.maps.geometry import wrap_angle, wrap_rad
 from app.state import from_columns, from_plain
@@ -244,6 +244,14 @@ class EvidenceTracker:
         start = state.get("start")
         self._start = None if start is None else tuple(float(v) for v in start)  # type: ignore[assignment]
 
+    def reobserve(self) -> None:
+        """Make the window's observations again, as the sensor model would make them now
+        (after :meth:`~app.localization.models.SensorModel.exclude`): the same as a
+        checkpoint's round trip, so a restored tracker scores as this one does."""
+        frames = self._history_from(self._history_columns())
+        self._history.clear()
+        self._history.extend(frames)
+
     def _history_columns(self) -> dict[str, Any]:
         """The window of recent frames as a few arrays: the odometry as rows (forward,
         left, turn; ``moved`` False where a frame had none), the observations as
@@ -276,7 +284,7 @@ class EvidenceTracker:
             rows = np.asarray(history["motion"], dtype=np.float64).reshape(-1, 3).tolist()
             moved = np.asarray(history["moved"], dtype=bool).tolist()
             odometry = [Odometry(*row) if m else None for row, m in zip(rows, moved, strict=True)]
-            observations = observations_from_columns(history["observations"], self.map, self.config)
+            observations = self.sensor.observations_from_columns(history["observations"])
             plain_compass = history["compass"]
         elif isinstance(history, Mapping):  # formats 2 and 3
             odometry = [from_plain(Odometry | None, odo) for odo in history["odometry"]]

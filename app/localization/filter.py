@@ -53,7 +53,12 @@ from app.localization.resampling import (
     weights_and_log_sum_exp,
 )
 from app.localization.search import PATTERN
-from app.localization.sensor import Observation, normalized_residuals, prepare_observation
+from app.localization.sensor import (
+    Observation,
+    normalized_residuals,
+    observation_columns,
+    prepare_observation,
+)
 from app.localization.slide import SLIP_SCALE_STDS, OdometryCheck
 from app.localization.types import Detection, Estimate, InitialPose, Odometry
 from app.localization.unseen import UnseenObjects
@@ -100,6 +105,14 @@ SEARCH_MAX_SPREAD_M = 0.5
 #: other place (``ParticleFilter._place_is_unique``): the evidence tracker searches
 #: every 25 frames while it finds nothing.
 UNIQUE_SEARCH_FRAMES = 25
+#: ... and when the fix is known well enough to tell an object moved since the map was
+#: drawn from its own error: its protection radius at most this (m; a metre, what the
+#: integrity suites call wrong) ...
+FORGIVE_PROTECTION_M = 1.0
+#: ... and it is not being dragged: at most this far (m) off where the odometry carries
+#: it (half of the gate's ``hold_slide_m``). Measured on the phone suite's stale office
+#: map, a fix dragged 0.8 m off took a present door for gone and went on 1.3-1.8 m off.
+FORGIVE_SLIDE_M = 0.25
 
 
 class ParticleFilter:
@@ -726,10 +739,12 @@ class ParticleFilter:
         # (checkpoints from before these were kept hold neither)
         self._sees_nothing = bool(state.get("sees_nothing", False))
         self._blind_hold = bool(state.get("blind_hold", False))
-        if self.evidence is not None and state["evidence"] is not None:
-            self.evidence.restore(state["evidence"])
         if self.unseen is not None and state.get("unseen") is not None:
             self.unseen.restore(state["unseen"])
+            # (before the evidence tracker makes its window's observations again)
+            self.sensor.exclude(np.flatnonzero(self.unseen.moved).tolist())
+        if self.evidence is not None and state["evidence"] is not None:
+            self.evidence.restore(state["evidence"])
         if self.floors is not None and state.get("floors") is not None:
             self.floors.restore(state["floors"])
         self._located_at_ride = bool(state.get("located_at_ride", False))
@@ -776,8 +791,13 @@ class ParticleFilter:
         row = self._vis.row(raw.x, raw.y) if self._vis is not None else None
         if self.unseen is not None:
             self.unseen.update(raw.x, raw.y, raw.theta_rad, obs, row)
-            if self.unseen.contradicted and self._place_is_unique():
-                self.unseen.forgive()  # a stale map: the object is gone
+            if self.unseen.contradicted and self._place_is_unique(raw):
+                # A stale map: the objects are moved or gone; the moved ones explain no
+                # detection any more.
+                self.unseen.forgive()
+                self._exclude_moved()
+                obs = self.last_observation
+                assert obs is not None
         self.geometry.add(raw.x, raw.y, raw.theta_rad, obs, row)
         r = normalized_residuals(raw.x, raw.y, raw.theta_rad, obs, self.map, self._fit_config, row)
         if self._fit_scale != 1.0:
@@ -819,23 +839,42 @@ class ParticleFilter:
         contradicted = self.unseen is not None and self.unseen.contradicted
         self.quality = FitQuality(fit, unexplained, bad, contradicted)
 
-    def _place_is_unique(self) -> bool:
-        """Whether the last frame's converged estimate's place is the only one that explains what
-        was seen: a global search of the last ``UNIQUE_SEARCH_FRAMES`` frames found no
-        alternative, none is tracked, and the last frame's fit was good. An object in
-        clear view that goes unreported there is gone from the world, not a sign of
-        another place (unseen.UnseenObjects.forgive)."""
+    def _exclude_moved(self) -> None:
+        """Take the objects the unseen-object check forgave as moved out of the sensor
+        model, and make the frames it holds again without them (the evidence tracker's
+        window and this frame's observation), as a checkpoint's round trip would."""
+        assert self.unseen is not None
+        self.sensor.exclude(np.flatnonzero(self.unseen.moved).tolist())
+        if self.evidence is not None:
+            self.evidence.reobserve()
+        if self.last_observation is not None:
+            columns = observation_columns([self.last_observation])
+            self.last_observation = self.sensor.observations_from_columns(columns)[0]
+
+    def _place_is_unique(self, raw: Estimate) -> bool:
+        """Whether the last frame's converged estimate's place is the only one that
+        explains what was seen (a global search of the last ``UNIQUE_SEARCH_FRAMES``
+        frames found no alternative, none is tracked, and the last frame's fit was good),
+        that fix is known within ``FORGIVE_PROTECTION_M``, and this frame's estimate
+        ``raw`` is not sliding off the odometry (by more than ``FORGIVE_SLIDE_M``). An
+        object in clear view that goes unreported there has been moved or taken away
+        since the map was drawn, and is no sign of another place
+        (unseen.UnseenObjects.forgive)."""
         ev = self.evidence
         q = self.quality
+        est = self.estimate
         return (
             ev is not None
-            and self.estimate.converged
+            and est.converged
+            and est.protection_m is not None
+            and est.protection_m <= FORGIVE_PROTECTION_M
             and ev.count == 0
             and ev.searched_ago is not None
             and ev.searched_ago <= UNIQUE_SEARCH_FRAMES
             and q is not None
             and not q.bad_frame
             and q.fit <= self._gate.hold_fit
+            and self.odometry_check.slide_m(raw.x, raw.y) <= FORGIVE_SLIDE_M
         )
 
     def _turned_fits(

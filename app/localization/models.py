@@ -17,8 +17,8 @@ estimates its own scale) is another class with the same methods, handed to the f
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-from typing import Protocol
+from collections.abc import Mapping, Sequence
+from typing import Any, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
@@ -27,7 +27,7 @@ from app.localization import sensor_kernel
 from app.localization.config import FilterConfig
 from app.localization.motion import penalized, sample_motion
 from app.localization.recovery import sample_from_observation
-from app.localization.sensor import Observation, prepare_observation
+from app.localization.sensor import Observation, observations_from_columns, prepare_observation
 from app.localization.sensor_kernel import ObservationWindow
 from app.localization.types import Detection, Odometry
 from app.maps.model import SemanticMap
@@ -86,6 +86,17 @@ class SensorModel(Protocol):
         """``n`` poses that explain one of the frame's detections each (obs not empty)."""
         ...
 
+    def exclude(self, objects: Sequence[int]) -> None:
+        """From now on, the map's ``objects`` explain no detection in what :meth:`observe`
+        and :meth:`observations_from_columns` make (a stale map's objects the filter
+        took for moved, :attr:`app.localization.unseen.UnseenObjects.moved`)."""
+        ...
+
+    def observations_from_columns(self, columns: Mapping[str, Any]) -> list[Observation]:
+        """Observations kept as :func:`~app.localization.sensor.observation_columns`,
+        as :meth:`observe` would make them now."""
+        ...
+
 
 class MotionModel(Protocol):
     """What the filter asks of a motion model: where each pose goes, and whether it can."""
@@ -124,9 +135,17 @@ class BearingSensorModel:
         self._setup = sensor_kernel._sensor_setup(semantic_map, config, grid)
         self._free = sensor_kernel._free_space_setup(semantic_map)
         self._seed_std_rad = config.bearing_std_rad("")
+        #: The objects excluded (sorted indices, :meth:`exclude`).
+        self.excluded: tuple[int, ...] = ()
 
     def observe(self, detections: Sequence[Detection]) -> Observation:
-        return prepare_observation(detections, self.semantic_map, self.config)
+        return prepare_observation(detections, self.semantic_map, self.config, self.excluded)
+
+    def exclude(self, objects: Sequence[int]) -> None:
+        self.excluded = tuple(sorted({int(o) for o in objects}))
+
+    def observations_from_columns(self, columns: Mapping[str, Any]) -> list[Observation]:
+        return observations_from_columns(columns, self.semantic_map, self.config, self.excluded)
 
     def log_likelihood(self, x: Array, y: Array, theta: Array, obs: Observation) -> Array:
         return sensor_kernel.likelihood_with(self._setup, x, y, theta, obs)

@@ -76,8 +76,17 @@ def sample_from_observation(
     """
     pts = semantic_map.free_space.sample(n, rng)
     x, y = pts[:, 0], pts[:, 1]
-    # Detections drawn in proportion to their scores (inverse CDF of the scores).
-    cumulative = np.cumsum(obs.det_score)
+    # Detections drawn in proportion to their scores (inverse CDF of the scores); one
+    # whose class has no object left in the session's map (each excluded,
+    # BearingSensorModel.exclude) points at nothing, and a frame of only such
+    # detections gives no heading.
+    score = obs.det_score
+    sizes = np.diff(obs.member_start)
+    if not sizes.all():
+        score = np.where(sizes[obs.det_group] > 0, score, 0.0)
+        if not score.any():
+            return x, y, rng.uniform(-np.pi, np.pi, n)
+    cumulative = np.cumsum(score)
     k = np.searchsorted(cumulative, rng.random(n) * cumulative[-1], side="right")
     k = np.minimum(k, obs.det_cos.size - 1)
     g = obs.det_group[k]

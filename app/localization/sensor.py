@@ -73,8 +73,11 @@ class Observation:
         group_log_floor: log of the relative clutter density eps * I0e(kappa), -inf
             when clutter is off, shape (G,).
         group_log_keep: log(1 - eps) (0 when clutter is off), shape (G,).
-        member_start: group g's objects are members[member_start[g]:member_start[g+1]].
-        members: object indices, shape (M,).
+        member_start: group g's objects are members[member_start[g]:member_start[g+1]]
+            (none when every object of the class is excluded, below).
+        members: object indices, shape (M,): the map's objects of each group's class,
+            less those the session excluded (taken for moved on a stale map,
+            :meth:`app.localization.models.BearingSensorModel.exclude`).
         classes: class word per group.
         ignored: class words of dropped unknown-class detections.
     """
@@ -114,21 +117,27 @@ _Layout = tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], N
 
 
 def _class_layout(
-    semantic_map: SemanticMap, config: FilterConfig, classes: tuple[str, ...], eps: float
+    semantic_map: SemanticMap,
+    config: FilterConfig,
+    classes: tuple[str, ...],
+    eps: float,
+    excluded: tuple[int, ...] = (),
 ) -> _Layout:
     """The per-group arrays of :func:`prepare_observation` that do not depend on the
-    detections themselves, only on which classes were seen; kept with the map
-    (:meth:`SemanticMap.derived_value`), shared by every frame with the same classes
-    and config terms. Nothing writes into an observation's arrays."""
+    detections themselves, only on which classes were seen (and which objects are
+    ``excluded``, sorted); kept with the map (:meth:`SemanticMap.derived_value`), shared
+    by every frame with the same classes and config terms. Nothing writes into an
+    observation's arrays."""
 
     def make() -> _Layout:
-        kappa, floor, keep, starts, members, share = [], [], [], [0], [], []
+        kappa, floor, keep, starts, share = [], [], [], [0], []
+        members: list[int] = []
         for cls in classes:
             k, log_floor, log_keep = _class_terms(config.bearing_std_rad(cls), eps)
             kappa.append(k)
             floor.append(log_floor)
             keep.append(log_keep)
-            members.extend(semantic_map.class_members[cls].tolist())
+            members.extend(o for o in semantic_map.class_members[cls].tolist() if o not in excluded)
             starts.append(len(members))
             share.append(config.likelihood_share(cls))
         return (
@@ -143,14 +152,18 @@ def _class_layout(
     std_deg = config.bearing_std_deg
     per_class = tuple(config.class_bearing_std_deg.items())
     shares = config.likelihood_bias_deg, config.fov_deg < NARROW_CAMERA_FOV_DEG
-    key = ("observation", classes, eps, std_deg, per_class, shares)
+    key = ("observation", classes, eps, std_deg, per_class, shares, excluded)
     return semantic_map.derived_value(key, make)
 
 
 def prepare_observation(
-    detections: Sequence[Detection], semantic_map: SemanticMap, config: FilterConfig
+    detections: Sequence[Detection],
+    semantic_map: SemanticMap,
+    config: FilterConfig,
+    excluded: tuple[int, ...] = (),
 ) -> Observation:
-    """Group a frame's detections by class into an :class:`Observation`."""
+    """Group a frame's detections by class into an :class:`Observation`; the objects
+    ``excluded`` (sorted indices) explain none of them."""
     by_class: dict[str, list[Detection]] = {}
     ignored: list[str] = []
     for d in detections:
@@ -181,6 +194,7 @@ def prepare_observation(
         tuple(ignored),
         semantic_map,
         config,
+        excluded,
     )
 
 
@@ -195,11 +209,14 @@ def _assemble(
     ignored: tuple[str, ...],
     semantic_map: SemanticMap,
     config: FilterConfig,
+    excluded: tuple[int, ...] = (),
 ) -> Observation:
     """An observation from its detections' arrays and its classes: the class groups'
     arrays come from the map (:func:`_class_layout`)."""
     eps = config.floor_prob if config.clutter else 0.0
-    kappa, floor, keep, starts, members, share = _class_layout(semantic_map, config, classes, eps)
+    kappa, floor, keep, starts, members, share = _class_layout(
+        semantic_map, config, classes, eps, excluded
+    )
     return Observation(
         det_bearing=bearing,
         det_cos=cos,
@@ -248,10 +265,14 @@ def observation_columns(observations: Sequence[Observation]) -> dict[str, Any]:
 
 
 def observations_from_columns(
-    columns: Mapping[str, Any], semantic_map: SemanticMap, config: FilterConfig
+    columns: Mapping[str, Any],
+    semantic_map: SemanticMap,
+    config: FilterConfig,
+    excluded: tuple[int, ...] = (),
 ) -> list[Observation]:
     """The observations :func:`observation_columns` was given, on the map and with the
-    configuration they were made with (each array a slice of one writable copy)."""
+    configuration they were made with (each array a slice of one writable copy), the
+    objects ``excluded`` now explaining none of them."""
     bearing, cos, sin, score, group = (
         np.array(columns[f], dtype=dtype) for f, dtype in _DETECTION_FIELDS.items()
     )
@@ -275,6 +296,7 @@ def observations_from_columns(
             tuple(ignored),
             semantic_map,
             config,
+            excluded,
         )
         out.append(observation)
     return out

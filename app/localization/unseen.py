@@ -26,10 +26,14 @@ object for longer before its absence says the pose is wrong.
 
 An object can be forgiven (:meth:`UnseenObjects.forgive`): once the filter knows its
 converged place is the only one that explains what is seen (a recent global search found
-no other), an object flagged there with no detection of its class anywhere near it is
-taken for gone from the world (a map drawn before it was taken away) and flags nothing
-any more. One whose class keeps being reported near it was moved, and stays a
-contradiction: its drawn place would drag the estimate.
+no other) and knows it within a metre, an object flagged there is taken for moved or
+gone from the world since the map was drawn, and flags nothing any more. One whose class
+keeps being reported near it (a near miss) was moved (:attr:`UnseenObjects.moved`): the
+filter then also takes it out of its sensor model
+(:meth:`~app.localization.models.BearingSensorModel.exclude`), since its detections,
+weighed against its drawn place, would drag the estimate to where that place explains
+them. One with no detection of its class near it stays in the sensor model: it may be
+there after all, missed by the detector, and still tells look-alike places apart.
 
 Only frames with detections count (a blocked camera reports nothing at all, which says
 nothing about any one object). When the estimate jumps by more than ``jump_m`` the
@@ -86,7 +90,7 @@ class UnseenSettings:
     chance_miss: float = 2e-3
     #: A detection of an object's class within this angle of its bearing (but not close
     #: enough to see it) is a near miss: the object may have been moved since the map
-    #: was drawn, and then it is not forgiven (:meth:`UnseenObjects.forgive`).
+    #: was drawn (:meth:`UnseenObjects.forgive`).
     near_miss_rad: float = float(np.radians(25.0))
 
 
@@ -116,6 +120,8 @@ class UnseenObjects:
         #: Objects taken for gone from the world (a stale map, :meth:`forgive`): they
         #: flag nothing any more in this session.
         self.absent = np.zeros(semantic_map.object_count, dtype=bool)
+        #: Of those, the ones forgiven with near misses: moved, not taken away.
+        self.moved = np.zeros(semantic_map.object_count, dtype=bool)
         # The camera's view as the frame's count takes it (rad): its centre off the
         # body's forward, and the half-width in which an object is in clear view. The
         # config and settings are frozen, so each frame would compute the same two.
@@ -158,18 +164,19 @@ class UnseenObjects:
         )
 
     def forgive(self) -> int:
-        """Take the objects flagged now for gone from the world; how many there were.
+        """Take the objects flagged now for moved or gone from the world (those with near
+        misses for moved, :attr:`moved`); how many there were.
 
         For a caller that knows the estimate is right although an object in clear view
         goes unreported: the filter calls it when a global search of the last few
         seconds found no other place that explains the detections as well (in a mirror
         image of a room or a twin office there is one, and the object then stays a
-        contradiction). What is left is a map drawn before the object was taken away.
+        contradiction), with its fix known within a metre and not sliding off the
+        odometry. What is left is a map drawn before the object was moved or taken away.
         """
-        # An object whose class keeps being reported near it was moved, not taken
-        # away: its place in the map may drag the estimate, and it stays a contradiction.
-        flagged = self._flagged() & (self.near <= self.settings.max_seen_share * self.expected)
+        flagged = self._flagged()
         self.absent |= flagged
+        self.moved |= flagged & (self.near > self.settings.max_seen_share * self.expected)
         self._contradicted = None
         return int(flagged.sum())
 
@@ -237,6 +244,7 @@ class UnseenObjects:
             "reach": self.reach_m,
             "rate": self.rate_sums,
             "absent": self.absent,
+            "moved": self.moved,
             "near": self.near,
             "at": None if self._at is None else list(self._at),
         }
@@ -255,6 +263,13 @@ class UnseenObjects:
             np.zeros(self.map.object_count, dtype=bool)
             if absent is None
             else np.array(absent, dtype=bool)
+        )
+        # (checkpoints from before moved objects were forgiven hold none)
+        moved = state.get("moved")
+        self.moved = (
+            np.zeros(self.map.object_count, dtype=bool)
+            if moved is None
+            else np.array(moved, dtype=bool)
         )
         at = state["at"]
         self._at = None if at is None else (float(at[0]), float(at[1]))

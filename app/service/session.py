@@ -190,6 +190,7 @@ class Session:
                 fov_centre_deg=self.filter.config.fov_centre_deg,
                 observation=self.filter.last_observation,
                 odometry=frame.odometry,
+                gone=None if self.filter.unseen is None else self.filter.unseen.absent,
             )
             now = time.monotonic() if frame.timestamp is None else frame.timestamp
             guidance, said = self._guide(estimate, now, warnings)

@@ -235,3 +235,19 @@ def test_while_lost_it_suggests_turning_then_walking_and_says_so_every_10_s() ->
     fresh = Narrator(TWO_OFFICES)
     fb = fresh.update(lost((3, 2.5, 1.0)), [], timestamp_s=0.0, fov_deg=360.0, odometry=turn)
     assert fb.suggestion == "walk" and "Walk a few steps" in fb.text
+
+
+def test_an_object_taken_for_moved_or_gone_is_not_said() -> None:
+    """Where a stale map has an object the filter took for moved or taken away is not
+    where it is: the narrator leaves it out, even when a detection of its class points
+    its way."""
+    import numpy as np
+
+    n = Narrator(TWO_OFFICES)
+    gone = np.zeros(TWO_OFFICES.object_count, dtype=bool)
+    gone[0] = True  # the main entrance
+    fb = n.update(located(7, 2.5), [Detection("door", 0.0)], timestamp_s=0.0, gone=gone)
+    assert fb.items and all(i.label != "main entrance" and i.cls != "door" for i in fb.items)
+    assert "entrance" not in fb.text.lower()
+    plain = Narrator(TWO_OFFICES).update(located(7, 2.5), [Detection("door", 0.0)], timestamp_s=0.0)
+    assert plain.items[0].label == "main entrance"

@@ -208,3 +208,80 @@ def test_the_compiled_fit_sums_are_numpys_to_the_last_bit() -> None:
         nan = np.isnan(want)  # (a NaN's sign and payload are not compared)
         assert np.array_equal(np.isnan(got), nan), (n, got, want)
         assert np.array_equal(got[~nan].view(np.int64), want[~nan].view(np.int64)), (n, got, want)
+
+
+def _standing_at_a_stale_place(
+    moved: bool, frames: int = 40
+) -> tuple[ParticleFilter, int, list[list[Detection]]]:
+    """A person standing at a known start, a 360-degree camera reporting the objects in
+    view but one: taken away (nothing of it reported) or ``moved`` (reported
+    15 degrees off its drawn place). The filter and the object, and the frames."""
+    from app.bench import generated_map
+    from tests.localization.test_unseen import POSE, _loneliest_in_view
+
+    sm = generated_map(40, seed=2)
+    assert POSE == (10.0, 9.0)
+    x, y = 10.0, 9.0
+    dist = np.hypot(sm.object_xy[:, 0] - x, sm.object_xy[:, 1] - y)
+    in_view = np.flatnonzero(sm.visibility.row(x, y) & (dist <= 8.0) & (dist >= 0.7))
+    # The object in clear view farthest in bearing from the others of its class (a
+    # neighbour's detection in its direction would see it).
+    changed, apart = _loneliest_in_view(sm, FilterConfig())
+    assert apart > np.radians(30.0)
+    bearing = np.arctan2(sm.object_xy[:, 1] - y, sm.object_xy[:, 0] - x)
+    bearing[changed] += np.radians(15.0)
+    rng = np.random.default_rng(2)
+    seen = [i for i in in_view if moved or i != changed]
+    stream = [
+        [
+            Detection(sm.class_of(int(i)), float(bearing[i] + rng.normal(0, 0.035)), 0.9)
+            for i in seen
+        ]
+        for _ in range(frames)
+    ]
+    start = InitialPose(x, y, 0.0, 0.05, np.radians(1.0))
+    pf = ParticleFilter(
+        sm, FilterConfig(particles=3000), rng=np.random.default_rng(1), initial_pose=start
+    )
+    return pf, changed, stream
+
+
+@pytest.mark.parametrize("moved", [False, True])
+def test_an_object_moved_or_taken_away_is_forgiven_and_a_moved_one_leaves_the_sensor_model(
+    moved: bool,
+) -> None:
+    """Located within a metre and alone in explaining what is seen, the filter takes an
+    object in clear view that goes unreported for moved or gone: it no longer keeps the
+    fix from being held; a moved one (its class reported near it) explains no detection
+    any more, a gone one stays in the sensor model (it may only be missed by the
+    detector); and a restored session carries on the same."""
+    pf, changed, stream = _standing_at_a_stale_place(moved)
+    for dets in stream[:20]:
+        est = pf.step(Odometry(0.0, 0.0, 0.0), dets)
+    assert pf.unseen is not None and pf.unseen.absent[changed]
+    assert pf.unseen.absent.sum() == 1
+    excluded = (changed,) if moved else ()
+    assert pf.sensor.excluded == excluded  # type: ignore[attr-defined]
+    assert pf.unseen.moved.any() == moved
+    assert est.converged and np.hypot(est.x - 10.0, est.y - 9.0) < 0.3
+    # A checkpoint's round trip carries the exclusion, and both go on alike.
+    again = ParticleFilter(pf.map, pf.config, rng=np.random.default_rng(9), state=pf.checkpoint())
+    assert again.sensor.excluded == excluded  # type: ignore[attr-defined]
+    for dets in stream[20:]:
+        a = pf.step(Odometry(0.0, 0.0, 0.0), dets)
+        b = again.step(Odometry(0.0, 0.0, 0.0), dets)
+        assert (a.x, a.y, a.theta_rad, a.converged) == (b.x, b.y, b.theta_rad, b.converged)
+        assert a.converged
+
+
+def test_a_fix_known_to_more_than_a_metre_forgives_nothing(monkeypatch: pytest.MonkeyPatch) -> None:
+    """An object can look moved from a fix that is itself a metre off: with the fix's
+    protection radius above FORGIVE_PROTECTION_M the object stays a contradiction."""
+    from app.localization import filter as filter_module
+
+    monkeypatch.setattr(filter_module, "FORGIVE_PROTECTION_M", 0.01)
+    pf, _, stream = _standing_at_a_stale_place(moved=True)
+    held = [pf.step(Odometry(0.0, 0.0, 0.0), dets).converged for dets in stream]
+    assert pf.unseen is not None and not pf.unseen.absent.any()
+    assert pf.sensor.excluded == ()  # type: ignore[attr-defined]
+    assert any(held[:10]) and not any(held[10:])  # let go, and not gained again

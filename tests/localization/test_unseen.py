@@ -191,7 +191,7 @@ def test_a_detector_that_misses_a_third_must_miss_an_object_longer() -> None:
     assert any(_walk_past(UnseenObjects(sm, cfg), sm, 0.7, absent, 60, seed=3))
 
 
-def test_an_object_taken_away_is_forgiven_one_moved_is_not() -> None:
+def test_an_object_taken_away_or_moved_is_forgiven_and_a_moved_one_is_told_apart() -> None:
     sm = generated_map(40, seed=2)
     cfg = FilterConfig()
     (x, y), bearing = POSE, _bearings(sm)
@@ -201,7 +201,7 @@ def test_an_object_taken_away_is_forgiven_one_moved_is_not() -> None:
     taken = UnseenObjects(sm, cfg)
     flags = _walk_past(taken, sm, 1.0, gone, 20, seed=1)
     assert flags[-1] and taken.forgive() == 1
-    assert not taken.contradicted and taken.absent[gone]
+    assert not taken.contradicted and taken.absent[gone] and not taken.moved.any()
     assert not any(_walk_past(taken, sm, 1.0, gone, 20, seed=2))  # it flags no more
     # Moved: its class keeps being reported 15 degrees off its drawn place.
     moved = UnseenObjects(sm, cfg)
@@ -214,4 +214,6 @@ def test_an_object_taken_away_is_forgiven_one_moved_is_not() -> None:
         ] + [Detection(sm.class_of(gone), float(bearing[gone] + np.radians(15.0)), 0.9)]
         obs = prepare_observation(dets, sm, cfg)
         moved.update(x, y, 0.0, obs, sm.visibility.row(x, y))
-    assert moved.contradicted and moved.forgive() == 0 and moved.contradicted
+    assert moved.contradicted and moved.forgive() == 1
+    assert not moved.contradicted and moved.absent[gone] and moved.moved[gone]
+    assert moved.moved.sum() == 1
