@@ -794,10 +794,12 @@ class ParticleFilter:
             if self.unseen.contradicted and self._place_is_unique(raw):
                 # A stale map: the objects are moved or gone; the moved ones explain no
                 # detection any more.
+                moved = int(self.unseen.moved.sum())
                 self.unseen.forgive()
-                self._exclude_moved()
-                obs = self.last_observation
-                assert obs is not None
+                if self.unseen.moved.sum() > moved:
+                    self._exclude_moved()
+                    obs = self.last_observation
+                    assert obs is not None
         self.geometry.add(raw.x, raw.y, raw.theta_rad, obs, row)
         r = normalized_residuals(raw.x, raw.y, raw.theta_rad, obs, self.map, self._fit_config, row)
         if self._fit_scale != 1.0:

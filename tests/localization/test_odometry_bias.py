@@ -166,3 +166,23 @@ def test_filter_corrects_odometry_and_checkpoints_the_estimate() -> None:
         ).odometry_bias
         is None
     )
+
+
+def test_the_first_stretch_of_a_converged_run_teaches_nothing() -> None:
+    """A fix's first seconds are its least sure (it forms where it first fits, then
+    settles): the first stretch of each converged run is not measured. An estimate that
+    lags a fifth behind the odometry while it settles leaves the scale alone, and the
+    next stretch measures it."""
+    rng = np.random.default_rng(9)
+    poses = _walk(int(2.5 * SEGMENT_S / DT), rng)
+    first = int(SEGMENT_S / DT) + 1
+    settling = poses.copy()
+    # Over the first stretch the estimate covers only 80 % of the walk, then keeps pace.
+    settling[:first, :2] = poses[0, :2] + 0.8 * (poses[:first, :2] - poses[0, :2])
+    settling[first:, :2] = poses[first:, :2] - (poses[first - 1, :2] - settling[first - 1, :2])
+    bias = OdometryBias(BIAS_PRIORS["pdr"])
+    raw = _increments(poses)
+    _feed(bias, settling[: first + 1], raw[:first], rng, pos_noise=0.0)
+    assert bias.scale == 1.0
+    _feed(bias, settling[first:], raw[first:], rng, pos_noise=0.0)
+    assert bias.scale != 1.0 and bias.scale == pytest.approx(1.0, abs=0.02)
