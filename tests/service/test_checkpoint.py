@@ -29,7 +29,7 @@ from app.localization.sensor import (
     observations_from_columns,
     prepare_observation,
 )
-from app.localization.types import Detection, InitialPose, Pose
+from app.localization.types import Detection, InitialPose, Odometry, Pose
 from app.maps.check import load_map
 from app.resources import bundled_maps_dir
 from app.service import checkpoint
@@ -488,3 +488,27 @@ def test_unknown_ids_are_not_found_through_the_store() -> None:
         m.close()
 
     asyncio.run(main())
+
+
+def test_an_object_taken_for_moved_stays_out_of_a_session_restored_from_the_store() -> None:
+    """The stale-map exclusion is session state: packed into the store's bytes and
+    unpacked on another worker, the moved object is still out of the sensor model, its
+    window made without it, and the session goes on the same way."""
+    from tests.localization.test_filter import _standing_at_a_stale_place
+
+    a, changed, stream = _standing_at_a_stale_place(moved=True)
+    for dets in stream[:20]:
+        a.step(Odometry(0.0, 0.0, 0.0), dets)
+    assert a.unseen is not None and a.unseen.moved[changed]
+    data = checkpoint.pack({"format": checkpoint.FORMAT_VERSION, "filter": a.checkpoint()})
+    b = ParticleFilter(a.map, a.config, rng=np.random.default_rng(99))
+    b.restore(checkpoint.unpack(data)["filter"])
+    assert b.unseen is not None and np.array_equal(b.unseen.moved, a.unseen.moved)
+    assert b.sensor.excluded == a.sensor.excluded == (changed,)  # type: ignore[attr-defined]
+    assert b.evidence is not None and a.evidence is not None
+    assert all(changed not in obs.members.tolist() for _, obs, _ in b.evidence._history)
+    for dets in stream[20:]:
+        still = Odometry(0.0, 0.0, 0.0)
+        ea, eb = a.step(still, dets), b.step(still, dets)
+        assert math.hypot(ea.x - eb.x, ea.y - eb.y) < 1e-3
+        assert ea.converged == eb.converged
