@@ -34,7 +34,7 @@ from app.localization.dilution import warm_up as warm_up_dilution
 from app.localization.estimate import estimate_pose, with_alternatives
 from app.localization.evidence import EvidenceTracker
 from app.localization.fastmath import PAIRWISE_BLOCK, hypot, pairwise_sum
-from app.localization.floors import AltitudeReading, FloorTracker
+from app.localization.floors import LEVEL_SURE_SHARE, AltitudeReading, FloorTracker
 from app.localization.kld import kld_sample_size
 from app.localization.latency import DEFAULT_FRAME_S, CaptureClock, moved_forward
 from app.localization.models import (
@@ -533,12 +533,29 @@ class ParticleFilter:
             # called the person between floors keeps being tested by the hold rules
             # until a level does change: a poor barometer's noise calls a walking
             # person between floors for a frame or two now and then, and that fix,
-            # never moved, is as good after as before.
+            # never moved, is as good after as before. Without a barometer the same
+            # holds while the belief keeps all but ``LEVEL_SURE_SHARE`` of its weight
+            # on the fix's level: its particles that took the connector (BLIND_RATE a
+            # frame) are weighed by the view like the rest, and a person walking past
+            # the foot of the stairs sees their own floor, not the next, so the fix
+            # comes back as they step out of the stop (measured on the venue suite:
+            # every pass by a stop cost 3-5 s of "not sure" at 2-10 cm of error). A
+            # ride, or a view that cannot tell the floors apart, leaves the other
+            # level its share, and the test starts afresh as before.
             floors = self.floors
             assert floors is not None
-            if floors.blind or floors.changed or not self._gate.held:
+            blind_doubt = (
+                floors.blind and floors.share_on_level(self.x, w, raw.x) < LEVEL_SURE_SHARE
+            )
+            if blind_doubt or floors.changed or not self._gate.held:
                 self._gate.reset()
-        if self.evidence is not None and not transit:
+        if self.evidence is not None and transit:
+            # Carried along all the same, or the first frame after would find the
+            # filter's cloud walked away from the tracker's anchor and take the fix's
+            # own place for an alternative (measured: a fix held through a stop without
+            # a barometer, swapped out on the frame it stepped out).
+            self._weigh_alternatives(odometry, raw, w, ess, heading, carry_only=True)
+        elif self.evidence is not None:
             raw, w, ess = self._weigh_alternatives(odometry, raw, w, ess, heading)
             share, searched_ago = self.evidence.alternative_share, self.evidence.searched_ago
             confirmed, gain_share = self.evidence.confirmed_share, self.evidence.gain_share
@@ -629,8 +646,11 @@ class ParticleFilter:
         w: NDArray[np.float64],
         ess: float,
         heading: CompassReading | None = None,
+        carry_only: bool = False,
     ) -> tuple[Estimate, NDArray[np.float64], float]:
-        """Move and weigh the alternatives; swap the strongest in if the evidence says so."""
+        """Move and weigh the alternatives; swap the strongest in if the evidence says so.
+        With ``carry_only`` (between floors) they are only moved: no weighing, no search,
+        no swap."""
         assert self.evidence is not None and self.last_observation is not None
         top = raw.hypotheses[0] if raw.hypotheses else None
         tight = top is not None and top.std_xy_m <= SEARCH_MAX_SPREAD_M
@@ -640,14 +660,16 @@ class ParticleFilter:
         # Nor during a blind hold (see _step): a place that happens to explain a false
         # box is no likelier for it.
         fits = (
-            q is not None
+            not carry_only
+            and q is not None
             and q.fit <= self._gate.hold_fit
             and q.unexplained <= self._gate.hold_unexplained
             and not self._blind_hold
         )
         particles = (self.x, self.y, self.theta, w)
         obs = self.last_observation
-        if not self.evidence.update(odometry, obs, top, tight, particles, heading, fits):
+        swap = self.evidence.update(odometry, obs, top, tight, particles, heading, fits)
+        if carry_only or not swap:
             return raw, w, ess
         self.x, self.y, self.theta = self.evidence.swap(self.n)
         self.log_w = np.zeros(self.n)

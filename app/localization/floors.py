@@ -431,6 +431,14 @@ class FloorTracker:
         on = np.flatnonzero(self._storey == self._start_storey + self.net_storeys)
         return int(on[0]) if on.size == 1 else None
 
+    def share_on_level(
+        self, x: NDArray[np.float64], w: NDArray[np.float64], estimate_x: float
+    ) -> float:
+        """The share of the (normalized) weights ``w`` on the level of plane x
+        ``estimate_x``."""
+        mine = int(self.layout.level_of_plane_x(np.array(estimate_x)))
+        return float(np.sum(w[self.layout.level_of_plane_x(x) == mine]))
+
     def after_estimate(
         self, x: NDArray[np.float64], w: NDArray[np.float64], estimate_x: float, converged: bool
     ) -> None:
@@ -446,9 +454,8 @@ class FloorTracker:
         person in the lift car). Without a fix since the chain began (a global start not
         yet located, a frame without altitude) nothing is counted, and a look-alike
         floor the belief merely drifted to is never confirmed this way."""
-        level = self.layout.level_of_plane_x(x)
+        self.level_probability = self.share_on_level(x, w, estimate_x)
         mine = int(self.layout.level_of_plane_x(np.array(estimate_x)))
-        self.level_probability = float(np.sum(w[level == mine]))
         counted = (
             not converged
             and not self.blind

@@ -404,3 +404,45 @@ def test_without_a_fix_only_a_ride_that_leaves_one_floor_possible_counts() -> No
     feed(tracker, x + PITCH, y, list(np.linspace(4.5, 9.0, 25)) + [9.0] * 10)
     assert tracker.net_storeys == 2 and tracker.counted_level() == 2
     assert _agree(tracker, 2, LEVEL_SURE_FRAMES)[-1] and tracker.confirmed_level == 2
+
+
+def _pass_the_escalators_foot(seen_in_stop: bool) -> tuple[list[bool], list[bool]]:
+    """Located without a barometer, walk north through the escalator's stop on the Ground
+    Floor and out of it (0.2 m a frame), seeing the Ground Floor all the way, or nothing
+    while in the stop; per frame whether converged and whether in the stop."""
+    camera = CameraModel(360.0, 15.0)
+    start = InitialPose(12.5, 2.6, np.pi / 2, 0.1, 0.05)
+    pf = ParticleFilter(
+        VENUE, FilterConfig(particles=2000), rng=np.random.default_rng(3), initial_pose=start
+    )
+    assert pf.floors is not None
+    converged, in_stop = [], []
+    for k in range(40):
+        y = 2.6 + 0.2 * max(k - 15, 0)  # 15 frames standing, then walking
+        pose = Pose(12.5, y, np.pi / 2)
+        stop = pf.floors.in_stop(pose.x, pose.y)
+        idx, bearing = visible_objects(VENUE, pose, camera)
+        seen = [
+            Detection(VENUE.class_of(int(j)), float(b), 1.0)
+            for j, b in zip(idx, bearing, strict=True)
+        ]
+        walk = Odometry(0.2 if k > 15 else 0.0, 0.0, 0.0)
+        est = pf.step(walk, seen if seen_in_stop or not stop else [])
+        converged.append(est.converged)
+        in_stop.append(stop)
+    return converged, in_stop
+
+
+def test_without_a_barometer_a_fix_walking_past_a_stop_comes_back_as_it_leaves_it() -> None:
+    # Seeing their own floor through the stop, the particles that took the escalator lose
+    # their weight; the fix held before it is withheld in the stop (it could be a ride) and
+    # given back on the first frame out (before, the test started afresh: 5 frames more).
+    converged, in_stop = _pass_the_escalators_foot(seen_in_stop=True)
+    first = in_stop.index(True)
+    out = first + in_stop[first:].index(False)
+    assert converged[first - 1]
+    assert not any(converged[first:out])
+    assert converged[out]
+    # Seeing nothing there, the belief cannot tell the floors apart: not given back at once.
+    converged, in_stop = _pass_the_escalators_foot(seen_in_stop=False)
+    assert converged[first - 1] and not converged[out]
