@@ -409,7 +409,8 @@ def test_without_a_fix_only_a_ride_that_leaves_one_floor_possible_counts() -> No
 def _pass_the_escalators_foot(seen_in_stop: bool) -> tuple[list[bool], list[bool]]:
     """Located without a barometer, walk north through the escalator's stop on the Ground
     Floor and out of it (0.2 m a frame), seeing the Ground Floor all the way, or nothing
-    while in the stop; per frame whether converged and whether in the stop."""
+    while in the stop; per frame whether converged and whether the estimate (what the
+    rule looks at) stood in the stop."""
     camera = CameraModel(360.0, 15.0)
     start = InitialPose(12.5, 2.6, np.pi / 2, 0.1, 0.05)
     pf = ParticleFilter(
@@ -429,7 +430,7 @@ def _pass_the_escalators_foot(seen_in_stop: bool) -> tuple[list[bool], list[bool
         walk = Odometry(0.2 if k > 15 else 0.0, 0.0, 0.0)
         est = pf.step(walk, seen if seen_in_stop or not stop else [])
         converged.append(est.converged)
-        in_stop.append(stop)
+        in_stop.append(pf.floors.in_stop(est.x, est.y))
     return converged, in_stop
 
 
@@ -445,4 +446,6 @@ def test_without_a_barometer_a_fix_walking_past_a_stop_comes_back_as_it_leaves_i
     assert converged[out]
     # Seeing nothing there, the belief cannot tell the floors apart: not given back at once.
     converged, in_stop = _pass_the_escalators_foot(seen_in_stop=False)
+    first = in_stop.index(True)
+    out = first + in_stop[first:].index(False)
     assert converged[first - 1] and not converged[out]
