@@ -419,6 +419,7 @@ class EvidenceTracker:
         particles: tuple[NDArray[np.float64], ...],
         heading: CompassReading | None = None,
         search_ok: bool = True,
+        gain_waits: bool = False,
     ) -> bool:
         """Move and weigh the alternatives, search when due; True if a swap is due.
 
@@ -433,6 +434,9 @@ class EvidenceTracker:
             search_ok: whether a global search may run now (the filter says no while
                 its estimate does not explain the detections: converged could not be
                 gained or held anyway, and the search would be wasted).
+            gain_waits: whether a gain of ``converged`` waits for a search (the gate
+                gains only after one during its run of steady frames): searches then
+                come every ``search_every`` frames, not at the lengthened interval.
         """
         # Frames without detections are kept too: their odometry chains the window.
         self._history.append((odometry, obs, heading))
@@ -482,7 +486,8 @@ class EvidenceTracker:
             and search_ok
             and self._anchor is not None
             and not obs.empty
-            and self._since_search >= self.search_interval
+            and self._since_search
+            >= (self.settings.search_every if gain_waits else self.search_interval)
             and len(self._history) >= self.settings.min_history
         ):
             if not self.count:

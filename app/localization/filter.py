@@ -216,6 +216,7 @@ class ParticleFilter:
         self._wide_first = initial_pose is None and self.floors is not None
         self._recovery.reset()
         self._gate.reset()
+        self._after_ride = False
         if self.evidence is not None:
             self.evidence.reset()
             self.evidence.set_prior(initial_pose)
@@ -240,6 +241,9 @@ class ParticleFilter:
         self.steps = 0
         #: Whether the convergence gate held a fix when the last ride between levels began.
         self._located_at_ride = False
+        #: Since a ride that began located and until the next fix: a gain waiting for the
+        #: evidence search asks for it at once (see _weigh_alternatives).
+        self._after_ride = False
         self.estimate: Estimate = estimate_pose(self.x, self.y, self.theta, self.weights)
 
     @functools.cached_property
@@ -285,6 +289,7 @@ class ParticleFilter:
         self._recovery.reset()
         self._gate.reset()
         self._blind_hold = False
+        self._after_ride = False
         self.geometry.reset()
         self.odometry_check.reset()
         if self.evidence is not None:
@@ -524,6 +529,7 @@ class ParticleFilter:
             self.evidence.set_prior(
                 InitialPose(raw.x, raw.y, raw.theta_rad, RIDE_START_STD_M, RIDE_START_STD_RAD)
             )
+            self._after_ride = True
         share, confirmed, gain_share = 0.0, 0.0, 0.0
         searched_ago: int | None = 0
         transit = self.floors is not None and self.floors.between_floors(raw.x, raw.y)
@@ -585,6 +591,8 @@ class ParticleFilter:
         )
         if est.converged and transit:
             est = est.with_converged(False)
+        if est.converged:
+            self._after_ride = False
         # Where a held fix has nothing in clear view (a lift car, a bare wall ahead of a
         # narrow camera), every detection is clutter wherever the person stands, yet
         # weighing them lets the few particles elsewhere that one happens to fit outweigh
@@ -668,7 +676,21 @@ class ParticleFilter:
         )
         particles = (self.x, self.y, self.theta, w)
         obs = self.last_observation
-        swap = self.evidence.update(odometry, obs, top, tight, particles, heading, fits)
+        # After a ride, a run of steady frames long enough to gain with no search since
+        # it began asks for the search it waits for (ConvergenceGate.confirm) at the base
+        # interval, not the lengthened one of searches that found nothing: that was up to
+        # 4 s more of "not sure" at a fix the ride's known start had already placed
+        # (venue suite, 66 deg cameras). Only then: elsewhere the wait is a stale map's
+        # margin (the same rule everywhere gained fixes a metre off where a moved object
+        # fits: phone suite 87 -> 105 confidently-wrong frames).
+        gate, ago = self._gate, self.evidence.searched_ago
+        gain_waits = (
+            self._after_ride
+            and not gate.held
+            and gate.streak >= gate.frames - 1
+            and (ago is None or ago >= gate.streak)
+        )
+        swap = self.evidence.update(odometry, obs, top, tight, particles, heading, fits, gain_waits)
         if carry_only or not swap:
             return raw, w, ess
         self.x, self.y, self.theta = self.evidence.swap(self.n)
@@ -738,6 +760,7 @@ class ParticleFilter:
         if self.floors is not None:  # maps with several levels only
             state["floors"] = self.floors.checkpoint()
             state["located_at_ride"] = self._located_at_ride
+            state["after_ride"] = self._after_ride
             state["wide_first"] = self._wide_first
         return state
 
@@ -770,6 +793,7 @@ class ParticleFilter:
         if self.floors is not None and state.get("floors") is not None:
             self.floors.restore(state["floors"])
         self._located_at_ride = bool(state.get("located_at_ride", False))
+        self._after_ride = bool(state.get("after_ride", False))
         self.frames_without_evidence = int(state["frames_without_evidence"])
         self.restarts = int(state["restarts"])
         self.steps = int(state["steps"])

@@ -339,3 +339,39 @@ def test_a_long_tracked_look_alike_counts_at_half_its_evidence_for_a_gain(
     want = [np.exp(st.rival_weight * w * -9.0), np.exp(st.rival_weight * w * -30.0)]
     assert tracker.gain_share == pytest.approx(sum(want) / (1.0 + sum(want)), rel=1e-12)
     assert tracker.alternative_share < 0.01 < tracker.gain_share
+
+
+def test_a_gain_waiting_for_a_search_gets_it_at_the_base_interval(
+    paper_office: SemanticMap,
+) -> None:
+    """A walk with no look-alike searches every 5 s once its searches keep finding none;
+    told that a gain waits for a search (the filter does so after a ride), the tracker
+    searches again within ``search_every`` frames."""
+    import copy
+
+    sim = replace(paper_config("nominal", 360.0), duration_s=60.0)
+    frames = simulate(paper_office, sim, np.random.default_rng(11))
+    pf = ParticleFilter(paper_office, FilterConfig(), rng=np.random.default_rng(12))
+    assert pf.evidence is not None
+    quiet, base = pf.evidence.settings.max_search_every, pf.evidence.settings.search_every
+    i = 0
+    for i, f in enumerate(frames):
+        est = pf.step(f.odometry, f.detections)
+        if i > 50 and est.converged and pf.evidence.searched_ago == 0:
+            break
+    assert pf.evidence.search_interval == quiet  # the walk's searches found nothing
+
+    def searched_within(gain_waits: bool) -> bool:
+        tracker = copy.deepcopy(pf.evidence)
+        assert tracker is not None
+        main = pf.estimate.hypotheses[0]
+        particles = (pf.x, pf.y, pf.theta, pf.weights)
+        for f in frames[i + 1 : i + 1 + base]:
+            obs = pf.sensor.observe(f.detections)
+            tracker.update(f.odometry, obs, main, True, particles, None, True, gain_waits)
+            if tracker.searched_ago == 0:
+                return True
+        return False
+
+    assert searched_within(gain_waits=True)
+    assert not searched_within(gain_waits=False)

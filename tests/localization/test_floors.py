@@ -449,3 +449,38 @@ def test_without_a_barometer_a_fix_walking_past_a_stop_comes_back_as_it_leaves_i
     first = in_stop.index(True)
     out = first + in_stop[first:].index(False)
     assert converged[first - 1] and not converged[out]
+
+
+def test_a_ride_begun_located_asks_for_the_search_a_gain_waits_for_until_the_next_fix() -> None:
+    # Located at the stairs' foot on the Ground Floor, up the stairs by the barometer, then
+    # the First Floor's view from the stairs' head: until the fix there, the filter asks
+    # the evidence search to come at its base interval (kept in its checkpoint).
+    camera = CameraModel(360.0, 15.0)
+
+    def seen_from(pose: Pose) -> list[Detection]:
+        idx, bearing = visible_objects(VENUE, pose, camera)
+        return [
+            Detection(VENUE.class_of(int(j)), float(b), 1.0)
+            for j, b in zip(idx, bearing, strict=True)
+        ]
+
+    ground, first = Pose(22.0, 2.0, 0.0), Pose(22.0 + PITCH, 2.0, 0.0)
+    start = InitialPose(ground.x, ground.y, ground.theta_rad, 0.3, 0.1)
+    pf = ParticleFilter(
+        VENUE, FilterConfig(particles=2000), rng=np.random.default_rng(0), initial_pose=start
+    )
+    assert pf.floors is not None
+    for _ in range(30):
+        assert not pf.checkpoint()["after_ride"]
+        est = pf.step(Odometry(), seen_from(ground), altitude=AltitudeReading(100.0, 0.3))
+    assert est.converged
+    after: list[bool] = []
+    gained = None
+    for k, r in enumerate(list(np.linspace(100.0, 104.5, 20)) + [104.5] * 40):
+        pose = ground if pf.floors.changes == 0 else first
+        est = pf.step(Odometry(), seen_from(pose), altitude=AltitudeReading(float(r), 0.3))
+        after.append(bool(pf.checkpoint()["after_ride"]))
+        if pf.floors.changes and est.converged and gained is None:
+            gained = k
+    assert pf.floors.changes == 1 and gained is not None
+    assert any(after[:gained]) and not any(after[gained:])
