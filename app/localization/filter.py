@@ -533,6 +533,7 @@ class ParticleFilter:
         share, confirmed, gain_share = 0.0, 0.0, 0.0
         searched_ago: int | None = 0
         transit = self.floors is not None and self.floors.between_floors(raw.x, raw.y)
+        kept = False
         if transit:
             # Between floors nobody is located (converged is withheld below), and the
             # convergence test starts afresh, except that a fix held as the barometer
@@ -555,6 +556,11 @@ class ParticleFilter:
             )
             if blind_doubt or floors.changed or not self._gate.held:
                 self._gate.reset()
+            # Without a barometer such a fix is even kept converged in the stop, as long
+            # as the view keeps the belief on its floor: a ride shows a lift car (the
+            # same on every floor) or stairs leading away from it, and leaves the floors
+            # the connector reaches their share within a frame or two.
+            kept = floors.blind and not floors.in_transit and self._gate.held
         if self.evidence is not None and transit:
             # Carried along all the same, or the first frame after would find the
             # filter's cloud walked away from the tracker's anchor and take the fix's
@@ -589,7 +595,7 @@ class ParticleFilter:
             slide_m=slide_m,
             gain_alternatives=gain_share,
         )
-        if est.converged and transit:
+        if est.converged and transit and not kept:
             est = est.with_converged(False)
         if est.converged:
             self._after_ride = False

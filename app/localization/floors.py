@@ -49,7 +49,9 @@ up or down is confirmed, and announced, once the belief agrees
 
 Without altitude, a particle in a stop moves to a level its connector reaches with a
 small probability per frame (``BLIND_RATE``), and what is seen on each level decides;
-an estimate inside a stop is then between floors too (nothing tells the floor there).
+an estimate inside a stop is then between floors too (nothing tells the floor there),
+though the filter keeps a fix it held on entering while the view keeps the belief on
+its floor (``share_on_level``, see ``ParticleFilter._step``).
 """
 
 from __future__ import annotations

@@ -434,21 +434,20 @@ def _pass_the_escalators_foot(seen_in_stop: bool) -> tuple[list[bool], list[bool
     return converged, in_stop
 
 
-def test_without_a_barometer_a_fix_walking_past_a_stop_comes_back_as_it_leaves_it() -> None:
+def test_without_a_barometer_a_fix_walking_past_a_stop_stays_while_it_sees_its_floor() -> None:
     # Seeing their own floor through the stop, the particles that took the escalator lose
-    # their weight; the fix held before it is withheld in the stop (it could be a ride) and
-    # given back on the first frame out (before, the test started afresh: 5 frames more).
+    # their weight: the fix held before it stays converged all the way through (before,
+    # it was withheld in the stop and gained afresh after it: 5 frames more).
     converged, in_stop = _pass_the_escalators_foot(seen_in_stop=True)
     first = in_stop.index(True)
     out = first + in_stop[first:].index(False)
-    assert converged[first - 1]
-    assert not any(converged[first:out])
-    assert converged[out]
-    # Seeing nothing there, the belief cannot tell the floors apart: not given back at once.
+    assert all(converged[first - 1 : out + 1])
+    # Seeing nothing there, the belief cannot tell the floors apart (a lift car, a ride):
+    # let go in the stop, and not given back at once after it.
     converged, in_stop = _pass_the_escalators_foot(seen_in_stop=False)
     first = in_stop.index(True)
     out = first + in_stop[first:].index(False)
-    assert converged[first - 1] and not converged[out]
+    assert converged[first - 1] and not all(converged[first:out]) and not converged[out]
 
 
 def test_a_ride_begun_located_asks_for_the_search_a_gain_waits_for_until_the_next_fix() -> None:
