@@ -483,3 +483,23 @@ def test_a_ride_begun_located_asks_for_the_search_a_gain_waits_for_until_the_nex
             gained = k
     assert pf.floors.changes == 1 and gained is not None
     assert any(after[:gained]) and not any(after[gained:])
+
+
+def test_a_rise_at_a_lifts_rate_makes_the_stairs_less_likely_than_the_lift() -> None:
+    # A cloud not yet located, half in the lift car and half at the stairs' foot on the
+    # Ground Floor: the barometer rises a storey at a lift's 1 m/s, or a climber's 0.3 m/s.
+    # Every particle changes level either way; at a lift's rate the ones that took the
+    # stairs weigh WALKED_AT_LIFT_RATE of the lift's.
+    from app.localization.floors import WALKED_AT_LIFT_RATE
+
+    for per_frame, stairs_ratio in [(0.2, WALKED_AT_LIFT_RATE), (0.06, 1.0)]:
+        tracker = FloorTracker(VENUE)
+        lx, ly = particles(1.5, 1.5, 0, 100)
+        sx, sy = particles(22.0, 2.0, 0, 100)
+        x, y = np.concatenate([lx, sx]), np.concatenate([ly, sy])
+        climb = list(100.0 + per_frame * np.arange(1, int(4.5 / per_frame) + 1))
+        x, log_w, contradicted = feed(tracker, x, y, [100.0] * 10 + climb + [104.5] * 10)
+        assert tracker.changes == 1 and not contradicted
+        assert np.all(x > PITCH / 2)  # all on the First Floor
+        w = np.exp(log_w - log_w.max())
+        assert w[100:].mean() / w[:100].mean() == pytest.approx(stairs_ratio)
