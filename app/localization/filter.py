@@ -242,7 +242,7 @@ class ParticleFilter:
         #: Whether the convergence gate held a fix when the last ride between levels began.
         self._located_at_ride = False
         #: Since a ride that began located and until the next fix: a gain waiting for the
-        #: evidence search asks for it at once (see _weigh_alternatives).
+        #: evidence search asks for it at the base interval (see _weigh_alternatives).
         self._after_ride = False
         self.estimate: Estimate = estimate_pose(self.x, self.y, self.theta, self.weights)
 
@@ -544,11 +544,10 @@ class ParticleFilter:
             # holds while the belief keeps all but ``LEVEL_SURE_SHARE`` of its weight
             # on the fix's level: its particles that took the connector (BLIND_RATE a
             # frame) are weighed by the view like the rest, and a person walking past
-            # the foot of the stairs sees their own floor, not the next, so the fix
-            # comes back as they step out of the stop (measured on the venue suite:
-            # every pass by a stop cost 3-5 s of "not sure" at 2-10 cm of error). A
-            # ride, or a view that cannot tell the floors apart, leaves the other
-            # level its share, and the test starts afresh as before.
+            # the foot of the stairs sees their own floor, not the next (measured on
+            # the venue suite: every pass by a stop cost 3-5 s of "not sure" at 2-10 cm
+            # of error). A ride, or a view that cannot tell the floors apart, leaves
+            # the other level its share, and the test starts afresh as before.
             floors = self.floors
             assert floors is not None
             blind_doubt = (
