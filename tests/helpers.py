@@ -21,11 +21,13 @@ import httpx
 from fastapi import FastAPI
 
 from app.config import Settings
+from app.localization.types import Detection, Pose
 from app.maps.check import load_map
 from app.maps.model import SemanticMap, parse_map
 from app.maps.prepare import ensure_prepared
 from app.resources import bundled_maps_dir
 from app.server import BearingsServer, uvicorn_config
+from app.simulation.camera import CameraModel, visible_objects
 
 
 # ---------------------------------------------------------------------------- maps
@@ -40,6 +42,13 @@ def room(objects: list[dict], walls: list[dict] | None = None, name: str = "room
     return ensure_prepared(
         parse_map({"name": name, "walls": outline + (walls or []), "objects": objects})
     )
+
+
+def seen_from(m: SemanticMap, pose: Pose, camera: CameraModel | None = None) -> list[Detection]:
+    """What ``camera`` (default: 360 degrees, 15 m) sees from plane pose ``pose`` on
+    ``m``: every visible object at its exact bearing, score 1."""
+    idx, bearing = visible_objects(m, pose, camera or CameraModel(360.0, 15.0))
+    return [Detection(m.class_of(int(j)), float(b), 1.0) for j, b in zip(idx, bearing, strict=True)]
 
 
 def paper_office() -> SemanticMap:

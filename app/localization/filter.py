@@ -550,16 +550,16 @@ class ParticleFilter:
             # the other level its share, and the test starts afresh as before.
             floors = self.floors
             assert floors is not None
-            blind_doubt = (
-                floors.blind and floors.share_on_level(self.x, w, raw.x) < LEVEL_SURE_SHARE
-            )
-            if blind_doubt or floors.changed or not self._gate.held:
+            held = self._gate.held and not floors.changed
+            if held and floors.blind:
+                held = floors.share_on_level(self.x, w, raw.x) >= LEVEL_SURE_SHARE
+            if not held:
                 self._gate.reset()
             # Without a barometer such a fix is even kept converged in the stop, as long
             # as the view keeps the belief on its floor: a ride shows a lift car (the
             # same on every floor) or stairs leading away from it, and leaves the floors
             # the connector reaches their share within a frame or two.
-            kept = floors.blind and not floors.in_transit and self._gate.held
+            kept = held and floors.blind
         if self.evidence is not None and transit:
             # Carried along all the same, or the first frame after would find the
             # filter's cloud walked away from the tracker's anchor and take the fix's

@@ -3,6 +3,7 @@ protection radius holds the truth, kidnaps are noticed."""
 
 from __future__ import annotations
 
+import copy
 from dataclasses import replace
 
 import numpy as np
@@ -347,8 +348,6 @@ def test_a_gain_waiting_for_a_search_gets_it_at_the_base_interval(
     """A walk with no look-alike searches every 5 s once its searches keep finding none;
     told that a gain waits for a search (the filter does so after a ride), the tracker
     searches again within ``search_every`` frames."""
-    import copy
-
     sim = replace(paper_config("nominal", 360.0), duration_s=60.0)
     frames = simulate(paper_office, sim, np.random.default_rng(11))
     pf = ParticleFilter(paper_office, FilterConfig(), rng=np.random.default_rng(12))

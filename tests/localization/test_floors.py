@@ -14,12 +14,13 @@ from app.localization.floors import (
     AltitudeReading,
     FloorTracker,
 )
-from app.localization.types import Detection, InitialPose, Odometry, Pose
+from app.localization.types import InitialPose, Odometry, Pose
 from app.maps.model import SemanticMap
-from app.simulation.camera import CameraModel, visible_objects
+from app.service import checkpoint
 from app.simulation.simulator import SimulationConfig
 from app.simulation.venue import venue_legs, venue_map
 from app.simulation.venue_walk import Barometer, Ride, Walk, simulate_venue
+from tests.helpers import seen_from
 
 VENUE = venue_map()
 PITCH = VENUE.layout.pitch_m
@@ -219,10 +220,7 @@ def test_a_fix_called_between_floors_by_the_barometers_noise_is_kept() -> None:
     # (nobody located) while they last, located again at once after, as no level
     # changed. Before, the fix had to be gained again from scratch (5 frames or more).
     pose = Pose(22.0, 2.0, 0.0)
-    idx, bearing = visible_objects(VENUE, pose, CameraModel(360.0, 15.0))
-    seen = [
-        Detection(VENUE.class_of(int(j)), float(b), 1.0) for j, b in zip(idx, bearing, strict=True)
-    ]
+    seen = seen_from(VENUE, pose)
     start = InitialPose(pose.x, pose.y, pose.theta_rad, 0.3, 0.1)
     pf = ParticleFilter(
         VENUE, FilterConfig(particles=2000), rng=np.random.default_rng(0), initial_pose=start
@@ -411,7 +409,6 @@ def _pass_the_escalators_foot(seen_in_stop: bool) -> tuple[list[bool], list[bool
     Floor and out of it (0.2 m a frame), seeing the Ground Floor all the way, or nothing
     while in the stop; per frame whether converged and whether the estimate (what the
     rule looks at) stood in the stop."""
-    camera = CameraModel(360.0, 15.0)
     start = InitialPose(12.5, 2.6, np.pi / 2, 0.1, 0.05)
     pf = ParticleFilter(
         VENUE, FilterConfig(particles=2000), rng=np.random.default_rng(3), initial_pose=start
@@ -422,13 +419,8 @@ def _pass_the_escalators_foot(seen_in_stop: bool) -> tuple[list[bool], list[bool
         y = 2.6 + 0.2 * max(k - 15, 0)  # 15 frames standing, then walking
         pose = Pose(12.5, y, np.pi / 2)
         stop = pf.floors.in_stop(pose.x, pose.y)
-        idx, bearing = visible_objects(VENUE, pose, camera)
-        seen = [
-            Detection(VENUE.class_of(int(j)), float(b), 1.0)
-            for j, b in zip(idx, bearing, strict=True)
-        ]
         walk = Odometry(0.2 if k > 15 else 0.0, 0.0, 0.0)
-        est = pf.step(walk, seen if seen_in_stop or not stop else [])
+        est = pf.step(walk, seen_from(VENUE, pose) if seen_in_stop or not stop else [])
         converged.append(est.converged)
         in_stop.append(pf.floors.in_stop(est.x, est.y))
     return converged, in_stop
@@ -453,16 +445,10 @@ def test_without_a_barometer_a_fix_walking_past_a_stop_stays_while_it_sees_its_f
 def test_a_ride_begun_located_asks_for_the_search_a_gain_waits_for_until_the_next_fix() -> None:
     # Located at the stairs' foot on the Ground Floor, up the stairs by the barometer, then
     # the First Floor's view from the stairs' head: until the fix there, the filter asks
-    # the evidence search to come at its base interval (kept in its checkpoint).
-    camera = CameraModel(360.0, 15.0)
-
-    def seen_from(pose: Pose) -> list[Detection]:
-        idx, bearing = visible_objects(VENUE, pose, camera)
-        return [
-            Detection(VENUE.class_of(int(j)), float(b), 1.0)
-            for j, b in zip(idx, bearing, strict=True)
-        ]
-
+    # the evidence search to come at its base interval. That is session state: restored
+    # from the store's bytes into a new filter as it is set, the new filter takes the very
+    # steps the first one takes from the same bytes (whatever a checkpoint left out, the
+    # first would still have and the new one not).
     ground, first = Pose(22.0, 2.0, 0.0), Pose(22.0 + PITCH, 2.0, 0.0)
     start = InitialPose(ground.x, ground.y, ground.theta_rad, 0.3, 0.1)
     pf = ParticleFilter(
@@ -471,17 +457,30 @@ def test_a_ride_begun_located_asks_for_the_search_a_gain_waits_for_until_the_nex
     assert pf.floors is not None
     for _ in range(30):
         assert not pf.checkpoint()["after_ride"]
-        est = pf.step(Odometry(), seen_from(ground), altitude=AltitudeReading(100.0, 0.3))
+        est = pf.step(Odometry(), seen_from(VENUE, ground), altitude=AltitudeReading(100.0, 0.3))
     assert est.converged
     after: list[bool] = []
     gained = None
+    restored: ParticleFilter | None = None
     for k, r in enumerate(list(np.linspace(100.0, 104.5, 20)) + [104.5] * 40):
-        pose = ground if pf.floors.changes == 0 else first
-        est = pf.step(Odometry(), seen_from(pose), altitude=AltitudeReading(float(r), 0.3))
-        after.append(bool(pf.checkpoint()["after_ride"]))
+        seen = seen_from(VENUE, ground if pf.floors.changes == 0 else first)
+        reading = AltitudeReading(float(r), 0.3)
+        est = pf.step(Odometry(), seen, altitude=reading)
+        if restored is not None:
+            again = restored.step(Odometry(), seen, altitude=reading)
+            assert (again.x, again.y, again.converged) == (est.x, est.y, est.converged)
+            restored.checkpoint()  # (a checkpoint rounds the filter's own state too)
+        state = pf.checkpoint()
+        after.append(bool(state["after_ride"]))
+        if after[-1] and restored is None:
+            data = checkpoint.pack({"format": checkpoint.FORMAT_VERSION, "filter": state})
+            restored = ParticleFilter(VENUE, pf.config, rng=np.random.default_rng(99))
+            restored.restore(checkpoint.unpack(data)["filter"])
+            pf.restore(checkpoint.unpack(data)["filter"])  # the same rounding for both
+            assert restored.checkpoint()["after_ride"]
         if pf.floors.changes and est.converged and gained is None:
             gained = k
-    assert pf.floors.changes == 1 and gained is not None
+    assert pf.floors.changes == 1 and gained is not None and restored is not None
     assert any(after[:gained]) and not any(after[gained:])
 
 

@@ -11,18 +11,15 @@ from app.localization.config import FilterConfig
 from app.localization.filter import ParticleFilter
 from app.localization.types import Detection, InitialPose, Odometry, Pose
 from app.maps.model import SemanticMap
-from app.simulation.camera import CameraModel, visible_objects
 from app.simulation.venue import venue_map
+from tests import helpers
 
 VENUE = venue_map()
 
 
 def seen_from(pose: Pose) -> list[Detection]:
     """What a 360-degree camera sees from plane pose ``pose``, exact bearings."""
-    idx, bearing = visible_objects(VENUE, pose, CameraModel(360.0, 15.0))
-    return [
-        Detection(VENUE.class_of(int(j)), float(b), 1.0) for j, b in zip(idx, bearing, strict=True)
-    ]
+    return helpers.seen_from(VENUE, pose)
 
 
 def weight_near(pf: ParticleFilter, pose: Pose, radius_m: float = 1.0) -> float:
