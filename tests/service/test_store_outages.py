@@ -17,15 +17,21 @@ import dataclasses
 from collections.abc import Callable
 from pathlib import Path
 
+import numpy as np
 import pytest
 import redis
 
 from app.service.backlog import STATE_NOT_PERSISTED
 from app.service.errors import SessionNotFound
+from app.service.metrics import Metrics
 from app.service.sessions import SessionManager
 from app.service.store.redis_store import RedisStore
 from app.service.store.scripts import base_key
-from app.service.types import FrameOutcome
+from app.service.types import FrameInput, FrameOutcome, SessionSpec
+from app.simulation.simulator import SimulationConfig
+from app.simulation.venue import VENUE_NAME, venue_legs, venue_map
+from app.simulation.venue_walk import simulate_venue
+from tests.helpers import make_settings
 from tests.service.redis_process import RedisProcess, redis_process
 from tests.service.test_checkpoint import SPEC, frame, manager
 
@@ -280,4 +286,94 @@ def test_a_session_deleted_while_redis_is_down_stays_deleted(tmp_path: Path) -> 
             m.close()
 
     with redis_process(tmp_path, aof=True) as r:
+        asyncio.run(main(r))
+
+
+def test_a_venue_session_rides_the_lift_through_an_outage_and_is_resumed_on_its_floor(
+    tmp_path: Path,
+) -> None:
+    """On a venue of several floors, Redis dies (kill -9) just before a lift ride and
+    comes back empty after it: every frame of the ride is answered from memory, the
+    level changes on the way as the barometer says, the session is stored again with
+    its new level, and when the worker then dies another resumes it on the floor the
+    person is on (docs/API.md, "Venues with several floors" and "When the store fails")."""
+    venue = venue_map()
+    start, legs = venue_legs()
+    cfg = SimulationConfig(path=((0.0, 0.0),), miss_prob=0.1)
+    walk = simulate_venue(venue, start, legs[:3], cfg, np.random.default_rng(7))
+    ride = [i for i, vf in enumerate(walk) if vf.riding]
+    kill_at, back_at = ride[0] - 10, ride[-1] + 5
+    level_ids = [lv.id for lv in venue.layout.levels]
+
+    def venue_frame(i: int) -> FrameInput:
+        f = walk[i].frame
+        return FrameInput(
+            timestamp=f.t,
+            odometry=f.odometry,
+            detections=tuple(f.detections),
+            altitude=walk[i].altitude,
+        )
+
+    def worker(r: RedisProcess) -> SessionManager:
+        settings = make_settings(store_lease_s=0.3, checkpoint_interval_s=0.2)
+        return SessionManager({VENUE_NAME: venue}, settings, Metrics(), RedisStore(r.url))
+
+    async def main(r: RedisProcess) -> None:
+        a = worker(r)
+        assert a.sharing is not None
+        keeper = asyncio.create_task(a.sharing.run_keeper())
+        ids = [(await a.create(SessionSpec(VENUE_NAME, particles=2000, seed=k))).id for k in (1, 2)]
+
+        async def step(i: int) -> list[FrameOutcome]:
+            outs = [await a.process(sid, venue_frame(i)) for sid in ids]
+            await asyncio.sleep(0.005)
+            return outs
+
+        before = [o for i in range(kill_at) for o in await step(i)]
+        assert not_persisted(before) == 0
+        assert all(o.level is not None and o.level.id == "L0" for o in before[-2:])
+        r.kill()
+        during = [o for i in range(kill_at, back_at) for o in await step(i)]
+        assert not_persisted(during) == len(during)  # answered all the same, from memory
+        assert {o.level.id for o in during if o.level is not None} >= {"L0", "L2"}
+        r.start()  # empty
+        i = back_at
+        held = {sid: a.get(sid).frames for sid in ids}
+        loop = asyncio.get_running_loop()
+        deadline = loop.time() + CAUGHT_UP_BOUND_S
+        while not all(stored_frames(r.url, sid) >= n for sid, n in held.items()):
+            assert loop.time() < deadline, f"not stored again within {CAUGHT_UP_BOUND_S} s"
+            await step(i)
+            i += 1
+        last = await step(i)
+        i += 1
+        assert not_persisted(last) == 0
+        truth = level_ids[walk[i].level]
+        assert truth == "L2"
+        # The worker dies; another takes each session up on the floor it had reached.
+        keeper.cancel()
+        frames = {sid: a.get(sid).frames for sid in ids}
+        b = worker(r)
+        kept = ("anchor_m", "readings", "changes", "net_storeys", "confirmed_level")
+        for sid, was in zip(ids, last, strict=True):
+            out = await b.process(sid, venue_frame(i))
+            assert out.seq == frames[sid] + 1
+            assert out.level is not None and was.level is not None
+            assert out.level.id == truth == was.level.id
+            assert out.level_probability is not None and out.level_probability >= 0.99
+            assert out.estimate.converged == was.estimate.converged
+            # The barometer's memory came along: the dead worker's copy, stepped on the
+            # same frame, has the very same (its particles differ by the checkpoint's
+            # rounding only).
+            old = a.get(sid)
+            old.process_sync(venue_frame(i))
+            floors_a, floors_b = old.filter.floors, b.get(sid).filter.floors
+            assert floors_a is not None and floors_b is not None
+            assert floors_b.confirmed_level == venue.layout.level_index("L2")
+            ca, cb = floors_a.checkpoint(), floors_b.checkpoint()
+            assert {k: cb[k] for k in kept} == {k: ca[k] for k in kept}
+        for m in (a, b):
+            m.close()
+
+    with redis_process(tmp_path) as r:
         asyncio.run(main(r))
