@@ -442,6 +442,28 @@ def test_without_a_barometer_a_fix_walking_past_a_stop_stays_while_it_sees_its_f
     assert converged[first - 1] and not all(converged[first:out]) and not converged[out]
 
 
+def test_without_a_barometer_a_gain_is_not_made_in_a_stop_but_comes_on_leaving_it() -> None:
+    # Not located, standing at the escalators' foot on the Ground Floor seeing its floor,
+    # then walking out of the stop: nobody is located in a stop (on a ride the view shows
+    # the floor being left until the top), but once the view has put the belief on one
+    # floor the test towards a fix runs there, and the fix comes as the estimate leaves
+    # the stop (before: the test started afresh outside it, five frames and a search on).
+    # (Held, it stays converged through the other escalator's stop just north.)
+    pf = ParticleFilter(VENUE, FilterConfig(particles=4000), rng=np.random.default_rng(5))
+    assert pf.floors is not None
+    converged, in_stop = [], []
+    for k in range(60):
+        y = 6.0 + 0.2 * max(k - 40, 0)  # 40 frames standing, then walking north
+        pose = Pose(12.5, y, np.pi / 2)
+        est = pf.step(Odometry(0.2 if k > 40 else 0.0, 0.0, 0.0), seen_from(VENUE, pose))
+        converged.append(est.converged)
+        in_stop.append(pf.floors.in_stop(est.x, est.y))
+    assert in_stop[:40] == [True] * 40
+    out = in_stop.index(False)
+    assert not any(converged[:out])
+    assert converged[out], (out, converged[out:])
+
+
 def test_a_ride_begun_located_asks_for_the_search_a_gain_waits_for_until_the_next_fix() -> None:
     # Located at the stairs' foot on the Ground Floor, up the stairs by the barometer, then
     # the First Floor's view from the stairs' head: until the fix there, the filter asks
