@@ -193,6 +193,25 @@ def test_hedging_when_the_protection_radius_is_wide() -> None:
     assert "about 3 metres" in fb.text
 
 
+def test_a_fix_with_a_wide_radius_is_announced_with_it() -> None:
+    """Located with a protection radius past a metre, the person hears how far off the
+    fix may be; a tight one is announced plainly, and the radius is said once."""
+    from dataclasses import replace
+
+    for radius, units, said in [
+        (0.4, "metric", "Location found. "),
+        (1.2, "metric", "Location found, to within 1 metre. "),
+        (2.7, "metric", "Location found, to within about 3 metres. "),
+        (2.7, "imperial", "Location found, to within about 9 feet. "),
+    ]:
+        n = Narrator(TWO_OFFICES, FeedbackOptions(units=units))  # type: ignore[arg-type]
+        fix = replace(located(7, 2.5), protection_m=radius)
+        fb = n.update(fix, [Detection("door", 0.0)], timestamp_s=0.0)
+        assert fb.text.startswith(said), (radius, units, fb.text)
+        again = n.update(fix, [Detection("door", 0.0)], timestamp_s=5.0)
+        assert "Location found" not in again.text
+
+
 def test_while_lost_it_suggests_turning_then_walking_and_says_so_every_10_s() -> None:
     """A phone camera (66 deg): turn on the spot until it has looked all around, then
     walk; after a few metres, look around again. Spoken at most once every 10 s; no
