@@ -69,9 +69,9 @@ def found_sentence(protection_m: float | None, units: Units = "metric") -> str:
     """What is said as the person is located: with the protection radius when it is wider
     than ``CERTAIN_PROTECTION_M`` ("Location found, to within about 3 metres."), so that
     a fix that may be a few metres off is never told as a plain one. Measured on the
-    phone suite: through a phone's 66-degree camera the radius of a right fix is often
-    1-3 m, and on a map whose furniture moved since it was drawn the fixes 1.0-1.6 m
-    off were told with radii of 1.6-4 m (docs/results/phone.md)."""
+    phone suite: through a phone's 66-degree camera most fixes are gained with a radius
+    of 1-10 m, and on a map whose furniture moved since it was drawn the fixes 1.0-1.6 m
+    off had been gained with radii of 1.5-3.7 m (CHANGELOG, 0.3.0)."""
     if protection_m is None or protection_m <= CERTAIN_PROTECTION_M:
         return "Location found."
     return f"Location found, to within {distance_phrase(protection_m, units)}."
