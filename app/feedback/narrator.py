@@ -26,6 +26,7 @@ from numba import njit
 from numpy.typing import NDArray
 
 from app.feedback.phrasing import (
+    FEET_PER_METRE,
     Style,
     Units,
     article,
@@ -67,14 +68,19 @@ SUGGESTION_WORDS = {
 
 def found_sentence(protection_m: float | None, units: Units = "metric") -> str:
     """What is said as the person is located: with the protection radius when it is wider
-    than ``CERTAIN_PROTECTION_M`` ("Location found, to within about 3 metres."), so that
-    a fix that may be a few metres off is never told as a plain one. Measured on the
-    phone suite: through a phone's 66-degree camera most fixes are gained with a radius
-    of 1-10 m, and on a map whose furniture moved since it was drawn the fixes 1.0-1.6 m
-    off had been gained with radii of 1.5-3.7 m (CHANGELOG, 0.3.0)."""
+    than ``CERTAIN_PROTECTION_M`` ("Location found, to within about 2 metres."), so that
+    a fix that may be a metre or two off is never told as a plain one. The radius is a
+    bound, so it is rounded up (to the metre, or the foot), never down. A fix is gained
+    only with a radius of at most 1.5 m (``convergence.GAIN_PROTECTION_M``); through a
+    phone's 66-degree camera most gains come with a radius over a metre (measured on the
+    phone suite, CHANGELOG)."""
     if protection_m is None or protection_m <= CERTAIN_PROTECTION_M:
         return "Location found."
-    return f"Location found, to within {distance_phrase(protection_m, units)}."
+    if units == "imperial":
+        bound = math.ceil(protection_m * FEET_PER_METRE - 1e-9) / FEET_PER_METRE
+    else:
+        bound = float(math.ceil(protection_m - 1e-9))
+    return f"Location found, to within {distance_phrase(bound, units)}."
 
 
 @dataclass(frozen=True)

@@ -2,8 +2,9 @@
 
 :class:`ConvergenceGate` decides ``converged`` with hysteresis: gained once the heaviest
 cluster is tight and heavy, has stayed put for a few frames, explains the detections, a
-global search has run since it formed (or a tight known start rules other places out)
-and the alternatives it found are improbable; held until the cluster spreads, lightens
+global search has run since it formed (or a tight known start rules other places out),
+the alternatives it found are improbable and the protection radius is narrow
+(:data:`GAIN_PROTECTION_M`); held until the cluster spreads, lightens
 or jumps, the detections stop fitting, an object in clear view keeps going unreported,
 the odometry breaks off, dead reckoning lasts too long, an alternative gains
 probability, or the estimate slides away from where the odometry carries it
@@ -67,7 +68,9 @@ class ConvergenceGate:
     held no more than ``hold_alternatives`` on any of those frames (a fix gained on
     frames whose competitor would have released it held is given up soon after), and
     the estimate has not slid more than ``hold_slide_m`` from a recent converged one
-    carried by the odometry (:mod:`~app.localization.slide`).
+    carried by the odometry (:mod:`~app.localization.slide`). The filter then takes the
+    gain back (:meth:`withhold`) while the fix's protection radius is wider than
+    :data:`GAIN_PROTECTION_M`.
 
     **Held** while the cluster stays reasonably heavy and tight (``hold_*``), does not
     jump, still explains the detections (looser ``hold_fit`` and ``hold_unexplained``,
@@ -261,6 +264,12 @@ class ConvergenceGate:
         )
         return raw.with_converged(self._held)
 
+    def withhold(self) -> None:
+        """Take back a gain :meth:`confirm` just made, because the fix's protection
+        radius is too wide to tell (:data:`GAIN_PROTECTION_M`). The streak stays: the
+        next frame that passes the gain's tests with a narrower radius is a gain."""
+        self._held = False
+
     @property
     def streak(self) -> int:
         """Frames in a row the estimate has been steady and fitting towards a gain (0
@@ -310,6 +319,17 @@ class ConvergenceGate:
 
 #: Probability the protection radius must hold (docs/API.md, FrameResult.protection_m).
 PROTECTION_PROBABILITY = 0.99
+#: A fix is first told (``converged`` gained, or given again) only with a protection
+#: radius of at most this (m); once told, it is held on the gate's rules, however wide
+#: its radius grows. The radius is a bound on what the cloud, the bearings' geometry and
+#: the residuals allow: a fix it puts no closer than a metre and a half relies on a few
+#: objects, and a map whose furniture moved since it was drawn pulls just such a fix a
+#: metre or more off while its radius covers it (measured on the phone suite's stale
+#: office map, 10 seeds: every confidently-wrong span but one began at a gain with a
+#: radius of 1.5-3.7 m). 1.5 m keeps most narrow cameras' fixes (a 66-degree camera's
+#: radius is rarely under a metre) and still says "Location found, to within about 1-2
+#: metres" where the radius is over a metre (:mod:`app.feedback.narrator`).
+GAIN_PROTECTION_M = 1.5
 #: Particles (a systematic resample) whose distances give the radius's quantile.
 PROTECTION_SAMPLE = 1_000
 #: Calibration of the radius on the integrity suite (docs/results/integrity.md): the

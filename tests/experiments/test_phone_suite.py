@@ -23,10 +23,12 @@ from app.experiments.phone import (
     metrics,
     pinhole_camera,
     reliability,
+    run_scenario,
     scenarios,
     suite_map,
     walk_of,
 )
+from app.localization.convergence import GAIN_PROTECTION_M
 from app.simulation.phone import PhoneEffects, simulate_phone, vio_phone
 
 
@@ -132,3 +134,13 @@ def test_quick_suite_end_to_end(tmp_path: Path) -> None:
     text = (tmp_path / "phone.md").read_text()
     assert "--suite phone --quick" in text and "Reliability" in text
     assert (tmp_path / "phone.png").stat().st_size > 10_000
+
+
+def test_a_fix_is_first_told_only_with_a_narrow_radius() -> None:
+    """A 66-degree camera on the office map whose furniture moved: the old gate gained
+    here with a radius of 4.4 m, 1.2 m off (measured). Every gain now comes with a radius
+    of at most GAIN_PROTECTION_M; a held fix's may grow past it."""
+    run = run_scenario(Scenario("office_suite", "vio-stale-pinhole66"), 0, 2000, max_s=25.0)
+    gains = np.flatnonzero(run.converged & ~np.concatenate(([False], run.converged[:-1])))
+    assert gains.size
+    assert np.all(run.protection_m[gains] <= GAIN_PROTECTION_M)

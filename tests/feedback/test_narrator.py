@@ -195,14 +195,17 @@ def test_hedging_when_the_protection_radius_is_wide() -> None:
 
 def test_a_fix_with_a_wide_radius_is_announced_with_it() -> None:
     """Located with a protection radius past a metre, the person hears how far off the
-    fix may be; a tight one is announced plainly, and the radius is said once."""
+    fix may be, rounded up (the radius is a bound); a tight one is announced plainly,
+    and the radius is said once."""
     from dataclasses import replace
 
     for radius, units, said in [
         (0.4, "metric", "Location found. "),
-        (1.2, "metric", "Location found, to within 1 metre. "),
+        (1.2, "metric", "Location found, to within about 2 metres. "),
+        (1.5, "metric", "Location found, to within about 2 metres. "),
         (2.7, "metric", "Location found, to within about 3 metres. "),
         (2.7, "imperial", "Location found, to within about 9 feet. "),
+        (1.2, "imperial", "Location found, to within about 4 feet. "),
     ]:
         n = Narrator(TWO_OFFICES, FeedbackOptions(units=units))  # type: ignore[arg-type]
         fix = replace(located(7, 2.5), protection_m=radius)

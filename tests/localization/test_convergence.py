@@ -175,3 +175,13 @@ def test_a_gain_is_held_to_the_stricter_share_and_a_hold_is_not() -> None:
         _tight(), quality=GOOD, searched_ago=0, alternatives=0.0, gain_alternatives=strict
     )
     assert out.converged
+
+
+def test_a_gain_taken_back_for_a_wide_radius_is_made_on_the_next_frame_that_passes() -> None:
+    gate = _held_gate()
+    streak = gate.streak
+    gate.withhold()
+    assert not gate.held
+    assert gate.streak == streak  # the run towards the gain is not started over
+    assert _feed(gate, GOOD)
+    assert gate.held
