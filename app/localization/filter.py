@@ -643,6 +643,7 @@ class ParticleFilter:
         )
         protection: float | None = None
         gained = est.converged and not was_held
+        withheld = False
         if est.converged and transit and not kept:  # the stop's rules above
             est = est.with_converged(False)
         if est.converged or gained:
@@ -667,6 +668,7 @@ class ParticleFilter:
                 # of a known start.
                 self._gate.withhold()
                 est = est.with_converged(False)
+                withheld = True
         if est.converged:
             self._after_ride = False
             self._fix_into_stop = False
@@ -717,7 +719,10 @@ class ParticleFilter:
             assert protection is not None
             est = est.with_protection(protection)
         if self.floors is not None:
-            self.floors.after_estimate(self.x, w, est.x, est.converged)
+            # A gain taken back for its radius alone is a fix of the level all the same
+            # (the gate's tests held, alternatives on other floors included): the floor
+            # is confirmed, and the barometer's storeys are counted from it.
+            self.floors.after_estimate(self.x, w, est.x, est.converged or withheld)
         self.estimate = est
         self._resample(w, ess, inject)
         self.steps += 1

@@ -20,6 +20,7 @@ from app.localization.floors import (
 from app.localization.types import InitialPose, Odometry, Pose
 from app.maps.model import SemanticMap
 from app.service import checkpoint
+from app.simulation.camera import CameraModel
 from app.simulation.simulator import SimulationConfig
 from app.simulation.venue import venue_legs, venue_map
 from app.simulation.venue_walk import Barometer, Ride, Walk, simulate_venue
@@ -561,3 +562,26 @@ def test_a_fix_let_go_on_the_stairs_is_taken_up_at_their_head_without_a_narrow_r
             break
     assert changed_at is not None and gained_at is not None
     assert gained_at - changed_at <= STOP_EXIT_FRAMES
+
+
+def test_a_gain_withheld_for_its_radius_still_confirms_the_floor() -> None:
+    # Not located, through a 66-degree camera pacing on the Ground Floor: the gate's tests
+    # pass (one tight cluster, no place elsewhere on any floor), but the fix's radius is
+    # over the 1.5 m a first fix needs, so the place is not told. The floor is: the
+    # radius is about where on it, and the barometer's storeys are counted from it.
+    camera = CameraModel(66.0, 15.0)
+    pf = ParticleFilter(
+        VENUE, FilterConfig(particles=3000, fov_deg=66.0), rng=np.random.default_rng(1)
+    )
+    assert pf.floors is not None
+    confirmed = None
+    for k in range(40):
+        step = 0.1 * (k % 20)
+        est = pf.step(
+            Odometry(0.1 if k % 20 else -1.9, 0.0, 0.0),
+            seen_from(VENUE, Pose(5.0, 4.0 + step, np.pi / 2), camera),
+        )
+        assert not est.converged
+        if pf.floors.confirmed_level is not None and confirmed is None:
+            confirmed = pf.floors.confirmed_level
+    assert confirmed == 0
