@@ -327,8 +327,8 @@ PROTECTION_PROBABILITY = 0.99
 #: metre or more off while its radius covers it (measured on the phone suite's stale
 #: office map, 10 seeds: every confidently-wrong span but one began at a gain with a
 #: radius of 1.5-3.7 m). 1.5 m keeps most narrow cameras' fixes (a 66-degree camera's
-#: radius is rarely under a metre) and still says "Location found, to within about 1-2
-#: metres" where the radius is over a metre (:mod:`app.feedback.narrator`).
+#: radius is rarely under a metre); a gain whose radius is over a metre is told as
+#: "Location found, to within about 2 metres." (:mod:`app.feedback.narrator`).
 GAIN_PROTECTION_M = 1.5
 #: Particles (a systematic resample) whose distances give the radius's quantile.
 PROTECTION_SAMPLE = 1_000
