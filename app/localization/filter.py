@@ -260,11 +260,11 @@ class ParticleFilter:
         #: the floor in a connector's stop) and until the next fix: a gain waiting for
         #: the evidence search asks for it at the base interval (see _weigh_alternatives).
         self._after_ride = False
-        #: Since a fix told as the person came into a connector's stop (or rode between
-        #: levels) was let go there, until the next fix or STOP_EXIT_FRAMES frames out of
-        #: the stop: that fix continues it, and is not held to GAIN_PROTECTION_M (_step).
-        self._fix_into_stop = False
-        self._out_of_stop = 0
+        #: Frames out of a connector's stop since a fix told as the person came into it
+        #: (or rode between levels) was let go there; None without one, or once the next
+        #: fix came or STOP_EXIT_FRAMES passed. A fix in that time continues the one let
+        #: go, and is not held to GAIN_PROTECTION_M (_step).
+        self._out_of_stop: int | None = None
         #: Until the first fix from a known start: that fix continues the pose the app
         #: gave, and is not held to GAIN_PROTECTION_M either (a start given within half a
         #: metre is itself a radius of 1.5 m, and a narrow camera standing still pins the
@@ -316,7 +316,7 @@ class ParticleFilter:
         self._gate.reset()
         self._blind_hold = False
         self._after_ride = False
-        self._fix_into_stop = False
+        self._out_of_stop = None
         self._from_known_start = False
         self.geometry.reset()
         self.odometry_check.reset()
@@ -658,7 +658,7 @@ class ParticleFilter:
             radius = max(radius, min(max(fix_m, reach), self._map_span_m))
             fit = None if self.quality is None else self.quality.fit
             protection = widened_radius(radius, fit, slide_m)
-            continues = self._fix_into_stop or self._from_known_start
+            continues = self._out_of_stop is not None or self._from_known_start
             if gained and not continues and protection > GAIN_PROTECTION_M:
                 # A fix is gained only once its radius is narrow (GAIN_PROTECTION_M); the
                 # gate tries again on the next frame (ConvergenceGate.withhold). A fix
@@ -671,14 +671,15 @@ class ParticleFilter:
                 withheld = True
         if est.converged:
             self._after_ride = False
-            self._fix_into_stop = False
+            self._out_of_stop = None
             self._from_known_start = False
         elif transit or (floors is not None and floors.in_stop(raw.x, raw.y)):
-            self._fix_into_stop = self._fix_into_stop or self.estimate.converged
-            self._out_of_stop = 0
-        elif self._fix_into_stop:
+            if self._out_of_stop is not None or self.estimate.converged:
+                self._out_of_stop = 0
+        elif self._out_of_stop is not None:
             self._out_of_stop += 1
-            self._fix_into_stop = self._out_of_stop <= STOP_EXIT_FRAMES
+            if self._out_of_stop > STOP_EXIT_FRAMES:
+                self._out_of_stop = None
         # Where a held fix has nothing in clear view (a lift car, a bare wall ahead of a
         # narrow camera), every detection is clutter wherever the person stands, yet
         # weighing them lets the few particles elsewhere that one happens to fit outweigh
@@ -842,7 +843,6 @@ class ParticleFilter:
             state["floors"] = self.floors.checkpoint()
             state["located_at_ride"] = self._located_at_ride
             state["after_ride"] = self._after_ride
-            state["fix_into_stop"] = self._fix_into_stop
             state["out_of_stop"] = self._out_of_stop
             state["wide_first"] = self._wide_first
         return state
@@ -881,8 +881,10 @@ class ParticleFilter:
         self.restarts = int(state["restarts"])
         self.steps = int(state["steps"])
         self.estimate = from_plain(Estimate, state["estimate"])
-        self._fix_into_stop = bool(state.get("fix_into_stop", False))
-        self._out_of_stop = int(state.get("out_of_stop", 0))
+        # (071f311's checkpoints kept a flag beside the count: the count stands only
+        # with the flag.)
+        out = state.get("out_of_stop") if state.get("fix_into_stop", True) else None
+        self._out_of_stop = None if out is None else int(out)
         self._from_known_start = bool(state.get("from_known_start", False))
         self.capture.restore(state.get("capture"))
         self.geometry.restore(state.get("geometry"))
