@@ -60,7 +60,7 @@ from app.localization.sensor import (
     observation_columns,
     prepare_observation,
 )
-from app.localization.slide import SLIP_SCALE_STDS, OdometryCheck
+from app.localization.slide import SLIDE_FRAMES, SLIP_SCALE_STDS, OdometryCheck
 from app.localization.types import Detection, Estimate, InitialPose, Odometry
 from app.localization.unseen import UnseenObjects
 from app.maps.geometry import wrap_angle
@@ -113,6 +113,16 @@ RIDE_START_STD_RAD = math.radians(45.0)
 #: facing its wall), the place after a ride through a 66-degree camera was found within
 #: 5 s 25 -> 32 times of 40 (VIO), 23 -> 28 (PDR).
 STOP_EXIT_FRAMES = 25
+#: A fix let go for doubt alone (an alternative gained probability, or the evidence
+#: swapped the belief onto a place within the fix's protection radius) and taken up
+#: again within this many frames continues it, and is not held to the narrow radius a
+#: first fix needs either: the place it returns to is the one told, which the slide
+#: check holds the regain to (within ``hold_slide_m`` of it carried by the odometry,
+#: over as many frames). Measured on the venue suite through a 66-degree camera: a fix
+#: let go for an alternative refuted 4 s later stayed "not sure" for 37-50 s at 0.1 m
+#: of error, each gain taken back for a radius of 2-3 m, and one swapped 0.13 m for
+#: 59 s.
+DOUBT_FRAMES = SLIDE_FRAMES
 #: Alternatives are searched for while the heaviest cluster is at most this wide (m).
 SEARCH_MAX_SPREAD_M = 0.5
 #: An unreported object in clear view of a converged estimate is taken for gone from
@@ -270,6 +280,9 @@ class ParticleFilter:
         #: metre is itself a radius of 1.5 m, and a narrow camera standing still pins the
         #: place no closer along its line of sight).
         self._from_known_start = initial_pose is not None
+        #: Frames since a fix was let go for doubt alone (DOUBT_FRAMES); None without
+        #: one, or once the next fix came or DOUBT_FRAMES passed.
+        self._since_doubt: int | None = None
         self.estimate: Estimate = estimate_pose(self.x, self.y, self.theta, self.weights)
 
     @functools.cached_property
@@ -318,6 +331,7 @@ class ParticleFilter:
         self._after_ride = False
         self._out_of_stop = None
         self._from_known_start = False
+        self._since_doubt = None
         self.geometry.reset()
         self.odometry_check.reset()
         if self.evidence is not None:
@@ -658,7 +672,11 @@ class ParticleFilter:
             radius = max(radius, min(max(fix_m, reach), self._map_span_m))
             fit = None if self.quality is None else self.quality.fit
             protection = widened_radius(radius, fit, slide_m)
-            continues = self._out_of_stop is not None or self._from_known_start
+            continues = (
+                self._out_of_stop is not None
+                or self._from_known_start
+                or self._since_doubt is not None
+            )
             if gained and not continues and protection > GAIN_PROTECTION_M:
                 # A fix is gained only once its radius is narrow (GAIN_PROTECTION_M); the
                 # gate tries again on the next frame (ConvergenceGate.withhold). A fix
@@ -669,6 +687,12 @@ class ParticleFilter:
                 self._gate.withhold()
                 est = est.with_converged(False)
                 withheld = True
+        if was_held and not self._gate.held and self._gate.lost_because == ("alternative",):
+            self._since_doubt = 0
+        elif self._since_doubt is not None:
+            self._since_doubt += 1
+            if est.converged or self._since_doubt > DOUBT_FRAMES:
+                self._since_doubt = None
         if est.converged:
             self._after_ride = False
             self._out_of_stop = None
@@ -774,6 +798,7 @@ class ParticleFilter:
         swap = self.evidence.update(odometry, obs, top, tight, particles, heading, fits, gain_waits)
         if carry_only or not swap:
             return raw, w, ess
+        told = self.estimate
         self.x, self.y, self.theta = self.evidence.swap(self.n)
         self.log_w = np.zeros(self.n)
         self._gate.reset()
@@ -782,7 +807,13 @@ class ParticleFilter:
         self.quality = None
         w = self.weights
         ess = effective_sample_size(w)
-        return estimate_pose(self.x, self.y, self.theta, w, ess=ess, rng=self.rng), w, ess
+        est = estimate_pose(self.x, self.y, self.theta, w, ess=ess, rng=self.rng)
+        # A swap onto a place the told fix's radius holds is doubt, not a new place
+        # (DOUBT_FRAMES): its heading or a few decimetres were in question.
+        radius = told.protection_m if told.converged else None
+        if radius is not None and hypot(est.x - told.x, est.y - told.y) <= radius:
+            self._since_doubt = 0
+        return est, w, ess
 
     # ------------------------------------------------------------ checkpoints
     def checkpoint(self, max_particles: int = CHECKPOINT_PARTICLES) -> dict[str, Any]:
@@ -831,6 +862,7 @@ class ParticleFilter:
             "frames_without_evidence": self.frames_without_evidence,
             "restarts": self.restarts,
             "from_known_start": self._from_known_start,
+            "since_doubt": self._since_doubt,
             "steps": self.steps,
             "estimate": self.estimate,
             "capture": self.capture.checkpoint(),
@@ -886,6 +918,8 @@ class ParticleFilter:
         out = state.get("out_of_stop") if state.get("fix_into_stop", True) else None
         self._out_of_stop = None if out is None else int(out)
         self._from_known_start = bool(state.get("from_known_start", False))
+        doubt = state.get("since_doubt")
+        self._since_doubt = None if doubt is None else int(doubt)
         self.capture.restore(state.get("capture"))
         self.geometry.restore(state.get("geometry"))
         self.odometry_check.restore(state.get("odometry_check"))

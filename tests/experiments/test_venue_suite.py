@@ -31,6 +31,17 @@ def test_a_leg_one_filter_never_fixes_has_no_located_frames() -> None:
     a = _availability([leg])
     assert a["frames"] == 4 and a["one_level"] == 1.0 and a["venue"] == 0.0
     assert np.isnan(a["venue_located"])  # no frame to judge, not a perfect score
+    assert a["one_level_global"] == 1.0  # without a second filter, the one-level's own
+
+
+def test_a_leg_after_a_ride_counts_the_one_level_map_started_with_no_knowledge() -> None:
+    t = np.arange(4) * 0.2
+    known = np.ones(4, bool)
+    unknown = np.array([0, 0, 1, 1], dtype=bool)
+    leg = leg_availability(1, t, known, known, global_start=False, one_global_right=unknown)
+    assert (leg.one_right, leg.one_global_right) == (4, 2)
+    a = _availability([leg])
+    assert a["one_level"] == 1.0 and a["one_level_global"] == 0.5
 
 
 def test_the_phone_condition_filters_as_a_service_session_with_vio_odometry() -> None:
