@@ -42,6 +42,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "stairs and escalators, with and without a drifting barometer",
     )
     parser.add_argument(
+        "--first-seed",
+        type=int,
+        default=0,
+        help="phone and venue: the first seed (seeds K to K + --seeds - 1), to check "
+        "fresh walks beside the committed results' seeds 0-9 (default 0)",
+    )
+    parser.add_argument(
         "--scenarios",
         default=None,
         help="integrity and phone: comma-separated MAP or MAP/CONDITION (* for any map), "
@@ -50,6 +57,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.first_seed < 0:
+        raise SystemExit("bearings experiments: need --first-seed >= 0")
+    if args.first_seed and args.suite not in ("phone", "venue"):
+        raise SystemExit(
+            "bearings experiments: --first-seed is for the phone and venue suites, "
+            f"not {args.suite}"
+        )
     if args.suite == "integrity":
         return _run_integrity(args)
     if args.suite == "building":
@@ -137,7 +151,7 @@ def _run_phone(args: argparse.Namespace) -> int:
     try:
         summary = phone.run(
             args.out, seeds=seeds, particles=args.particles, workers=max(1, args.workers),
-            quick=args.quick, select=args.scenarios,
+            quick=args.quick, select=args.scenarios, first_seed=args.first_seed,
         )  # fmt: skip
     except ValueError as exc:
         raise SystemExit(f"bearings experiments: {exc}") from None
@@ -152,7 +166,10 @@ def _run_venue(args: argparse.Namespace) -> int:
     seeds = min(args.seeds, 2) if args.quick else args.seeds
     if seeds < 1 or args.particles < 100:
         raise SystemExit("bearings experiments: need --seeds >= 1 and --particles >= 100")
-    rows = venue.run(args.out, seeds=seeds, particles=args.particles, workers=max(1, args.workers))
+    rows = venue.run(
+        args.out, seeds=seeds, particles=args.particles, workers=max(1, args.workers),
+        first_seed=args.first_seed,
+    )  # fmt: skip
     print(venue.markdown_table(rows))
     print(f"wrote {args.out / 'venue.md'} and venue.json")
     return 0

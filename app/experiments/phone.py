@@ -656,15 +656,25 @@ def run_suite(
     workers: int,
     max_s: float | None = None,
     progress: Callable[[], object] | None = None,
+    first_seed: int = 0,
 ) -> list[PhoneRun]:
-    jobs = [(s, seed, particles, max_s) for s in todo for seed in range(seeds)]
+    seed_range = range(first_seed, first_seed + seeds)
+    jobs = [(s, seed, particles, max_s) for s in todo for seed in seed_range]
     return map_jobs(_job, jobs, workers, progress)
 
 
 def run(
-    out: Path, *, seeds: int, particles: int, workers: int, quick: bool, select: str | None = None
+    out: Path,
+    *,
+    seeds: int,
+    particles: int,
+    workers: int,
+    quick: bool,
+    select: str | None = None,
+    first_seed: int = 0,
 ) -> dict[str, object]:
-    """Run the suite, write phone.md, phone.json and phone.png to ``out``; the summary."""
+    """Run the suite (seeds ``first_seed`` on), write phone.md, phone.json and phone.png
+    to ``out``; the summary."""
     from tqdm import tqdm
 
     todo = scenarios(quick, select)
@@ -672,7 +682,7 @@ def run(
     out.mkdir(parents=True, exist_ok=True)
     started, cpu_started = time.perf_counter(), _cpu_s()
     with tqdm(total=len(todo) * seeds, desc="phone runs", unit="run") as bar:
-        runs = run_suite(todo, seeds, particles, workers, max_s, bar.update)
+        runs = run_suite(todo, seeds, particles, workers, max_s, bar.update, first_seed)
     seconds, cpu_s = time.perf_counter() - started, _cpu_s() - cpu_started
     summary = summarize(runs)
     (out / "phone.json").write_text(json.dumps(summary, indent=1), encoding="utf-8")
@@ -681,6 +691,8 @@ def run(
         command += " --quick"
     if select is not None:
         command += f" --scenarios '{select}'"
+    if first_seed:
+        command += f" --first-seed {first_seed} --seeds {seeds}"
     text = markdown(
         summary, seconds=seconds, cpu_s=cpu_s, particles=particles, seeds=seeds, command=command
     )

@@ -493,11 +493,23 @@ def markdown_table(rows: list[dict[str, object]]) -> str:
     return "\n".join(lines)
 
 
-def markdown(rows: list[dict[str, object]], *, seconds: float, particles: int, seeds: int) -> str:
+def markdown(
+    rows: list[dict[str, object]],
+    *,
+    seconds: float,
+    particles: int,
+    seeds: int,
+    first_seed: int = 0,
+) -> str:
+    command = "bearings experiments --suite venue"
+    counted = f"{seeds} seeds per condition"
+    if first_seed:
+        command += f" --first-seed {first_seed} --seeds {seeds}"
+        counted += f", {first_seed} to {first_seed + seeds - 1}"
     out = [
         "# Venue suite: three floors, lift, stairs and escalators",
         "",
-        f"`bearings experiments --suite venue` ({seeds} seeds per condition, {particles:,} "
+        f"`{command}` ({counted}, {particles:,} "
         f"particles, {seconds:.0f} s). The walk, the venue and the definitions are in "
         "`app/experiments/venue.py`; every number below comes from that run.",
         "",
@@ -562,11 +574,15 @@ def markdown(rows: list[dict[str, object]], *, seconds: float, particles: int, s
     return "\n".join(out) + "\n"
 
 
-def run(out: Path, *, seeds: int, particles: int, workers: int) -> list[dict[str, object]]:
-    """Run every condition for ``seeds`` seeds; write venue.md and venue.json to ``out``."""
+def run(
+    out: Path, *, seeds: int, particles: int, workers: int, first_seed: int = 0
+) -> list[dict[str, object]]:
+    """Run every condition for ``seeds`` seeds from ``first_seed`` on; write venue.md and
+    venue.json to ``out``."""
     from app.experiments.runner import map_jobs
 
-    jobs = [(c, s, particles) for c in CONDITIONS for s in range(seeds)]
+    seed_range = range(first_seed, first_seed + seeds)
+    jobs = [(c, s, particles) for c in CONDITIONS for s in seed_range]
     started = time.perf_counter()
     runs = map_jobs(_job, jobs, workers)
     seconds = time.perf_counter() - started
@@ -574,6 +590,7 @@ def run(out: Path, *, seeds: int, particles: int, workers: int) -> list[dict[str
     out.mkdir(parents=True, exist_ok=True)
     (out / "venue.json").write_text(json.dumps(rows, indent=1), encoding="utf-8")
     (out / "venue.md").write_text(
-        markdown(rows, seconds=seconds, particles=particles, seeds=seeds), encoding="utf-8"
+        markdown(rows, seconds=seconds, particles=particles, seeds=seeds, first_seed=first_seed),
+        encoding="utf-8",
     )
     return rows

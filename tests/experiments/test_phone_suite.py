@@ -24,6 +24,7 @@ from app.experiments.phone import (
     pinhole_camera,
     reliability,
     run_scenario,
+    run_suite,
     scenarios,
     suite_map,
     walk_of,
@@ -117,7 +118,7 @@ def test_frames_reach_the_service_with_or_without_the_age_field() -> None:
 def test_quick_suite_end_to_end(tmp_path: Path) -> None:
     args = argparse.Namespace(
         suite="phone", quick=True, seeds=10, particles=1000, workers=1, out=tmp_path,
-        scenarios=None,
+        scenarios=None, first_seed=0,
     )  # fmt: skip
     assert cli.run(args) == 0
     summary = json.loads((tmp_path / "phone.json").read_text())
@@ -144,3 +145,27 @@ def test_a_fix_is_first_told_only_with_a_narrow_radius() -> None:
     gains = np.flatnonzero(run.converged & ~np.concatenate(([False], run.converged[:-1])))
     assert gains.size
     assert np.all(run.protection_m[gains] <= GAIN_PROTECTION_M)
+
+
+def test_fresh_seeds_are_walked_from_the_first_seed_given(tmp_path: Path) -> None:
+    """`--first-seed K --seeds N` walks seeds K to K + N - 1 (fresh walks beside the
+    committed results' 0-9), and the report says so."""
+    parser = argparse.ArgumentParser()
+    cli.add_arguments(parser)
+    args = parser.parse_args(
+        ["--suite", "phone", "--quick", "--scenarios", "office_suite/ideal-360",
+         "--first-seed", "12", "--seeds", "2", "--workers", "1", "--out", str(tmp_path)]
+    )  # fmt: skip
+    assert cli.run(args) == 0
+    assert "--first-seed 12 --seeds 2" in (tmp_path / "phone.md").read_text()
+    runs = run_suite([Scenario("office_suite", "ideal-360")], 2, 500, 1, 2.0, first_seed=12)
+    assert [r.seed for r in runs] == [12, 13]
+
+
+@pytest.mark.parametrize("suite", ["tables", "integrity", "building"])
+def test_a_first_seed_is_refused_where_the_suite_has_none(suite: str, tmp_path: Path) -> None:
+    parser = argparse.ArgumentParser()
+    cli.add_arguments(parser)
+    args = parser.parse_args(["--suite", suite, "--first-seed", "10", "--out", str(tmp_path)])
+    with pytest.raises(SystemExit, match="--first-seed is for the phone and venue suites"):
+        cli.run(args)

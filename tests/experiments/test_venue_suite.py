@@ -4,7 +4,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from app.experiments.venue import CONDITIONS, _availability, filter_config, leg_availability
+from app.experiments.venue import (
+    CONDITIONS,
+    _availability,
+    filter_config,
+    leg_availability,
+    markdown,
+)
 from app.localization.config import FilterConfig
 from app.service.metrics import Metrics
 from app.service.sessions import SessionManager
@@ -65,3 +71,10 @@ def test_the_pdr_phone_conditions_filter_as_a_session_with_pdr_odometry() -> Non
         session = manager.build(spec)
         assert filter_config(CONDITIONS[name], 1000) == session.filter.config
         assert session.filter.config.odometry_source == "pdr"
+
+
+def test_a_report_of_fresh_seeds_names_them() -> None:
+    text = markdown([], seconds=1.0, particles=1000, seeds=2, first_seed=10)
+    assert "`bearings experiments --suite venue --first-seed 10 --seeds 2`" in text
+    assert "2 seeds per condition, 10 to 11" in text
+    assert "--first-seed" not in markdown([], seconds=1.0, particles=1000, seeds=10)
