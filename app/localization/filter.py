@@ -116,12 +116,12 @@ STOP_EXIT_FRAMES = 25
 #: A fix let go for doubt alone (an alternative gained probability, or the evidence
 #: swapped the belief onto a place within the fix's protection radius) and taken up
 #: again within this many frames continues it, and is not held to the narrow radius a
-#: first fix needs either: the place it returns to is the one told, which the slide
-#: check holds the regain to (within ``hold_slide_m`` of it carried by the odometry,
-#: over as many frames). Measured on the venue suite through a 66-degree camera: a fix
-#: let go for an alternative refuted 4 s later stayed "not sure" for 37-50 s at 0.1 m
-#: of error, each gain taken back for a radius of 2-3 m, and one swapped 0.13 m for
-#: 59 s.
+#: first fix needs either: it returns to the place told (after an alternative, the slide
+#: check holds the regain within ``hold_slide_m`` of the told fix carried by the
+#: odometry, over as many frames; a swap's place lay within the told radius). Measured
+#: on the venue suite through a 66-degree camera: a fix let go for an alternative
+#: refuted 4 s later stayed "not sure" for 37-50 s at 0.1 m of error, each gain taken
+#: back for a radius of 2-3 m, and one swapped 0.13 m for 59 s.
 DOUBT_FRAMES = SLIDE_FRAMES
 #: Alternatives are searched for while the heaviest cluster is at most this wide (m).
 SEARCH_MAX_SPREAD_M = 0.5

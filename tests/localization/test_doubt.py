@@ -12,6 +12,7 @@ from app.localization.config import FilterConfig
 from app.localization.evidence import EvidenceTracker
 from app.localization.filter import DOUBT_FRAMES, ParticleFilter
 from app.localization.types import Detection, InitialPose, Odometry, Pose
+from app.service import checkpoint
 from app.simulation.camera import CameraModel
 from app.simulation.venue import venue_map
 from tests.helpers import seen_from
@@ -21,12 +22,14 @@ POSE = Pose(8.0, 3.0, math.pi / 2)
 
 
 def _located_then_let_go(
-    monkeypatch: pytest.MonkeyPatch, doubt: bool
+    monkeypatch: pytest.MonkeyPatch, doubt: bool, through_a_checkpoint: bool = False
 ) -> tuple[tuple[str, ...], list[bool], list[float | None]]:
     """Standing at POSE through a 66-degree camera from a known start, a fix is told;
     then for three frames either an alternative holds half the probability (``doubt``)
     or the camera reports three boxes nothing on the map explains. Returns why the fix
-    was let go, and converged and the radius on each of the DOUBT_FRAMES frames after."""
+    was let go, and converged and the radius on each of the DOUBT_FRAMES frames after
+    (``through_a_checkpoint``: by a filter restored from a checkpoint taken then, as a
+    worker taking the session over would)."""
     # The radius a first fix needs, lowered under this fix's (about 0.5 m): every gain
     # here is a wide one.
     monkeypatch.setattr(filter_module, "GAIN_PROTECTION_M", 0.3)
@@ -56,6 +59,10 @@ def _located_then_let_go(
     state["doubt"] = False
     assert not est.converged
     why = pf._gate.lost_because
+    if through_a_checkpoint:
+        data = checkpoint.pack({"format": checkpoint.FORMAT_VERSION, "filter": pf.checkpoint()})
+        pf = ParticleFilter(VENUE, pf.config, rng=np.random.default_rng(99))
+        pf.restore(checkpoint.unpack(data)["filter"])
     converged, radius = [], []
     for _ in range(DOUBT_FRAMES):
         est = pf.step(still, seen)
@@ -64,10 +71,11 @@ def _located_then_let_go(
     return why, converged, radius
 
 
+@pytest.mark.parametrize("through_a_checkpoint", [False, True])
 def test_a_fix_let_go_for_an_alternative_alone_is_taken_up_without_a_narrow_radius(
-    monkeypatch: pytest.MonkeyPatch,
+    monkeypatch: pytest.MonkeyPatch, through_a_checkpoint: bool
 ) -> None:
-    why, converged, radius = _located_then_let_go(monkeypatch, doubt=True)
+    why, converged, radius = _located_then_let_go(monkeypatch, True, through_a_checkpoint)
     assert why == ("alternative",)
     assert any(converged), "the fix was not taken up within DOUBT_FRAMES"
     first = converged.index(True)
