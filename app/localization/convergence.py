@@ -277,6 +277,12 @@ class ConvergenceGate:
         return self._streak
 
     @property
+    def let_go_for_doubt(self) -> bool:
+        """Whether no fix is held and the last one was let go only because an
+        alternative gained probability (:mod:`~app.localization.continuation`)."""
+        return not self._held and self.lost_because == ("alternative",)
+
+    @property
     def held(self) -> bool:
         """Whether ``converged`` was given in the last :meth:`confirm` (and not reset)."""
         return self._held

@@ -23,6 +23,7 @@ from numpy.typing import NDArray
 from app.localization import sensor_kernel
 from app.localization.compass import CompassReading, compass_log_likelihood
 from app.localization.config import FilterConfig
+from app.localization.continuation import Continuation
 from app.localization.convergence import (
     GAIN_PROTECTION_M,
     ConvergenceGate,
@@ -60,7 +61,7 @@ from app.localization.sensor import (
     observation_columns,
     prepare_observation,
 )
-from app.localization.slide import SLIDE_FRAMES, SLIP_SCALE_STDS, OdometryCheck
+from app.localization.slide import SLIP_SCALE_STDS, OdometryCheck
 from app.localization.types import Detection, Estimate, InitialPose, Odometry
 from app.localization.unseen import UnseenObjects
 from app.maps.geometry import wrap_angle
@@ -99,30 +100,6 @@ SLACK_STEP_DEG = 2.0
 #: the probability for 3 s after the ride) is excluded.
 RIDE_START_STD_M = 0.75
 RIDE_START_STD_RAD = math.radians(45.0)
-#: A fix told as the person came into a connector's stop (or a ride) and let go there (a
-#: lift car shows the same on every floor; a ride moves the cloud by the barometer, not
-#: the view) is taken up again on leaving it without the narrow radius a first fix needs
-#: (convergence.GAIN_PROTECTION_M), for this many frames out of the stop (5 s at 5
-#: frames/s: the time the venue suite allows for a level change to be confirmed). The
-#: exit is as good as a known start: the person left the connector there. Measured on
-#: the venue suite: held to the narrow radius, the place was found 3.0 s after a stairs
-#: ride with a barometer (median, against 0.0), and without one the floor was confirmed
-#: within 5 s of 4 of 10 lift rides (against 10); with no limit of frames, a fix lost
-#: later in the walk was regained 2.4 m off with an 18 m radius (PDR, 180 degrees).
-#: Counting a fix let go in the lift car before the ride began (a phone's narrow camera
-#: facing its wall), the place after a ride through a 66-degree camera was found within
-#: 5 s 25 -> 32 times of 40 (VIO), 23 -> 28 (PDR).
-STOP_EXIT_FRAMES = 25
-#: A fix let go for doubt alone (an alternative gained probability, or the evidence
-#: swapped the belief onto a place within the fix's protection radius) and taken up
-#: again within this many frames continues it, and is not held to the narrow radius a
-#: first fix needs either: it returns to the place told (after an alternative, the slide
-#: check holds the regain within ``hold_slide_m`` of the told fix carried by the
-#: odometry, over as many frames; a swap's place lay within the told radius). Measured
-#: on the venue suite through a 66-degree camera: a fix let go for an alternative
-#: refuted 4 s later stayed "not sure" for 37-50 s at 0.1 m of error, each gain taken
-#: back for a radius of 2-3 m, and one swapped 0.13 m for 59 s.
-DOUBT_FRAMES = SLIDE_FRAMES
 #: Alternatives are searched for while the heaviest cluster is at most this wide (m).
 SEARCH_MAX_SPREAD_M = 0.5
 #: An unreported object in clear view of a converged estimate is taken for gone from
@@ -208,6 +185,8 @@ class ParticleFilter:
             self.config.heading_slack_deg,
             None if source is None else SLIP_SCALE_STDS * BIAS_PRIORS[source].scale_std,
         )
+        #: The fixes a gain would continue, not held to GAIN_PROTECTION_M (_step).
+        self.continuation = Continuation()
         if state is None:
             self.reset(initial_pose)
         else:  # from a checkpoint (:meth:`checkpoint`): no cloud to draw first
@@ -270,19 +249,7 @@ class ParticleFilter:
         #: the floor in a connector's stop) and until the next fix: a gain waiting for
         #: the evidence search asks for it at the base interval (see _weigh_alternatives).
         self._after_ride = False
-        #: Frames out of a connector's stop since a fix told as the person came into it
-        #: (or rode between levels) was let go there; None without one, or once the next
-        #: fix came or STOP_EXIT_FRAMES passed. A fix in that time continues the one let
-        #: go, and is not held to GAIN_PROTECTION_M (_step).
-        self._out_of_stop: int | None = None
-        #: Until the first fix from a known start: that fix continues the pose the app
-        #: gave, and is not held to GAIN_PROTECTION_M either (a start given within half a
-        #: metre is itself a radius of 1.5 m, and a narrow camera standing still pins the
-        #: place no closer along its line of sight).
-        self._from_known_start = initial_pose is not None
-        #: Frames since a fix was let go for doubt alone (DOUBT_FRAMES); None without
-        #: one, or once the next fix came or DOUBT_FRAMES passed.
-        self._since_doubt: int | None = None
+        self.continuation.reset(known_start=initial_pose is not None)
         self.estimate: Estimate = estimate_pose(self.x, self.y, self.theta, self.weights)
 
     @functools.cached_property
@@ -329,9 +296,7 @@ class ParticleFilter:
         self._gate.reset()
         self._blind_hold = False
         self._after_ride = False
-        self._out_of_stop = None
-        self._from_known_start = False
-        self._since_doubt = None
+        self.continuation.reset()
         self.geometry.reset()
         self.odometry_check.reset()
         if self.evidence is not None:
@@ -672,38 +637,24 @@ class ParticleFilter:
             radius = max(radius, min(max(fix_m, reach), self._map_span_m))
             fit = None if self.quality is None else self.quality.fit
             protection = widened_radius(radius, fit, slide_m)
-            continues = (
-                self._out_of_stop is not None
-                or self._from_known_start
-                or self._since_doubt is not None
-            )
-            if gained and not continues and protection > GAIN_PROTECTION_M:
+            if gained and not self.continuation.active and protection > GAIN_PROTECTION_M:
                 # A fix is gained only once its radius is narrow (GAIN_PROTECTION_M); the
                 # gate tries again on the next frame (ConvergenceGate.withhold). A fix
                 # the gate holds is not tested again (held through a connector's stop,
                 # it is told on leaving it, however its radius grew on the way), nor one
-                # that takes up a fix let go in a stop (STOP_EXIT_FRAMES) or the pose
-                # of a known start.
+                # that continues a fix or a known start (app.localization.continuation).
                 self._gate.withhold()
                 est = est.with_converged(False)
                 withheld = True
-        if was_held and not self._gate.held and self._gate.lost_because == ("alternative",):
-            self._since_doubt = 0
-        elif self._since_doubt is not None:
-            self._since_doubt += 1
-            if est.converged or self._since_doubt > DOUBT_FRAMES:
-                self._since_doubt = None
+        self.continuation.after_frame(
+            let_go_for_doubt=was_held and self._gate.let_go_for_doubt,
+            told=est.converged,
+            in_stop=not est.converged
+            and (transit or (floors is not None and floors.in_stop(raw.x, raw.y))),
+            was_told=self.estimate.converged,
+        )
         if est.converged:
             self._after_ride = False
-            self._out_of_stop = None
-            self._from_known_start = False
-        elif transit or (floors is not None and floors.in_stop(raw.x, raw.y)):
-            if self._out_of_stop is not None or self.estimate.converged:
-                self._out_of_stop = 0
-        elif self._out_of_stop is not None:
-            self._out_of_stop += 1
-            if self._out_of_stop > STOP_EXIT_FRAMES:
-                self._out_of_stop = None
         # Where a held fix has nothing in clear view (a lift car, a bare wall ahead of a
         # narrow camera), every detection is clutter wherever the person stands, yet
         # weighing them lets the few particles elsewhere that one happens to fit outweigh
@@ -809,10 +760,10 @@ class ParticleFilter:
         ess = effective_sample_size(w)
         est = estimate_pose(self.x, self.y, self.theta, w, ess=ess, rng=self.rng)
         # A swap onto a place the told fix's radius holds is doubt, not a new place
-        # (DOUBT_FRAMES): its heading or a few decimetres were in question.
+        # (continuation.DOUBT_FRAMES): its heading or a few decimetres were in question.
         radius = told.protection_m if told.converged else None
         if radius is not None and hypot(est.x - told.x, est.y - told.y) <= radius:
-            self._since_doubt = 0
+            self.continuation.doubted()
         return est, w, ess
 
     # ------------------------------------------------------------ checkpoints
@@ -861,8 +812,7 @@ class ParticleFilter:
             "unseen": None if self.unseen is None else self.unseen.checkpoint(),
             "frames_without_evidence": self.frames_without_evidence,
             "restarts": self.restarts,
-            "from_known_start": self._from_known_start,
-            "since_doubt": self._since_doubt,
+            **self.continuation.checkpoint(levels=self.floors is not None),
             "steps": self.steps,
             "estimate": self.estimate,
             "capture": self.capture.checkpoint(),
@@ -875,7 +825,6 @@ class ParticleFilter:
             state["floors"] = self.floors.checkpoint()
             state["located_at_ride"] = self._located_at_ride
             state["after_ride"] = self._after_ride
-            state["out_of_stop"] = self._out_of_stop
             state["wide_first"] = self._wide_first
         return state
 
@@ -913,13 +862,7 @@ class ParticleFilter:
         self.restarts = int(state["restarts"])
         self.steps = int(state["steps"])
         self.estimate = from_plain(Estimate, state["estimate"])
-        # (071f311's checkpoints kept a flag beside the count: the count stands only
-        # with the flag.)
-        out = state.get("out_of_stop") if state.get("fix_into_stop", True) else None
-        self._out_of_stop = None if out is None else int(out)
-        self._from_known_start = bool(state.get("from_known_start", False))
-        doubt = state.get("since_doubt")
-        self._since_doubt = None if doubt is None else int(doubt)
+        self.continuation.restore(state)
         self.capture.restore(state.get("capture"))
         self.geometry.restore(state.get("geometry"))
         self.odometry_check.restore(state.get("odometry_check"))

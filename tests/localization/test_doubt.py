@@ -1,4 +1,4 @@
-"""A fix let go for doubt alone continues when it comes back (filter.DOUBT_FRAMES)."""
+"""A fix let go for doubt alone continues when it comes back (continuation.DOUBT_FRAMES)."""
 
 from __future__ import annotations
 
@@ -9,8 +9,9 @@ import pytest
 
 import app.localization.filter as filter_module
 from app.localization.config import FilterConfig
+from app.localization.continuation import DOUBT_FRAMES
 from app.localization.evidence import EvidenceTracker
-from app.localization.filter import DOUBT_FRAMES, ParticleFilter
+from app.localization.filter import ParticleFilter
 from app.localization.types import Detection, InitialPose, Odometry, Pose
 from app.service import checkpoint
 from app.simulation.camera import CameraModel

@@ -8,8 +8,9 @@ import numpy as np
 import pytest
 
 from app.localization.config import FilterConfig
+from app.localization.continuation import STOP_EXIT_FRAMES
 from app.localization.convergence import GAIN_PROTECTION_M
-from app.localization.filter import STOP_EXIT_FRAMES, ParticleFilter
+from app.localization.filter import ParticleFilter
 from app.localization.floors import (
     BLIND_RATE,
     LEVEL_SURE_FRAMES,

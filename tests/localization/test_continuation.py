@@ -1,0 +1,62 @@
+"""Which fixes a gain continues (app.localization.continuation), frame by frame."""
+
+from __future__ import annotations
+
+from app.localization.continuation import DOUBT_FRAMES, STOP_EXIT_FRAMES, Continuation
+
+
+def _frames(c: Continuation, n: int, *, in_stop: bool = False) -> None:
+    for _ in range(n):
+        c.after_frame(let_go_for_doubt=False, told=False, in_stop=in_stop, was_told=False)
+
+
+def test_a_known_start_lasts_until_the_first_fix() -> None:
+    c = Continuation(known_start=True)
+    _frames(c, 500)
+    assert c.active
+    c.after_frame(let_go_for_doubt=False, told=True, in_stop=False, was_told=False)
+    assert not c.active
+    assert not Continuation().active
+
+
+def test_doubt_lasts_doubt_frames_or_until_the_next_fix() -> None:
+    c = Continuation()
+    c.after_frame(let_go_for_doubt=True, told=False, in_stop=False, was_told=True)
+    _frames(c, DOUBT_FRAMES)
+    assert c.active
+    _frames(c, 1)
+    assert not c.active
+    c.doubted()  # a swap onto a place the told radius held
+    c.after_frame(let_go_for_doubt=False, told=True, in_stop=False, was_told=False)
+    assert not c.active
+
+
+def test_a_fix_let_go_in_a_stop_is_continued_for_stop_exit_frames_out_of_it() -> None:
+    c = Continuation()
+    # Told as the person came into the stop, let go there: the count starts ...
+    c.after_frame(let_go_for_doubt=False, told=False, in_stop=True, was_told=True)
+    _frames(c, 40, in_stop=True)  # ... and waits however long the ride takes,
+    assert c.active and c.out_of_stop == 0
+    _frames(c, STOP_EXIT_FRAMES)  # then runs out of the stop.
+    assert c.active
+    _frames(c, 1)
+    assert not c.active
+    # A stop entered with nothing told starts nothing.
+    _frames(c, 10, in_stop=True)
+    assert not c.active
+
+
+def test_checkpoints_keep_every_count_and_older_ones_resume() -> None:
+    c = Continuation(known_start=True)
+    c.after_frame(let_go_for_doubt=True, told=False, in_stop=True, was_told=True)
+    _frames(c, 3)
+    again = Continuation()
+    again.restore(c.checkpoint(levels=True))
+    assert (again.known_start, again.out_of_stop, again.since_doubt) == (True, 3, 3)
+    # One level: no stop to keep; 071f311's checkpoints (a flag beside the count) and
+    # older ones without any key continue nothing.
+    assert "out_of_stop" not in c.checkpoint(levels=False)
+    again.restore({"out_of_stop": 4, "fix_into_stop": False})
+    assert not again.active
+    again.restore({})
+    assert not again.active
