@@ -136,7 +136,9 @@ class Stream:
             if raw is None:
                 self._room.release()
                 continue
-            if len(raw.encode("utf-8")) > self.limit:
+            # A text of n characters is at most 4n bytes of UTF-8: only a text that may be
+            # over the limit is encoded to count them (a frame is far under it).
+            if len(raw) * 4 > self.limit and len(raw.encode("utf-8")) > self.limit:
                 self._answer_now(
                     error_message(
                         "message_too_large",

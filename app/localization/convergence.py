@@ -350,6 +350,46 @@ PROTECTION_FLOOR_M = 0.05
 _ORDER_MARGIN = 1e-12
 
 
+#: Up to this many values above the order statistic sought, :func:`_order_statistics`
+#: keeps the largest ones in a short sorted run instead of partitioning all of them.
+_TOP_RUN = 32
+
+
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _order_statistics(sq, lo, hi):  # fmt: skip  # pragma: no cover - compiled
+    """The ``lo``-th and ``hi``-th smallest of ``sq`` (ascending, from 0; ``hi`` is
+    ``lo`` or ``lo + 1``), the very values a partition picks.
+
+    The radius asks for the 99th percentile: the 990th of 1,000, so only the 11 largest
+    matter. They are kept in a sorted run while the values pass once (most fall below
+    its least and are passed over): 1.0 us against 3.4 us for ``np.partition`` (1,000
+    squared distances of a converged cloud). A NaN, which the run would pass over, or a
+    deeper statistic partitions as before."""
+    n = sq.shape[0]
+    top = n - lo  # the run: the top largest, ascending; sq's lo-th smallest is its first
+    if top <= _TOP_RUN:
+        run = np.full(top, -np.inf)
+        nan = False
+        for v in sq:
+            if v > run[0]:
+                j = 0
+                while j + 1 < top and run[j + 1] < v:
+                    run[j] = run[j + 1]
+                    j += 1
+                run[j] = v
+            elif v != v:
+                nan = True
+        if not nan:
+            return run[0], run[hi - lo]
+    part = np.partition(sq, lo)
+    s_hi = part[lo]
+    if hi > lo:  # the next order statistic: the least of those after lo
+        s_hi = part[lo + 1]
+        for k in range(lo + 2, n):
+            s_hi = min(s_hi, part[k])
+    return part[lo], s_hi
+
+
 @njit(cache=True, nogil=True, error_model="numpy")
 def _drawn_distances(x, y, w, n, u0, ex, ey, lo):  # fmt: skip  # pragma: no cover - compiled
     """The ``lo``-th and ``lo + 1``-th smallest of ``hypot(x - ex, y - ey)`` over ``n``
@@ -371,14 +411,9 @@ def _drawn_distances(x, y, w, n, u0, ex, ey, lo):  # fmt: skip  # pragma: no cov
         dy = y[i] - ey
         sq[k] = dx * dx + dy * dy
     hi = min(lo + 1, n - 1)
-    part = np.partition(sq, lo)
-    s_hi = part[lo]
-    if hi > lo:  # the next order statistic: the least of those after lo
-        s_hi = part[lo + 1]
-        for k in range(lo + 2, n):
-            s_hi = min(s_hi, part[k])
+    s_lo, s_hi = _order_statistics(sq, lo, hi)
     # (The 1e-300: squared distances that underflow, under 1e-154 m, all fall in it.)
-    low = part[lo] * (1.0 - _ORDER_MARGIN) - 1e-300
+    low = s_lo * (1.0 - _ORDER_MARGIN) - 1e-300
     high = s_hi * (1.0 + _ORDER_MARGIN) + 1e-300
     below = 0
     band = np.empty(n)

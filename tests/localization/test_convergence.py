@@ -185,3 +185,37 @@ def test_a_gain_taken_back_for_a_wide_radius_is_made_on_the_next_frame_that_pass
     assert gate.streak == streak  # the run towards the gain is not started over
     assert _feed(gate, GOOD)
     assert gate.held
+
+
+def test_the_order_statistics_are_a_partitions_to_the_bit() -> None:
+    """The radius's order statistics from the short sorted run are the ones the
+    partition before it picked (the reference below), ties and a NaN included."""
+    import numpy as np
+    from numba import njit
+
+    from app.localization.convergence import _order_statistics
+
+    @njit
+    def by_run(sq, lo, hi):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
+        return _order_statistics(sq, lo, hi)
+
+    @njit
+    def by_partition(sq, lo, hi):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
+        part = np.partition(sq, lo)
+        s_hi = part[lo]
+        if hi > lo:
+            s_hi = part[lo + 1]
+            for k in range(lo + 2, sq.shape[0]):
+                s_hi = min(s_hi, part[k])
+        return part[lo], s_hi
+
+    rng = np.random.default_rng(3)
+    for trial in range(400):
+        n = int(rng.integers(1, 1_200))
+        sq = rng.integers(0, 5, n).astype(float) if trial % 3 == 1 else rng.exponential(1.0, n)
+        if trial % 7 == 0:
+            sq[rng.integers(0, n)] = np.nan
+        lo = int(rng.integers(max(0, n - 40), n))
+        hi = min(lo + 1, n - 1)
+        got, want = np.array(by_run(sq, lo, hi)), np.array(by_partition(sq, lo, hi))
+        assert np.array_equal(got, want, equal_nan=True), (n, lo, got, want)

@@ -165,3 +165,25 @@ def test_protection_radius_takes_the_quantile_of_a_systematic_resample() -> None
         need = 1.0 if share >= 1.0 - PROTECTION_PROBABILITY else 0.99 / (1.0 - share)
         want = PROTECTION_SCALE * reference_protection_quantile(x, y, w, ex, ey, need, u0)
         assert got == want + PROTECTION_FLOOR_M, (trial, m, share)
+
+
+def test_a_subsamples_unit_vectors_are_the_whole_clouds_gathered() -> None:
+    """The subsample takes its headings' unit vectors from the whole cloud's
+    (estimate._clusters): the same bits as computing them from its own headings,
+    whatever the arrays' lengths (a vectorized loop and its remainder alike)."""
+    from numba import njit
+
+    from app.localization.estimate import _unit_vectors
+
+    @njit
+    def unit_vectors(theta):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
+        return _unit_vectors(theta)
+
+    rng = np.random.default_rng(11)
+    for n in (*range(1, 70), 999, 1_000, 2_000, 2_001):
+        theta = rng.uniform(-np.pi, np.pi, n)
+        idx = np.sort(rng.integers(0, n, max(1, n // 2)))
+        cos_all, sin_all = unit_vectors(theta)
+        cos_sub, sin_sub = unit_vectors(np.ascontiguousarray(theta[idx]))
+        assert np.array_equal(cos_all[idx], cos_sub)
+        assert np.array_equal(sin_all[idx], sin_sub)

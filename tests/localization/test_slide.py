@@ -193,3 +193,50 @@ def test_a_drag_across_the_walk_hides_in_the_anchor_heading_but_not_in_the_slip(
     copy.restore(vio.checkpoint())
     copy.moved(Odometry(0.25, 0.0, 0.0))
     assert copy.slide_m(*now) == pytest.approx(slip, abs=1e-9)
+
+
+def _slip_recomputed(check: OdometryCheck, x: float, y: float) -> float:
+    """The slip with every frame's share computed again (the code before the shares
+    were kept), the reference the kept shares must match to the bit."""
+    if check.slip_share is None:
+        return 0.0
+    sx = sy = walked = 0.0
+    nx, ny, move = x, y, check._move
+    for _, estimate, _, before in reversed(check._past):
+        if estimate is None or move is None:
+            break
+        ex, ey, et = estimate
+        forward, left = move
+        c, s = math.cos(et), math.sin(et)
+        sx += (nx - ex) - (c * forward - s * left)
+        sy += (ny - ey) - (s * forward + c * left)
+        walked += math.hypot(forward, left)
+        nx, ny, move = ex, ey, before
+    return max(0.0, math.hypot(sx, sy) - check.slip_share * walked)
+
+
+def test_the_kept_slip_shares_give_the_slip_computed_afresh_to_the_bit() -> None:
+    rng = np.random.default_rng(7)
+    check = OdometryCheck(slip_share=0.05)
+    x = y = theta = 0.0
+    for _ in range(600):
+        if rng.random() < 0.9:
+            odometry = Odometry(*rng.normal([0.1, 0.0, 0.0], [0.05, 0.02, 0.1]))
+            check.moved(odometry)
+        x, y = x + rng.normal(0.1, 0.05), y + rng.normal(0.0, 0.05)
+        theta = float(rng.uniform(-math.pi, math.pi))
+        assert check._slip_m(x, y) == _slip_recomputed(check, x, y)
+        converged, candidate = rng.random() < 0.8, rng.random() < 0.1
+        check.add(x, y, theta, converged, candidate)
+        roll = rng.random()
+        if roll < 0.03:
+            check.drop_candidates()
+        elif roll < 0.05:
+            restored = OdometryCheck(slip_share=0.05)
+            restored.restore(check.checkpoint())
+            check = restored
+        elif roll < 0.06:
+            check.reset()
+        probe_x, probe_y = x + rng.normal(0.0, 0.1), y + rng.normal(0.0, 0.1)
+        assert check._slip_m(probe_x, probe_y) == _slip_recomputed(check, probe_x, probe_y)
+        assert check.slide_m(probe_x, probe_y) >= check._slip_m(probe_x, probe_y)
