@@ -646,6 +646,7 @@ class ParticleFilter:
                 self._gate.withhold()
                 est = est.with_converged(False)
                 withheld = True
+        # (A told frame never reads in_stop: the guard only spares the stop lookup.)
         self.continuation.after_frame(
             let_go_for_doubt=was_held and self._gate.let_go_for_doubt,
             told=est.converged,
