@@ -4,7 +4,7 @@ A first fix is told only once its protection radius is narrow
 (:data:`~app.localization.convergence.GAIN_PROTECTION_M`): a person who has heard
 nothing yet loses little by waiting. A fix that takes up one the person was just told, at
 the place it left off, is not a first fix, and holding it to that radius only keeps a
-right answer from them. :class:`Continuation` keeps the three such cases the filter
+right answer from them. :class:`Continuation` keeps the four such cases the filter
 knows, each from the moment it starts to the next fix or its deadline:
 
 * a **known start** (the app's ``initial_pose``) until the first fix: that fix continues
@@ -13,6 +13,10 @@ knows, each from the moment it starts to the next fix or its deadline:
   sight);
 * a fix told as the person came into a connector's stop (or rode between levels) and
   let go there, for ``STOP_EXIT_FRAMES`` frames out of the stop;
+* a ride the belief placed the person in one connector for, though it held no fix
+  (:meth:`~app.localization.floors.FloorTracker.pinned_stop`: the barometer says they
+  rode, the belief says which connector), for ``STOP_EXIT_FRAMES`` frames out of the
+  stop, whose car or flight the bearings' geometry carries as a fix;
 * a fix let go for doubt alone (an alternative gained probability, then was refuted;
   or the evidence swapped the belief onto a place within the told radius), for
   ``DOUBT_FRAMES`` frames.
@@ -72,6 +76,11 @@ class Continuation:
     def active(self) -> bool:
         """Whether a gain now continues a fix (and is not held to the narrow radius)."""
         return self.known_start or self.out_of_stop is not None or self.since_doubt is not None
+
+    def rode_pinned(self) -> None:
+        """A ride the belief placed the person in one connector for: its exit is taken
+        up as a told fix let go in the stop is."""
+        self.out_of_stop = 0
 
     def doubted(self) -> None:
         """A fix was let go for doubt alone (or swapped onto a place its radius held)."""

@@ -224,14 +224,7 @@ class BearingGeometry:
         its own). A geometry bound better than the carried one becomes the new fix.
         inf while nothing fixes a position."""
         geometry = self._geometry_radius_m(x, y)
-        carried = math.inf
-        if self._fix is not None:
-            fx, fy, _ = self._fix
-            carried = (
-                math.hypot(x - fx, y - fy)
-                + self._fix_radius_m
-                + self.drift * (self.walked_m - self._fix_walked_m)
-            )
+        carried = self._carried_m(x, y)
         if geometry < carried:
             self._fix, self._fix_radius_m, self._fix_walked_m = (
                 (x, y, theta),
@@ -240,6 +233,21 @@ class BearingGeometry:
             )
             return geometry
         return carried
+
+    def _carried_m(self, x: float, y: float) -> float:
+        """The carried fix's bound at (x, y): the distance to it, its radius then, and
+        the odometry's drift since (inf without a fix)."""
+        if self._fix is None:
+            return math.inf
+        fx, fy, _ = self._fix
+        walked = self.walked_m - self._fix_walked_m
+        return math.hypot(x - fx, y - fy) + self._fix_radius_m + self.drift * walked
+
+    def offer_fix(self, pose: tuple[float, float, float], radius_m: float) -> None:
+        """A fix known otherwise (the stop of the connector a ride ended in): carried
+        from now on, unless the carried one already bounds the person tighter there."""
+        if self._carried_m(pose[0], pose[1]) > radius_m:
+            self._fix, self._fix_radius_m, self._fix_walked_m = pose, radius_m, self.walked_m
 
     def add(
         self,

@@ -36,7 +36,12 @@ from app.localization.dilution import warm_up as warm_up_dilution
 from app.localization.estimate import estimate_pose, with_alternatives
 from app.localization.evidence import EvidenceTracker
 from app.localization.fastmath import PAIRWISE_BLOCK, hypot, pairwise_sum
-from app.localization.floors import LEVEL_SURE_SHARE, AltitudeReading, FloorTracker
+from app.localization.floors import (
+    ARRIVAL_SHARE,
+    LEVEL_SURE_SHARE,
+    AltitudeReading,
+    FloorTracker,
+)
 from app.localization.kld import kld_sample_size
 from app.localization.latency import DEFAULT_FRAME_S, CaptureClock, moved_forward
 from app.localization.models import (
@@ -286,9 +291,16 @@ class ParticleFilter:
         pts = self.map.free_space.sample(n, self.rng)
         return pts[:, 0].copy(), pts[:, 1].copy(), self.rng.uniform(-np.pi, np.pi, n)
 
-    def _restart_global(self) -> None:
+    def _restart_global(self, after_ride: bool = False) -> None:
+        """Start again from no knowledge; ``after_ride``: a level change the belief
+        could not make, whose rider stands where a connector let them off
+        (:meth:`FloorTracker.arrivals`, a share ``ARRIVAL_SHARE`` of the new cloud)."""
         n = self.config.particles
         self.x, self.y, self.theta = self._anywhere(n)
+        if after_ride and self.floors is not None:
+            ax, ay = self.floors.arrivals(int(ARRIVAL_SHARE * n), self.rng)
+            k = ax.shape[0]
+            self.x[:k], self.y[:k] = ax, ay
         self.log_w = np.zeros(n, dtype=np.float64)
         self._seed_from_observation = self.config.recovery
         self._wide_first = self.floors is not None
@@ -487,6 +499,9 @@ class ParticleFilter:
     ) -> None:
         """:meth:`step` in capture time: ``odometry`` is the motion between captures."""
         rode = False  # a ride between levels ended with this frame's level change
+        # A ride the belief was not located for, but placed the person in one connector
+        # for (its stop: centre and radius), FloorTracker.pinned_stop.
+        pinned: tuple[float, float, float] | None = None
         self.predict(odometry)
         if odometry is not None:
             self.geometry.moved(odometry)
@@ -500,7 +515,7 @@ class ParticleFilter:
                 self.x, self.y, self.log_w, altitude, self.rng
             )
             if contradicted:
-                self._restart_global()
+                self._restart_global(after_ride=True)
             self.log_w = self.floors.rule_out_levels(self.x, self.log_w)
             if not contradicted and self.floors.changed:
                 # The fix the bearings' geometry gave rides along with the person.
@@ -519,6 +534,10 @@ class ParticleFilter:
                     if self.floors.first_change:
                         self._located_at_ride = self._gate.held
                     rode = self._located_at_ride
+                if not rode:
+                    # Not located, but placed in one connector by a belief that rode it:
+                    # its whole stop (not the cloud's point in it) is where they are.
+                    pinned = self.floors.pinned_stop(self.x, self.y, self.weights)
         # During a blind hold (decided below) the detections weigh nothing.
         mean_ll, w = self._correct(detections, weigh=not self._blind_hold)
         if heading is not None:
@@ -528,6 +547,12 @@ class ParticleFilter:
             w = self.weights
         ess = effective_sample_size(w)
         raw = estimate_pose(self.x, self.y, self.theta, w, ess=ess, rng=self.rng)
+        if pinned is not None:
+            # The person left that connector: its stop is a fix to carry along, and the
+            # first fix out of it continues it (the belief's heading rode along).
+            cx, cy, radius = pinned
+            self.geometry.offer_fix((cx, cy, raw.theta_rad), radius)
+            self.continuation.rode_pinned()
         if rode and self.evidence is not None:
             # A look-alike place elsewhere on the new level (the top of the other
             # escalator) is no alternative for someone who just rode this connector:

@@ -12,6 +12,7 @@ from app.localization.continuation import STOP_EXIT_FRAMES
 from app.localization.convergence import GAIN_PROTECTION_M
 from app.localization.filter import ParticleFilter
 from app.localization.floors import (
+    ARRIVAL_SHARE,
     BLIND_RATE,
     LEVEL_SURE_FRAMES,
     STAY_LIKELIHOOD,
@@ -29,6 +30,7 @@ from tests.helpers import seen_from
 
 VENUE = venue_map()
 PITCH = VENUE.layout.pitch_m
+RNG = np.random.default_rng(0)
 
 
 def particles(x: float, y: float, level: int, n: int = 200) -> tuple[np.ndarray, np.ndarray]:
@@ -341,6 +343,130 @@ def test_a_ride_the_belief_missed_rules_out_the_floors_it_cannot_have_reached() 
     feed(tracker, *particles(6.0, 11.0, 0), [0.0] * 5 + list(np.linspace(0, 4.5, 25)))
     tracker.apply(x, y, log_w, None, np.random.default_rng(0))
     assert tracker.level_allowed() is None
+
+
+def _stop_ids(tracker: FloorTracker, x: np.ndarray, y: np.ndarray) -> list[str]:
+    """Per plane point, the id of the connector whose stop it stands in ('' for none)."""
+    ids = [conn.id for conn in VENUE.layout.connectors for _ in conn.stops]
+    return [ids[s] if s >= 0 else "" for s in tracker.stop_of(x, y).tolist()]
+
+
+@pytest.mark.parametrize(
+    ("per_frame", "lift_share"),
+    # A storey at a lift's 1 m/s, or a walker's 0.5 m/s up an escalator.
+    [(0.2, None), (0.1, 0.5)],
+)
+def test_a_ride_the_belief_missed_lets_it_off_where_the_connectors_going_up_end(
+    per_frame: float, lift_share: float | None
+) -> None:
+    """A level change no particle could make still says the person just left a
+    connector: the new cloud's arrivals stand in the stops of the connectors going that
+    way (the up escalator's head, never the down one's), on a level the barometer leaves
+    possible, in free space."""
+    from app.localization.floors import WALKED_AT_LIFT_RATE
+
+    tracker = FloorTracker(VENUE)
+    climb = list(100.0 + per_frame * np.arange(1, int(4.5 / per_frame) + 1))
+    x, y = particles(6.0, 11.0, 0)  # in the hall: the belief missed the ride
+    _, _, contradicted = feed(tracker, x, y, [100.0] * 10 + climb)
+    assert contradicted and tracker.net_storeys == 1
+    ax, ay = tracker.arrivals(4000, np.random.default_rng(1))
+    assert ax.size == 4000
+    ids = _stop_ids(tracker, ax, ay)
+    assert "" not in ids and "esc-down" not in ids
+    assert VENUE.free_space.is_free(ax, ay).all()
+    levels = VENUE.layout.level_of_plane_x(ax)
+    assert set(levels.tolist()) == {1, 2}  # from the Ground Floor or the First, going up
+    # Each stop a connector leaves upwards draws an equal share, a walked one
+    # WALKED_AT_LIFT_RATE of a lift's at a lift's rate: lift 0->1 and 1->2, stairs 0->1
+    # and 1->2, the up escalator 0->1.
+    walked = WALKED_AT_LIFT_RATE if lift_share is None else 1.0
+    expected = 2.0 / (2.0 + 3.0 * walked)
+    assert ids.count("lift-a") / len(ids) == pytest.approx(expected, abs=0.03)
+    assert ids.count("esc-up") / len(ids) == pytest.approx(walked / (2 + 3 * walked), abs=0.03)
+
+
+def test_a_ride_down_the_belief_missed_lets_it_off_at_the_foot_of_the_down_escalator() -> None:
+    tracker = FloorTracker(VENUE)
+    x, y = particles(6.0, 11.0, 1)  # the First Floor's hall
+    descent = list(104.5 - 0.1 * np.arange(1, 46))
+    _, _, contradicted = feed(tracker, x, y, [104.5] * 10 + descent)
+    assert contradicted and tracker.net_storeys == -1
+    ax, ay = tracker.arrivals(3000, np.random.default_rng(2))
+    ids = _stop_ids(tracker, ax, ay)
+    assert "" not in ids and "esc-up" not in ids and "esc-down" in ids
+    assert set(VENUE.layout.level_of_plane_x(ax).tolist()) == {0, 1}
+
+
+def test_a_filter_whose_belief_missed_a_ride_starts_again_at_the_connectors_exits() -> None:
+    """A located belief in the hall, then the barometer rises a storey at a lift's rate
+    (the person stepped into the lift unseen): the restart puts at least ARRIVAL_SHARE
+    of the weight in the stops a ride up ends in, instead of their share of the floor
+    area (a few per cent)."""
+    start = InitialPose(6.0, 11.0, 0.0, 0.1, 0.1)
+    pf = ParticleFilter(
+        VENUE, FilterConfig(particles=4000), rng=np.random.default_rng(3), initial_pose=start
+    )
+    climb = list(100.0 + 0.2 * np.arange(1, 23))
+    for r in [100.0] * 10 + climb:
+        pf.step(None, [], altitude=AltitudeReading(float(r), 0.3))
+        if pf.restarts:
+            break
+    assert pf.restarts == 1
+    assert pf.floors is not None
+    inside = pf.floors.stop_of(pf.x, pf.y) >= 0
+    w = pf.weights
+    # (The rest, spread over the floors, weighs the Ground Floor out: at least that share.)
+    assert ARRIVAL_SHARE <= float(w[inside].sum()) < 0.75
+    assert float(w[VENUE.layout.level_of_plane_x(pf.x) == 0].sum()) < 1e-3
+
+
+def test_a_ride_the_belief_made_in_one_connector_pins_it_to_that_stop() -> None:
+    """Most of the belief in the lift car, the barometer rises a storey: the person left
+    the lift, whose stop is then a fix (its centre, the circle holding the car)."""
+    rise = [100.0] * 10 + list(np.linspace(100.0, 104.5, 25)) + [104.5] * 5
+
+    def pins(lift: int, hall: int, stairs: int = 0) -> list[tuple[float, float, float]]:
+        """The stops pinned frame by frame, particles in the lift, hall and stairs."""
+        tracker = FloorTracker(VENUE)
+        parts = [particles(1.5, 1.5, 0, lift), particles(6.0, 11.0, 0, hall)]
+        parts.append(particles(22.0, 2.0, 0, stairs))
+        x, y = (np.concatenate([p[i] for p in parts]) for i in (0, 1))
+        log_w = np.zeros(x.shape)
+        found = []
+        for r in rise:
+            x, log_w, _ = tracker.apply(x, y, log_w, AltitudeReading(r, 0.5), RNG)
+            pin = tracker.pinned_stop(x, y, np.exp(log_w - log_w.max()))
+            if pin is not None:
+                found.append(pin)
+        return found
+
+    pinned = pins(150, 50)
+    assert len(pinned) == 1  # on the change's frame only
+    cx, cy, radius = pinned[0]
+    assert (cx, cy) == pytest.approx((1.5 + PITCH, 1.5))
+    assert radius == pytest.approx(math.hypot(1.1, 1.1))
+    # The belief mostly in the hall (the person may have taken any connector it missed),
+    # or split between the lift and the stairs: no stop is pinned.
+    assert pins(50, 150) == []
+    assert pins(100, 0, 100) == []
+
+
+def test_a_belief_not_located_but_riding_the_lift_continues_at_its_exit() -> None:
+    """A belief all in the lift car that had not gained a fix (a narrow camera facing
+    the car's wall) rides up: the first fix out of the stop continues the ride's, and the
+    bearings' geometry carries the car as a fix."""
+    pf = ParticleFilter(VENUE, FilterConfig(particles=1000), rng=np.random.default_rng(4))
+    rng = np.random.default_rng(5)
+    pf.x, pf.y = rng.uniform(0.6, 2.4, 1000), rng.uniform(0.6, 2.4, 1000)
+    pf.theta = rng.uniform(-np.pi, np.pi, 1000)
+    pf.log_w = np.zeros(1000)
+    assert not pf.continuation.active
+    for r in [0.0] * 10 + list(np.linspace(0.0, 4.5, 25)) + [4.5] * 5:
+        pf.step(None, [], altitude=AltitudeReading(float(r), 0.3))
+    assert pf.floors is not None and pf.floors.changes == 1 and pf.restarts == 0
+    assert pf.continuation.active
+    assert pf.geometry.radius_m(1.5 + PITCH, 1.5, 0.0) <= math.hypot(1.1, 1.1) + 1e-9
 
 
 def _agree(tracker: FloorTracker, level: int, frames: int) -> list[bool]:
