@@ -443,6 +443,8 @@ class ParticleFilter:
             nx, ny, nt = self.sensor.sample_poses(n_new, obs, self.rng)
             slots = self.rng.choice(n_target, size=n_new, replace=False)
             self.x[slots], self.y[slots], self.theta[slots] = nx, ny, nt
+            if self.floors is not None:
+                self.log_w[slots] = self.floors.injected_log_w(nx)
         return True
 
     def step(

@@ -494,6 +494,21 @@ class FloorTracker:
         level = self.layout.level_of_plane_x(x)
         return log_w + np.where(allowed[level], 0.0, np.log(STAY_LIKELIHOOD))
 
+    def injected_log_w(self, x: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Log-weights for particles the recovery injects at plane x: as unlikely as one
+        that stayed through a level change on a level :meth:`place_allowed` rules out
+        (the barometer's count, the level it carries a confirmed fix to), else 0. What
+        the view suggests on another floor is no reason to believe the barometer missed
+        a ride (measured on the venue suite, PDR grade at 180 deg: a fix held into the
+        lift car, its view blank, swapped for places upstairs that injected particles
+        found to fit the few boxes, 26 s lost after the ride)."""
+        level = self.layout.level_of_plane_x(x)
+        allowed = self.level_allowed()
+        ok = np.ones(len(self.layout.levels), dtype=bool) if allowed is None else allowed.copy()
+        if self.carried_level is not None and not self.blind:
+            ok &= np.arange(ok.size) == self.carried_level
+        return np.where(ok[level], 0.0, np.log(STAY_LIKELIHOOD))
+
     def place_allowed(self, x: float, y: float) -> bool:
         """Whether the evidence search may keep an alternative at plane point (x, y):
         not on a level the barometer's steps rule out (:meth:`level_allowed`), nor on

@@ -490,6 +490,23 @@ def _fix_then_ride_up(tracker: FloorTracker) -> None:
     assert tracker.net_storeys == 1 and not tracker.in_transit
 
 
+def test_the_recovery_injects_on_another_floor_only_as_a_missed_ride_would_be() -> None:
+    """Particles the recovery draws where the boxes fit weigh as one that stayed through
+    a level change, on a floor other than the one the barometer carries a fix to; on
+    every floor while none is carried, or without altitude."""
+    on = [particles(6.0, 11.0, lv, 1)[0][0] for lv in range(3)]
+    tracker = FloorTracker(VENUE)
+    x, y = particles(1.5, 1.5, 0)
+    feed(tracker, x, y, [0.0] * 5)
+    assert tracker.injected_log_w(np.array(on)).tolist() == [0.0, 0.0, 0.0]  # no fix yet
+    _fix_then_ride_up(tracker)
+    assert tracker.carried_level == 1
+    stay = math.log(STAY_LIKELIHOOD)
+    assert tracker.injected_log_w(np.array(on)).tolist() == [stay, 0.0, stay]
+    tracker.apply(x, y, np.zeros(x.size), None, RNG)  # a frame without altitude
+    assert tracker.injected_log_w(np.array(on)).tolist() == [0.0, 0.0, 0.0]
+
+
 def test_the_floor_the_barometer_counted_from_a_fix_is_confirmed_once_the_belief_agrees() -> None:
     """Through a phone's narrow camera the place on the new floor takes seconds of
     looking after a lift ride; the floor does not: one storey up from a fix on the
