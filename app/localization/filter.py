@@ -513,8 +513,12 @@ class ParticleFilter:
             # ... nor to hold blind: out of the car, the detections are evidence again
             self._blind_hold = False
         if self.floors is not None:
+            told = self.estimate
+            fix = None
+            if self._gate.held and told.converged and told.protection_m is not None:
+                fix = (told.x, told.y, told.protection_m)
             self.x, self.log_w, contradicted = self.floors.apply(
-                self.x, self.y, self.log_w, altitude, self.rng
+                self.x, self.y, self.log_w, altitude, self.rng, fix
             )
             if contradicted:
                 self._restart_global(after_ride=True)

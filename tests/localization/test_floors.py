@@ -315,6 +315,35 @@ def test_a_ride_carries_the_bearings_geometry_fix_along() -> None:
     assert pf.geometry.radius_m(1.5, 1.5, 0.0) > PITCH / 2
 
 
+def test_a_storey_the_barometer_shows_far_from_every_connector_is_a_jump_of_its_reference() -> None:
+    """A fix held in the hall, 5 m from the nearest stop with a 1 m radius: the person
+    cannot have ridden, so a storey's rise is the barometer's reference moving (a
+    pressurized zone, a glitch). The particles stay, nothing is counted, and the anchor
+    follows; near the lift the same rise is a ride the belief missed, as before."""
+    rise = [0.0] * 5 + [4.5] * 10
+    hall = FloorTracker(VENUE)
+    rest = [4.5] * 150  # then the anchor follows the new reference
+    x, y = particles(6.0, 11.0, 0)
+    log_w = np.zeros(x.size)
+    for r in rise + rest:
+        new_x, new_w, contradicted = hall.apply(
+            x, y, log_w, AltitudeReading(r, 0.5), RNG, fix=(6.0, 11.0, 1.0)
+        )
+        assert not contradicted and (new_x == x).all() and (new_w == log_w).all()
+    assert hall.reference_jumps == 1 and hall.net_storeys == 0 and hall.changes == 0
+    assert hall.anchor_m is not None and abs(hall.anchor_m - 4.5) < 0.1
+    # A fix by the lift car (1 m from its stop, radius 0.5 m): the belief missed a ride.
+    lift = FloorTracker(VENUE)
+    x, y = particles(1.5, 4.1, 0)
+    contradicted_once = False
+    for r in rise:
+        _, _, c = lift.apply(
+            x, y, np.zeros(x.size), AltitudeReading(r, 0.5), RNG, fix=(1.5, 4.1, 0.5)
+        )
+        contradicted_once |= c
+    assert contradicted_once and lift.reference_jumps == 0 and lift.net_storeys == 1
+
+
 def test_a_ride_the_belief_missed_rules_out_the_floors_it_cannot_have_reached() -> None:
     """Gone up a storey from wherever they started, a person is on no lowest floor: a
     belief that was all outside the lift (not yet located) must not settle on a
