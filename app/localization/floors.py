@@ -249,6 +249,7 @@ class FloorTracker:
         #: fell at a lift's rate then (:meth:`arrivals`).
         self._last_up = True
         self._last_at_lift_rate = False
+        #: The share of the weight that made the last level change (:meth:`pinned_stop`).
         self.moved_share = 0.0
         #: Level changes the barometer showed far from every connector, taken for a
         #: jump of its reference (:meth:`_jumped`).
@@ -378,7 +379,6 @@ class FloorTracker:
             self._changed_in_transit = False
             self.reference_jumps += 1
             return x, log_w, False
-        #: The share of the weight that made this change (:meth:`pinned_stop`).
         self.moved_share = moved_share
         stayed = np.ones(x.shape, dtype=bool)
         stayed[moved] = False
