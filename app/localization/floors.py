@@ -88,7 +88,12 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from app.maps.geometry import first_polygon, polygon_edges
+from app.maps.geometry import (
+    first_polygon,
+    point_segment_distance,
+    points_in_polygon,
+    polygon_edges,
+)
 from app.maps.model import SemanticMap
 
 #: Readings averaged for the level-change test (at 5 frames/s: one second).
@@ -116,6 +121,7 @@ DRIFT_SHARE = 0.25
 DRIFT_GAIN = 0.02
 #: Likelihood of the barometer's level change for a particle that could not change level.
 STAY_LIKELIHOOD = 1e-4
+STAY_LOG = float(np.log(STAY_LIKELIHOOD))
 #: A level change that less than this share of the weight could make contradicts the
 #: belief: the filter starts again (over every level).
 CONTRADICTED_SHARE = 0.01
@@ -431,11 +437,7 @@ class FloorTracker:
         if fix is None or not self._starts.size:
             return False
         x, y, radius = fix
-        e = self._edges
-        dx, dy = e[:, 2] - e[:, 0], e[:, 3] - e[:, 1]
-        length2 = np.maximum(dx * dx + dy * dy, 1e-12)
-        t = np.clip(((x - e[:, 0]) * dx + (y - e[:, 1]) * dy) / length2, 0.0, 1.0)
-        nearest = float(np.min(np.hypot(e[:, 0] + t * dx - x, e[:, 1] + t * dy - y)))
+        nearest = float(point_segment_distance([[x, y]], self._edges).min())
         return nearest > radius + JUMP_MARGIN_M and not self.in_stop(x, y)
 
     def arrivals(
@@ -464,7 +466,6 @@ class FloorTracker:
         xs, ys = [], []
         for s, target, want in zip(source.tolist(), to.tolist(), counts.tolist(), strict=True):
             poly = self._polygons[s]
-            edges, starts = polygon_edges([poly])
             lo, hi = poly.min(axis=0), poly.max(axis=0)
             got: list[NDArray[np.float64]] = []
             have = 0
@@ -472,7 +473,7 @@ class FloorTracker:
                 if have >= want:
                     break
                 pts = rng.uniform(lo, hi, size=(2 * (want - have) + 16, 2))
-                pts = pts[first_polygon(pts, edges, starts) == 0]
+                pts = pts[points_in_polygon(pts, poly)]
                 pts = pts[self.free.is_free(pts[:, 0], pts[:, 1])]
                 px, landed = self._move(
                     pts[:, 0], pts[:, 1], np.arange(len(pts)), np.full(len(pts), target)
@@ -541,12 +542,7 @@ class FloorTracker:
         a ride (measured on the venue suite, PDR grade at 180 deg: a fix held into the
         lift car, its view blank, swapped for places upstairs that injected particles
         found to fit the few boxes, 26 s lost after the ride)."""
-        level = self.layout.level_of_plane_x(x)
-        allowed = self.level_allowed()
-        ok = np.ones(len(self.layout.levels), dtype=bool) if allowed is None else allowed.copy()
-        if self.carried_level is not None and not self.blind:
-            ok &= np.arange(ok.size) == self.carried_level
-        return np.where(ok[level], 0.0, np.log(STAY_LIKELIHOOD))
+        return np.where(self._place_levels()[self.layout.level_of_plane_x(x)], 0.0, STAY_LOG)
 
     def place_allowed(self, x: float, y: float) -> bool:
         """Whether the evidence search may keep an alternative at plane point (x, y):
@@ -559,13 +555,15 @@ class FloorTracker:
         suite's 66-degree camera: about 4 % of the Ground Floor's walking frames).
         Anywhere while no level is carried (no fix yet, a broken chain, no barometer:
         then only what is seen tells the floors apart)."""
-        level = int(self.layout.level_of_plane_x(np.array(x)))
+        return bool(self._place_levels()[int(self.layout.level_of_plane_x(np.array(x)))])
+
+    def _place_levels(self) -> NDArray[np.bool_]:
+        """Per level, whether a place may be on it (:meth:`place_allowed`)."""
         allowed = self.level_allowed()
-        if allowed is not None and not allowed[level]:
-            return False
-        if self.carried_level is None or self.blind:
-            return True
-        return level == self.carried_level
+        ok = np.ones(len(self.layout.levels), dtype=bool) if allowed is None else allowed
+        if self.carried_level is not None and not self.blind:
+            ok = ok & (np.arange(ok.size) == self.carried_level)
+        return ok
 
     def _blind(
         self, x: NDArray[np.float64], y: NDArray[np.float64], rng: np.random.Generator
