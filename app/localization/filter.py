@@ -720,7 +720,14 @@ class ParticleFilter:
         if not est.converged and streak <= 1:
             self.odometry_check.drop_candidates()
         candidate = not est.converged and streak > 0
-        self.odometry_check.add(raw.x, raw.y, raw.theta_rad, est.converged, candidate)
+        # While a fix let go for doubt may be taken up without a narrow radius
+        # (continuation.DOUBT_FRAMES), every frame is an anchor as a told one is: the
+        # regain is held to the told fix carried by the odometry (its slip counted over
+        # the frames of doubt too), not to a run of candidates too young to compare with.
+        doubt = self.continuation.since_doubt is not None
+        self.odometry_check.add(
+            raw.x, raw.y, raw.theta_rad, est.converged or doubt, candidate and not doubt
+        )
         if self.evidence is not None:
             est = with_alternatives(est, self.evidence.hypotheses(), share)
         if est.converged:
