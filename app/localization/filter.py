@@ -120,6 +120,14 @@ FORGIVE_PROTECTION_M = 1.0
 #: it (half of the gate's ``hold_slide_m``). Measured on the phone suite's stale office
 #: map, a fix dragged 0.8 m off took a present door for gone and went on 1.3-1.8 m off.
 FORGIVE_SLIDE_M = 0.25
+#: Frames in a row a first fix's radius must be narrow (GAIN_PROTECTION_M) before it is
+#: told. Through a 66-degree camera the bearings' geometry swings the radius between 1.5
+#: and 6 m from one frame to the next: measured on the phone suite's stale office, fixes
+#: 7 m off (a look-alike place a moved object favoured) were told on the one frame it
+#: dipped to 1.44-1.48 m, and held at 5-6 m from the next. Phone suite, 97 -> 11
+#: confidently-wrong frames with 2, availability 0.88 as before; with 3, 25 frames and
+#: 66-degree cameras 0.05-0.08 less available.
+NARROW_FRAMES = 2
 
 
 class ParticleFilter:
@@ -244,6 +252,8 @@ class ParticleFilter:
         #: A fix held in a connector's stop (a lift car) as its view went blind, still
         #: seeing nothing there: detections are not weighed (see _step).
         self._blind_hold = False
+        #: Frames in a row a gain was tested with a narrow radius (NARROW_FRAMES).
+        self._narrow_frames = 0
         self.frames_without_evidence = 0
         #: How often every particle became impossible and the filter started again.
         self.restarts = 0
@@ -656,6 +666,8 @@ class ParticleFilter:
         withheld = False
         if est.converged and transit and not kept:  # the stop's rules above
             est = est.with_converged(False)
+        if not gained:
+            self._narrow_frames = 0
         if est.converged or gained:
             reach = self.evidence.farthest_m(est.x, est.y) if self.evidence is not None else 0.0
             radius = protection_radius(self.x, self.y, w, est, self.rng, share, reach)
@@ -668,12 +680,15 @@ class ParticleFilter:
             radius = max(radius, min(max(fix_m, reach), self._map_span_m))
             fit = None if self.quality is None else self.quality.fit
             protection = widened_radius(radius, fit, slide_m)
-            if gained and not self.continuation.active and protection > GAIN_PROTECTION_M:
-                # A fix is gained only once its radius is narrow (GAIN_PROTECTION_M); the
-                # gate tries again on the next frame (ConvergenceGate.withhold). A fix
-                # the gate holds is not tested again (held through a connector's stop,
-                # it is told on leaving it, however its radius grew on the way), nor one
-                # that continues a fix or a known start (app.localization.continuation).
+            narrow = protection <= GAIN_PROTECTION_M
+            self._narrow_frames = self._narrow_frames + 1 if gained and narrow else 0
+            if gained and not self.continuation.active and self._narrow_frames < NARROW_FRAMES:
+                # A fix is gained only once its radius has been narrow (GAIN_PROTECTION_M)
+                # for NARROW_FRAMES frames in a row; the gate tries again on the next
+                # frame (ConvergenceGate.withhold). A fix the gate holds is not tested
+                # again (held through a connector's stop, it is told on leaving it,
+                # however its radius grew on the way), nor one that continues a fix or a
+                # known start (app.localization.continuation).
                 self._gate.withhold()
                 est = est.with_converged(False)
                 withheld = True
@@ -851,6 +866,7 @@ class ParticleFilter:
             "unseen": None if self.unseen is None else self.unseen.checkpoint(),
             "frames_without_evidence": self.frames_without_evidence,
             "restarts": self.restarts,
+            "narrow_frames": self._narrow_frames,
             **self.continuation.checkpoint(levels=self.floors is not None),
             "steps": self.steps,
             "estimate": self.estimate,
@@ -899,6 +915,7 @@ class ParticleFilter:
         self._after_ride = bool(state.get("after_ride", False))
         self.frames_without_evidence = int(state["frames_without_evidence"])
         self.restarts = int(state["restarts"])
+        self._narrow_frames = int(state.get("narrow_frames", 0))
         self.steps = int(state["steps"])
         self.estimate = from_plain(Estimate, state["estimate"])
         self.continuation.restore(state)

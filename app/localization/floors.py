@@ -224,6 +224,8 @@ class FloorTracker:
         #: Storeys the barometer's steps have taken the person up (down: negative) since
         #: the chain of readings began (a frame without altitude breaks it).
         self.net_storeys = 0
+        #: How often the count of storeys was dropped as wrong (after_estimate, apply).
+        self.counts_dropped = 0
         self.level_probability: float | None = None
         #: Whether the barometer says the person is between floors (the smoothed
         #: altitude more than ``DRIFT_SHARE`` of a storey from the anchor).
@@ -408,6 +410,12 @@ class FloorTracker:
             self.anchor_m += threshold * 2.0 if up else -threshold * 2.0
         self.changes += 1
         self.net_storeys += 1 if up else -1
+        allowed = self.level_allowed()
+        if allowed is not None and not allowed.any():
+            # More storeys one way than the venue has: the count went wrong somewhere (a
+            # jump of the barometer's reference taken for a ride) and says nothing.
+            self.net_storeys = 0
+            self.counts_dropped += 1
         self.changed = True
         #: Whether this change is the first of its ride (a ride of several floors makes
         #: several).
@@ -649,6 +657,15 @@ class FloorTracker:
         if confirmed:
             self.confirmed_level = mine
         if converged and not self.blind:
+            allowed = self.level_allowed()
+            if allowed is not None and not allowed[mine]:
+                # A fix passed every test of the gate on a level the count of storeys
+                # rules out (its particles weighed STAY_LIKELIHOOD a frame there): the
+                # count is what went wrong (a jump of the barometer's reference taken
+                # for a ride while the belief was not located). Kept, it would hold the
+                # belief off the person's floor after every ride to come.
+                self.net_storeys = 0
+                self.counts_dropped += 1
             self.carried_level = mine
             self._start_storey = int(self._storey[mine]) - self.net_storeys
 

@@ -502,6 +502,40 @@ def test_a_belief_not_located_but_riding_the_lift_continues_at_its_exit() -> Non
     assert pf.geometry.radius_m(1.5 + PITCH, 1.5, 0.0) <= math.hypot(1.1, 1.1) + 1e-9
 
 
+def test_a_count_of_storeys_the_view_contradicts_is_dropped() -> None:
+    """A jump of the barometer's reference while the belief was not located counts a
+    storey no ride made. Measured (venue, VIO 180 deg, a 4.5 m jump 15 s in): the fix the
+    view then found on the Ground Floor, against the count, did not correct it; the count
+    stayed a storey off, held the belief off the person's floor after every later ride
+    and reached more storeys than the venue has (1-51 frames a walk confidently on a
+    wrong floor)."""
+    tracker = FloorTracker(VENUE)
+    x, y = particles(6.0, 11.0, 0)  # in the hall: none of the belief in a stop
+    feed(tracker, x, y, [0.0] * 5 + list(np.linspace(0, 4.5, 25)) + [4.5] * 10)
+    assert tracker.net_storeys == 1
+    # A fix on the ground floor, which the count rules out, passed every test: the count
+    # is what went wrong.
+    tracker.after_estimate(x, np.full(x.size, 1.0 / x.size), float(x[0]), True)
+    assert tracker.net_storeys == 0 and tracker.level_allowed() is None
+    assert tracker.counts_dropped == 1 and tracker.carried_level == 0
+    # A fix on a level the count allows keeps it.
+    tracker = FloorTracker(VENUE)
+    feed(tracker, x, y, [0.0] * 5 + list(np.linspace(0, 4.5, 25)) + [4.5] * 10)
+    up = x + PITCH
+    tracker.after_estimate(up, np.full(x.size, 1.0 / x.size), float(up[0]), True)
+    assert tracker.net_storeys == 1 and tracker.counts_dropped == 0
+    # More storeys one way than the venue has is no count either.
+    tracker = FloorTracker(VENUE)
+    feed(tracker, x, y, [0.0] * 5)
+    rise = 0.0
+    while tracker.changes < 3:
+        feed(tracker, x, y, list(np.linspace(rise, rise + 4.5, 25)) + [rise + 4.5] * 10)
+        rise += 4.5
+        assert rise < 50.0
+    assert tracker.counts_dropped == 1
+    assert tracker.net_storeys == 0 and tracker.level_allowed() is None
+
+
 def _agree(tracker: FloorTracker, level: int, frames: int) -> list[bool]:
     """``frames`` steps of a belief all on ``level``, never converged: whether each
     confirmed that level."""
