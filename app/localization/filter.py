@@ -680,8 +680,9 @@ class ParticleFilter:
             radius = max(radius, min(max(fix_m, reach), self._map_span_m))
             fit = None if self.quality is None else self.quality.fit
             protection = widened_radius(radius, fit, slide_m)
-            narrow = protection <= GAIN_PROTECTION_M
-            self._narrow_frames = self._narrow_frames + 1 if gained and narrow else 0
+            if gained:
+                narrow = protection <= GAIN_PROTECTION_M
+                self._narrow_frames = self._narrow_frames + 1 if narrow else 0
             if gained and not self.continuation.active and self._narrow_frames < NARROW_FRAMES:
                 # A fix is gained only once its radius has been narrow (GAIN_PROTECTION_M)
                 # for NARROW_FRAMES frames in a row; the gate tries again on the next

@@ -325,8 +325,7 @@ class FloorTracker:
             self.carried_level = None
             self.in_transit = False
             self._changed_in_transit = False
-            self.net_storeys = 0  # (the person may have changed level unseen)
-            self._start_storey = None
+            self._break_count()  # (the person may have changed level unseen)
             return self._blind(x, y, rng), log_w, False
         self._readings.append(float(altitude.relative_m))
         recent = list(self._readings)
@@ -414,8 +413,7 @@ class FloorTracker:
         if allowed is not None and not allowed.any():
             # More storeys one way than the venue has: the count went wrong somewhere (a
             # jump of the barometer's reference taken for a ride) and says nothing.
-            self.net_storeys = 0
-            self.counts_dropped += 1
+            self._break_count(wrong=True)
         self.changed = True
         #: Whether this change is the first of its ride (a ride of several floors makes
         #: several).
@@ -437,6 +435,15 @@ class FloorTracker:
             return None
         totals = np.bincount(to[mine], weights=w[mine], minlength=len(self.layout.levels))
         return int(np.argmax(totals))
+
+    def _break_count(self, wrong: bool = False) -> None:
+        """Start the count of storeys afresh, with no fix to count from (a frame without
+        altitude; ``wrong``: a count the view or the venue contradicts,
+        :attr:`counts_dropped`)."""
+        self.net_storeys = 0
+        self._start_storey = None
+        if wrong:
+            self.counts_dropped += 1
 
     def _jumped(self, fix: tuple[float, float, float] | None) -> bool:
         """Whether a level change no particle could make comes from a fix held farther
@@ -664,8 +671,7 @@ class FloorTracker:
                 # count is what went wrong (a jump of the barometer's reference taken
                 # for a ride while the belief was not located). Kept, it would hold the
                 # belief off the person's floor after every ride to come.
-                self.net_storeys = 0
-                self.counts_dropped += 1
+                self._break_count(wrong=True)
             self.carried_level = mine
             self._start_storey = int(self._storey[mine]) - self.net_storeys
 

@@ -179,7 +179,8 @@ class OdometryCheck:
     def add(
         self, x: float, y: float, theta: float, converged: bool, candidate: bool = False
     ) -> None:
-        """Record this frame's estimate, kept as an anchor when converged or a
+        """Record this frame's estimate, kept as an anchor when ``converged`` (a told
+        fix, or a frame of doubt the filter holds to the told fix) or a
         ``candidate``: one of a run of frames on the way to gaining converged (the
         gate's streak). A gain is checked against the run's first estimates as a fix
         is held against its own: a cloud dragged off while no fix was held (a moved

@@ -527,6 +527,8 @@ def test_a_count_of_storeys_the_view_contradicts_is_dropped() -> None:
     # More storeys one way than the venue has is no count either.
     tracker = FloorTracker(VENUE)
     feed(tracker, x, y, [0.0] * 5)
+    tracker.after_estimate(x, np.full(x.size, 1.0 / x.size), float(x[0]), True)
+    assert tracker.counted_level() == 0  # counted from a fix on the ground floor
     rise = 0.0
     while tracker.changes < 3:
         feed(tracker, x, y, list(np.linspace(rise, rise + 4.5, 25)) + [rise + 4.5] * 10)
@@ -534,6 +536,8 @@ def test_a_count_of_storeys_the_view_contradicts_is_dropped() -> None:
         assert rise < 50.0
     assert tracker.counts_dropped == 1
     assert tracker.net_storeys == 0 and tracker.level_allowed() is None
+    # A fix counted from before the count went wrong is no start to count from either.
+    assert tracker.counted_level() is None
 
 
 def _agree(tracker: FloorTracker, level: int, frames: int) -> list[bool]:
