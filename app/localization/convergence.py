@@ -430,7 +430,7 @@ def _drawn_distances(x, y, w, n, u0, ex, ey, lo):  # fmt: skip  # pragma: no cov
 
 
 @functools.lru_cache(maxsize=64)
-def _gaussian_radius_stds(need: float) -> float:
+def gaussian_radius_stds(need: float) -> float:
     """sqrt(-2 ln(1 - need)), ``need`` at most 0.9999: the radius, in standard
     deviations, of a round Gaussian that holds ``need`` of its probability. Kept: all
     but the frames with alternatives ask for the same ``need``, and numpy's scalar
@@ -471,7 +471,7 @@ def protection_radius(
     )  # fmt: skip
     r_particles = float(d_lo + (pos - lo) * (d_next - d_lo))
     sigma = max(estimate.std_x_m, estimate.std_y_m)
-    r_gauss = _gaussian_radius_stds(need) * sigma
+    r_gauss = gaussian_radius_stds(need) * sigma
     r = PROTECTION_SCALE * max(r_particles, r_gauss) + PROTECTION_FLOOR_M
     if alternative_share >= 1.0 - q:
         r = max(r, alternatives_reach_m)

@@ -274,6 +274,43 @@ def test_an_object_moved_or_taken_away_is_forgiven_and_a_moved_one_leaves_the_se
         assert a.converged
 
 
+def test_an_object_gone_before_the_first_fix_does_not_keep_it_from_being_gained(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """With no start given, the object taken away comes into clear view before any fix
+    is told: the contradiction keeps the fix from being gained, and only a told fix
+    could forgive it. The candidate, alone in explaining what is seen and known within
+    a metre, forgives it instead, and the fix is gained at the truth; with the
+    candidate's radius taken as unknown, or once a fix has been told (a checkpoint
+    from before this rule reads so), it never is."""
+    from app.localization import filter as filter_module
+
+    def located(candidates_forgive: str) -> tuple[ParticleFilter, list[bool], int]:
+        pf, changed, stream = _standing_at_a_stale_place(moved=False, frames=80)
+        pf = ParticleFilter(pf.map, pf.config, rng=np.random.default_rng(1))  # no start
+        if candidates_forgive == "radius unknown":
+            monkeypatch.setattr(pf, "_candidate_radius_m", lambda raw: np.inf)
+        elif candidates_forgive == "told before":
+            state = pf.checkpoint()
+            del state["told_since_start"]
+            pf = ParticleFilter(pf.map, pf.config, rng=np.random.default_rng(1), state=state)
+        told = []
+        for dets in stream:
+            est = pf.step(Odometry(0.0, 0.0, 0.0), dets)
+            told.append(est.converged and bool(np.hypot(est.x - 10.0, est.y - 9.0) < 0.3))
+        return pf, told, changed
+
+    pf, told, changed = located("yes")
+    assert pf.unseen is not None and pf.unseen.absent[changed]
+    assert told[-1] and sum(told) >= 20
+    assert pf.checkpoint()["told_since_start"] is True
+    for case in ("radius unknown", "told before"):
+        pf, told, changed = located(case)
+        assert pf.unseen is not None and not pf.unseen.absent.any(), case
+        assert not any(told), case
+    assert filter_module.FORGIVE_PROTECTION_M == 1.0
+
+
 def test_a_fix_known_to_more_than_a_metre_forgives_nothing(monkeypatch: pytest.MonkeyPatch) -> None:
     """An object can look moved from a fix that is itself a metre off: with the fix's
     protection radius above FORGIVE_PROTECTION_M the object stays a contradiction."""
