@@ -430,7 +430,7 @@ def _drawn_distances(x, y, w, n, u0, ex, ey, lo):  # fmt: skip  # pragma: no cov
 
 
 @functools.lru_cache(maxsize=64)
-def gaussian_radius_stds(need: float) -> float:
+def _gaussian_radius_stds(need: float) -> float:
     """sqrt(-2 ln(1 - need)), ``need`` at most 0.9999: the radius, in standard
     deviations, of a round Gaussian that holds ``need`` of its probability. Kept: all
     but the frames with alternatives ask for the same ``need``, and numpy's scalar
@@ -470,12 +470,20 @@ def protection_radius(
         PROTECTION_SAMPLE, rng.random(), float(estimate.x), float(estimate.y), lo,
     )  # fmt: skip
     r_particles = float(d_lo + (pos - lo) * (d_next - d_lo))
-    sigma = max(estimate.std_x_m, estimate.std_y_m)
-    r_gauss = gaussian_radius_stds(need) * sigma
-    r = PROTECTION_SCALE * max(r_particles, r_gauss) + PROTECTION_FLOOR_M
+    # (Scaling is monotone: the larger of the two scaled is the larger one scaled.)
+    r = max(PROTECTION_SCALE * r_particles + PROTECTION_FLOOR_M, cluster_radius(estimate, need))
     if alternative_share >= 1.0 - q:
         r = max(r, alternatives_reach_m)
     return r
+
+
+def cluster_radius(estimate: Estimate, need: float = PROTECTION_PROBABILITY) -> float:
+    """The part of :func:`protection_radius` that the heaviest cluster's spread alone
+    gives (m): the radius of a round Gaussian with its largest standard deviation that
+    holds ``need`` of the probability, scaled as the whole radius is. Needs no draw, so
+    it serves for a pose that is only a candidate."""
+    sigma = max(estimate.std_x_m, estimate.std_y_m)
+    return PROTECTION_SCALE * (_gaussian_radius_stds(need) * sigma) + PROTECTION_FLOOR_M
 
 
 def widened_radius(radius_m: float, fit: float | None, slide_m: float) -> float:

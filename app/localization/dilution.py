@@ -234,6 +234,11 @@ class BearingGeometry:
             return geometry
         return carried
 
+    def bound_m(self, x: float, y: float) -> float:
+        """:meth:`radius_m`'s value at (x, y) without keeping anything: for a pose that
+        is only asked about (a candidate), not the frame's estimate."""
+        return min(self._geometry_radius_m(x, y), self._carried_m(x, y))
+
     def _carried_m(self, x: float, y: float) -> float:
         """The carried fix's bound at (x, y): the distance to it, its radius then, and
         the odometry's drift since (inf without a fix)."""

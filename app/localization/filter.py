@@ -26,12 +26,9 @@ from app.localization.config import FilterConfig
 from app.localization.continuation import Continuation
 from app.localization.convergence import (
     GAIN_PROTECTION_M,
-    PROTECTION_FLOOR_M,
-    PROTECTION_PROBABILITY,
-    PROTECTION_SCALE,
     ConvergenceGate,
     FitQuality,
-    gaussian_radius_stds,
+    cluster_radius,
     protection_radius,
     widened_radius,
 )
@@ -1082,18 +1079,12 @@ class ParticleFilter:
         )
 
     def _candidate_radius_m(self, raw: Estimate) -> float:
-        """A protection radius for the untold estimate ``raw`` without drawing from the
-        filter's generator: its heaviest cluster's Gaussian radius (as
-        :func:`~app.localization.convergence.protection_radius` scales it) or the
-        bearings' geometry (:class:`~app.localization.dilution.BearingGeometry`),
+        """A protection radius for the untold estimate ``raw``, asked without drawing from
+        the filter's generator or moving the geometry's carried fix: its heaviest
+        cluster's (:func:`~app.localization.convergence.cluster_radius`) or the bearings'
+        geometry's (:meth:`~app.localization.dilution.BearingGeometry.bound_m`),
         whichever is wider."""
-        cloud = (
-            PROTECTION_SCALE
-            * gaussian_radius_stds(PROTECTION_PROBABILITY)
-            * max(raw.std_x_m, raw.std_y_m)
-            + PROTECTION_FLOOR_M
-        )
-        return max(cloud, self.geometry.radius_m(raw.x, raw.y, raw.theta_rad))
+        return max(cluster_radius(raw), self.geometry.bound_m(raw.x, raw.y))
 
     def _turned_fits(
         self,

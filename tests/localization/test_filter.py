@@ -283,7 +283,6 @@ def test_an_object_gone_before_the_first_fix_does_not_keep_it_from_being_gained(
     a metre, forgives it instead, and the fix is gained at the truth; with the
     candidate's radius taken as unknown, or once a fix has been told (a checkpoint
     from before this rule reads so), it never is."""
-    from app.localization import filter as filter_module
 
     def located(candidates_forgive: str) -> tuple[ParticleFilter, list[bool], int]:
         pf, changed, stream = _standing_at_a_stale_place(moved=False, frames=80)
@@ -308,7 +307,18 @@ def test_an_object_gone_before_the_first_fix_does_not_keep_it_from_being_gained(
         pf, told, changed = located(case)
         assert pf.unseen is not None and not pf.unseen.absent.any(), case
         assert not any(told), case
-    assert filter_module.FORGIVE_PROTECTION_M == 1.0
+    # Restored before its first fix (its checkpoint says none was told), a session still
+    # forgives the object and is told at the truth.
+    pf, _, stream = _standing_at_a_stale_place(moved=False, frames=80)
+    pf = ParticleFilter(pf.map, pf.config, rng=np.random.default_rng(1))
+    for dets in stream[:5]:
+        pf.step(Odometry(0.0, 0.0, 0.0), dets)
+    assert not pf.estimate.converged
+    again = ParticleFilter(pf.map, pf.config, rng=np.random.default_rng(9), state=pf.checkpoint())
+    for dets in stream[5:]:
+        b = again.step(Odometry(0.0, 0.0, 0.0), dets)
+    assert b.converged and np.hypot(b.x - 10.0, b.y - 9.0) < 0.3
+    assert again.unseen is not None and again.unseen.absent[changed]
 
 
 def test_a_fix_known_to_more_than_a_metre_forgives_nothing(monkeypatch: pytest.MonkeyPatch) -> None:
