@@ -129,6 +129,10 @@ FORGIVE_SLIDE_M = 0.25
 #: confidently-wrong frames with 2, availability 0.88 as before; with 3, 25 frames and
 #: 66-degree cameras 0.05-0.08 less available.
 NARROW_FRAMES = 2
+#: How much farther than the odometry's path a person may have walked since the last fix
+#: told (PDR-grade step lengths are off by up to 10 %; dropped frames are carried by the
+#: next frame's odometry).
+WALK_BOUND_SCALE = 1.25
 
 
 class ParticleFilter:
@@ -258,6 +262,13 @@ class ParticleFilter:
         #: Whether a fix has been told since the filter last started from what it was
         #: given (see _place_is_unique).
         self._told_since_start = False
+        #: The last fix told (plane x, y) and a radius that holds the person since: its
+        #: protection radius plus the walk since, WALK_BOUND_SCALE times what the
+        #: odometry says (None: none on this level, or a frame without odometry since).
+        #: A level change the barometer shows far from every connector within it is
+        #: the barometer's reference moving (FloorTracker.apply), also once the fix was
+        #: let go.
+        self._last_fix: tuple[float, float, float] | None = None
         self.frames_without_evidence = 0
         #: How often every particle became impossible and the filter started again.
         self.restarts = 0
@@ -490,7 +501,8 @@ class ParticleFilter:
         if self.odometry_bias is not None:
             odometry = self.odometry_bias.correct(odometry, seconds)
         odometry = self.capture.step(odometry, frame_s, detections_age_s)
-        self._step(odometry, detections, heading, altitude)
+        known_s = frame_s if frame_s is not None and frame_s > 0.0 else None
+        self._step(odometry, detections, heading, altitude, known_s)
         back = self.capture.back
         est = self.estimate
         if not (back.forward_m == 0.0 and back.left_m == 0.0 and back.turn_rad == 0.0):
@@ -513,13 +525,21 @@ class ParticleFilter:
         detections: Sequence[Detection],
         heading: CompassReading | None,
         altitude: AltitudeReading | None = None,
+        frame_s: float | None = None,
     ) -> None:
-        """:meth:`step` in capture time: ``odometry`` is the motion between captures."""
+        """:meth:`step` in capture time: ``odometry`` is the motion between captures,
+        ``frame_s`` the time since the previous frame (None: not known)."""
         rode = False  # a ride between levels ended with this frame's level change
         # A ride the belief was not located for, but placed the person in one connector
         # for (its stop: centre and radius), FloorTracker.pinned_stop.
         pinned: tuple[float, float, float] | None = None
         self.predict(odometry)
+        if odometry is None:
+            self._last_fix = None
+        elif self._last_fix is not None:
+            lx, ly, lr = self._last_fix
+            walked = WALK_BOUND_SCALE * hypot(odometry.forward_m, odometry.left_m)
+            self._last_fix = (lx, ly, lr + walked)
         if odometry is not None:
             self.geometry.moved(odometry)
             self.odometry_check.moved(odometry)
@@ -529,12 +549,14 @@ class ParticleFilter:
             self._blind_hold = False
         if self.floors is not None:
             told = self.estimate
-            fix = None
+            fix = self._last_fix
             if self._gate.held and told.converged and told.protection_m is not None:
                 fix = (told.x, told.y, told.protection_m)
             self.x, self.log_w, contradicted = self.floors.apply(
-                self.x, self.y, self.log_w, altitude, self.rng, fix
+                self.x, self.y, self.log_w, altitude, self.rng, fix, frame_s
             )
+            if self.floors.changed:
+                self._last_fix = None  # on the level left
             if contradicted:
                 self._restart_global(after_ride=True)
             self.log_w = self.floors.rule_out_levels(self.x, self.log_w)
@@ -709,6 +731,8 @@ class ParticleFilter:
         if est.converged:
             self._after_ride = False
             self._told_since_start = True
+            assert protection is not None
+            self._last_fix = (est.x, est.y, protection)
         # Where a held fix has nothing in clear view (a lift car, a bare wall ahead of a
         # narrow camera), every detection is clutter wherever the person stands, yet
         # weighing them lets the few particles elsewhere that one happens to fit outweigh
@@ -811,6 +835,7 @@ class ParticleFilter:
         if carry_only or not swap:
             return raw, w, ess
         told = self.estimate
+        self._last_fix = None  # the evidence says the told place was not the person's
         self.x, self.y, self.theta = self.evidence.swap(self.n)
         self.log_w = np.zeros(self.n)
         self._gate.reset()
@@ -875,6 +900,7 @@ class ParticleFilter:
             "restarts": self.restarts,
             "narrow_frames": self._narrow_frames,
             "told_since_start": self._told_since_start,
+            "last_fix": None if self._last_fix is None else list(self._last_fix),
             **self.continuation.checkpoint(levels=self.floors is not None),
             "steps": self.steps,
             "estimate": self.estimate,
@@ -926,6 +952,8 @@ class ParticleFilter:
         self._narrow_frames = int(state.get("narrow_frames", 0))
         # (An older checkpoint: as if told, so no candidate forgives.)
         self._told_since_start = bool(state.get("told_since_start", True))
+        last = state.get("last_fix")
+        self._last_fix = None if last is None else (float(last[0]), float(last[1]), float(last[2]))
         self.steps = int(state["steps"])
         self.estimate = from_plain(Estimate, state["estimate"])
         self.continuation.restore(state)

@@ -53,9 +53,16 @@ A held fix farther than its protection radius from every connector's stop cannot
 ridden one: a level change the barometer shows then, which no particle could make, is
 its reference moving (a pressurized zone, a glitch of the sensor), and the tracker
 follows the new reading instead of restarting the belief and counting a storey
-(:meth:`FloorTracker._jumped`). Measured with a 4.5 m jump of the reference (no ride)
-injected into the venue suite's walks (VIO, 180 deg camera, 10 seeds): 100 s into the
-walk, 170 frames confidently on a wrong floor before, 6 after.
+(:meth:`FloorTracker._jumped`); the filter asks the same of the last fix told once it
+is let go, its radius grown by the walk since. Measured with a 4.5 m jump of the
+reference (no ride) injected into the venue suite's walks (VIO, 180 deg camera, 10
+seeds): 100 s into the walk, 170 frames confidently on a wrong floor before, 6 after.
+A person passing a connector's stop as the reference jumps could have ridden, but not
+as fast as the readings stepped: a step no rider climbs (``MAX_CLIMB_MPS``, beyond the
+readings' own noise) is followed at once, the readings before it and the anchor moved
+by it (:meth:`FloorTracker._follow_step`). The same 4.5 m jump 200 s into the walks had
+come as one walk passed the foot of the stairs: taken for a climb, the count of storeys
+it left put that walk confidently one floor up for 30 frames, 100 s later.
 
 A belief that did make the change is not always located either: through a phone's
 narrow camera the cloud can follow the person for minutes, tight and right, while the
@@ -119,6 +126,29 @@ CHANGE_SHARE = 0.6
 #: few seconds and moves the anchor by a few centimetres).
 DRIFT_SHARE = 0.25
 DRIFT_GAIN = 0.02
+#: A step of the barometer's readings faster than any rider climbs is its reference
+#: moving (a door opening on a pressurized zone, a glitch of the sensor), not a ride,
+#: wherever the person stands: the mean of the newest two updates this far past the
+#: median of the four before them (in metres: ``MAX_CLIMB_MPS`` times the time between
+#: the two groups' mean times, plus ``STEP_SIGMAS`` standard deviations of that
+#: difference), each of the two at least half as far. An update is a reading that
+#: differs from the one before, timed by the frame it first came with: a phone whose
+#: barometer updates once a second repeats its reading over the frames between, and a
+#: ride's climb over that second arrives as one step. Lifts in stations, shopping
+#: centres and offices run at 1-2.5 m/s; skyscrapers' express lifts (up to 10 m/s) are
+#: faster, and their steps would be taken for jumps.
+MAX_CLIMB_MPS = 3.0
+STEP_SIGMAS = 4.0
+#: Updates the step test compares (the newest two against the median of the rest).
+STEP_UPDATES = 6
+#: The readings' noise for that test is estimated from this many of the latest
+#: differences between consecutive updates (their median absolute value; the reported
+#: ``std_m`` until there are ``NOISE_MIN_UPDATES``): phones report a conservative
+#: figure, the readings say what it is.
+NOISE_UPDATES = 50
+NOISE_MIN_UPDATES = 10
+#: Median |N(0, 2)| over the standard deviation of one reading: sqrt(2) * 0.6745.
+_MEDIAN_ABS_DIFF = float(np.sqrt(2.0) * 0.6744897501960817)
 #: Likelihood of the barometer's level change for a particle that could not change level.
 STAY_LIKELIHOOD = 1e-4
 STAY_LOG = float(np.log(STAY_LIKELIHOOD))
@@ -219,6 +249,14 @@ class FloorTracker:
     def reset(self) -> None:
         """Forget the barometer (a new start)."""
         self._readings: deque[float] = deque(maxlen=RATE_FRAMES)
+        #: When each reading came (seconds on the tracker's own clock).
+        self._times: deque[float] = deque(maxlen=RATE_FRAMES)
+        self._clock = 0.0
+        #: The latest updates (a reading other than the one before) and when each first
+        #: came, for the step test (STEP_UPDATES) ...
+        self._updates: deque[tuple[float, float]] = deque(maxlen=STEP_UPDATES)
+        #: ... and the latest |differences| of consecutive updates (NOISE_UPDATES).
+        self._diffs: deque[float] = deque(maxlen=NOISE_UPDATES)
         self.anchor_m: float | None = None
         self.changes = 0
         #: Storeys the barometer's steps have taken the person up (down: negative) since
@@ -259,8 +297,9 @@ class FloorTracker:
         self._last_at_lift_rate = False
         #: The share of the weight that made the last level change (:meth:`pinned_stop`).
         self.moved_share = 0.0
-        #: Level changes the barometer showed far from every connector, taken for a
-        #: jump of its reference (:meth:`_jumped`).
+        #: Jumps of the barometer's reference followed: steps of its readings faster
+        #: than any rider climbs (:meth:`_follow_step`), and level changes it showed
+        #: far from every connector (:meth:`_jumped`).
         self.reference_jumps = 0
 
     # ------------------------------------------------------------ the particles
@@ -311,12 +350,15 @@ class FloorTracker:
         altitude: AltitudeReading | None,
         rng: np.random.Generator,
         fix: tuple[float, float, float] | None = None,
+        seconds: float | None = None,
     ) -> tuple[NDArray[np.float64], NDArray[np.float64], bool]:
         """The particles' x and log-weights after this frame's level changes, and
         whether the barometer contradicts the whole belief (a level change, and less
         than ``CONTRADICTED_SHARE`` of the weight could make it). ``fix``: a fix held
         (plane x, y and its protection radius), which such a change does not move when
-        no connector's stop lies within its radius (:meth:`_jumped`)."""
+        no connector's stop lies within its radius (:meth:`_jumped`). ``seconds``: the
+        time since the previous frame (None: not known, and the step test starts over,
+        since a guess could make a lift's climb look faster than it was)."""
         self.blind = altitude is None
         self.changed = False
         self.first_change = False
@@ -327,7 +369,18 @@ class FloorTracker:
             self._changed_in_transit = False
             self._break_count()  # (the person may have changed level unseen)
             return self._blind(x, y, rng), log_w, False
-        self._readings.append(float(altitude.relative_m))
+        if seconds is None:
+            self._updates.clear()
+        else:
+            self._clock += max(float(seconds), 0.0)
+        reading = float(altitude.relative_m)
+        self._readings.append(reading)
+        self._times.append(self._clock)
+        if not self._updates or reading != self._updates[-1][0]:
+            if self._updates:
+                self._diffs.append(abs(reading - self._updates[-1][0]))
+            self._updates.append((reading, self._clock))
+            self._follow_step(float(altitude.std_m))
         recent = list(self._readings)
         smoothed = float(np.mean(recent[-SMOOTH_FRAMES:]))
         half = RATE_FRAMES // 2
@@ -422,6 +475,43 @@ class FloorTracker:
         if moved_share < CONTRADICTED_SHARE:
             self.carried_level = None
         return new_x, log_w, moved_share < CONTRADICTED_SHARE
+
+    def _follow_step(self, reported_std_m: float) -> None:
+        """Take a step of the updates faster than any rider climbs (``MAX_CLIMB_MPS``)
+        for the reference moving: the readings before it, and the anchor, move by it, as
+        if the reference had always been the new one."""
+        if len(self._updates) < STEP_UPDATES or self.anchor_m is None:
+            return
+        values = np.array([v for v, _ in self._updates])
+        times = np.array([t for _, t in self._updates])
+        rise = values[-2:] - float(np.median(values[:-2]))
+        if rise[0] * rise[1] <= 0.0:
+            return
+        if len(self._diffs) >= NOISE_MIN_UPDATES:
+            std = float(np.median(np.fromiter(self._diffs, dtype=np.float64))) / _MEDIAN_ABS_DIFF
+        else:
+            std = reported_std_m
+        # The mean of two readings against the median of four (variance about pi/2 / 4).
+        spread = std * float(np.sqrt(0.5 + np.pi / 8.0))
+        climb = MAX_CLIMB_MPS * float(np.mean(times[-2:]) - np.mean(times[:-2]))
+        needed = climb + STEP_SIGMAS * spread
+        if abs(float(np.mean(rise))) < needed or float(np.min(np.abs(rise))) < 0.5 * needed:
+            return
+        step = float(np.mean(rise))
+        since = float(times[-2])  # the step's first update came with that frame
+        self._readings = deque(
+            (
+                v if t >= since else v + step
+                for v, t in zip(self._readings, self._times, strict=True)
+            ),
+            maxlen=RATE_FRAMES,
+        )
+        self._updates = deque(
+            ((v, t) if t >= since else (v + step, t) for v, t in self._updates),
+            maxlen=STEP_UPDATES,
+        )
+        self.anchor_m += step
+        self.reference_jumps += 1
 
     def _carry(
         self, frm: NDArray[np.int64], to: NDArray[np.int64], w: NDArray[np.float64]
@@ -679,6 +769,10 @@ class FloorTracker:
     def checkpoint(self) -> dict[str, Any]:
         return {
             "readings": list(self._readings),
+            "times": list(self._times),
+            "clock": self._clock,
+            "updates": [list(u) for u in self._updates],
+            "diffs": list(self._diffs),
             "anchor_m": self.anchor_m,
             "changes": self.changes,
             "net_storeys": self.net_storeys,
@@ -694,6 +788,17 @@ class FloorTracker:
 
     def restore(self, state: Mapping[str, Any]) -> None:
         self._readings = deque((float(v) for v in state["readings"]), maxlen=RATE_FRAMES)
+        # (An older checkpoint: no updates timed, no noise measured yet; its readings all
+        # came before any update to come.)
+        self._clock = float(state.get("clock", 0.0))
+        times = state.get("times")
+        if times is None or len(times) != len(self._readings):
+            times = [self._clock - 1.0] * len(self._readings)
+        self._times = deque((float(v) for v in times), maxlen=RATE_FRAMES)
+        self._updates = deque(
+            ((float(v), float(t)) for v, t in state.get("updates", [])), maxlen=STEP_UPDATES
+        )
+        self._diffs = deque((float(v) for v in state.get("diffs", [])), maxlen=NOISE_UPDATES)
         anchor = state["anchor_m"]
         self.anchor_m = None if anchor is None else float(anchor)
         self.changes = int(state["changes"])

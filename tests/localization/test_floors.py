@@ -43,8 +43,8 @@ def feed(
     rng = np.random.default_rng(0)
     log_w = np.zeros(x.shape)
     contradicted = False
-    for r in readings:
-        x, log_w, c = tracker.apply(x, y, log_w, AltitudeReading(r, 0.5), rng)
+    for r in readings:  # (5 frames/s)
+        x, log_w, c = tracker.apply(x, y, log_w, AltitudeReading(r, 0.5), rng, seconds=0.2)
         contradicted |= c
     return x, log_w, contradicted
 
@@ -800,3 +800,106 @@ def test_a_gain_withheld_for_its_radius_still_confirms_the_floor() -> None:
         if pf.floors.confirmed_level is not None and confirmed is None:
             confirmed = pf.floors.confirmed_level
     assert confirmed == 0
+
+
+def _let_go_in_the_hall(paces: int) -> ParticleFilter:
+    """A filter told a fix in the hall (6 m from the nearest stop), then blindfolded
+    (no detections) until the fix is let go, pacing ``paces`` strides of 0.5 m back and
+    forth on the spot (the odometry's path grows, the person stays)."""
+    pose = Pose(6.0, 11.0, 0.0)
+    pf = ParticleFilter(VENUE, FilterConfig(particles=3000), rng=np.random.default_rng(2))
+    still = Odometry(0.0, 0.0, 0.0)
+    level = AltitudeReading(100.0, 0.3)
+    for _ in range(60):
+        if pf.step(still, seen_from(VENUE, pose), altitude=level).converged:
+            break
+    assert pf.estimate.converged and math.hypot(pf.estimate.x - 6.0, pf.estimate.y - 11.0) < 0.5
+    for _ in range(100):
+        if not pf.step(still, [], altitude=level).converged:
+            break
+    assert not pf.estimate.converged
+    for k in range(paces):
+        pf.step(Odometry(0.5 if k % 2 == 0 else -0.5, 0.0, 0.0), [], altitude=level)
+    return pf
+
+
+def test_a_storey_the_barometer_shows_soon_after_a_fix_let_go_far_from_a_connector_is_a_jump() -> (
+    None
+):
+    """A fix let go in the hall, then the barometer rises a storey as a lift would (a
+    reference moving as slowly as a ride): from the last fix told, the person has walked
+    too little to reach any connector's stop, so no ride is believed. (Only a fix still
+    held was asked before: a rise just after one was let go restarted the belief at the
+    connectors' exits and counted a storey.) After a walk that could have reached one,
+    the same rise is a ride the belief missed."""
+    jump = [float(r) for r in np.linspace(100.0, 104.5, 23)] + [104.5] * 10  # 1 m/s
+    let_go = _let_go_in_the_hall(paces=2)
+    # The last fix is session state: a session restored from the store's bytes knows it.
+    data = checkpoint.pack({"format": checkpoint.FORMAT_VERSION, "filter": let_go.checkpoint()})
+    near = ParticleFilter(VENUE, let_go.config, rng=np.random.default_rng(99))
+    near.restore(checkpoint.unpack(data)["filter"])
+    assert near.floors is not None and near.restarts == 0
+    for r in jump:
+        near.step(Odometry(0.0, 0.0, 0.0), [], altitude=AltitudeReading(r, 0.3))
+    assert near.floors.reference_jumps == 1 and near.floors.changes == 0 and near.restarts == 0
+    assert (VENUE.layout.level_of_plane_x(near.x) == 0).all()
+    far = _let_go_in_the_hall(paces=16)  # 8 m walked: a stop within reach
+    assert far.floors is not None
+    for r in jump:
+        far.step(Odometry(0.0, 0.0, 0.0), [], altitude=AltitudeReading(r, 0.3))
+    assert far.floors.reference_jumps == 0 and far.floors.changes == 1 and far.restarts == 1
+
+
+def test_a_step_of_the_readings_faster_than_any_lift_is_the_reference_moving() -> None:
+    """Standing in the lift car (where a ride could start), the readings step up 4.5 m
+    between two frames: no rider climbs at 20 m/s, so the reference moved (measured, a
+    4.5 m jump injected 200 s into the venue suite's walks at VIO grade: a person
+    passing the foot of the stairs as it came was taken to have climbed them, and the
+    count of storeys it left put the walk confidently one floor up for 30 frames, 100 s
+    later). The readings before the step and the anchor follow it. A lift at 2.5 m/s
+    from the same car is a ride, also through a barometer that updates once a second,
+    and a single reading 4.5 m off is noise."""
+    rng = np.random.default_rng(5)
+    x, y = particles(1.5, 1.5, 0)  # in the lift car
+
+    def readings(values: np.ndarray) -> list[float]:
+        return [float(v) for v in values + rng.normal(0.0, 0.25, values.size)]
+
+    rest = np.full(60, 100.0)
+    stepped = FloorTracker(VENUE)
+    new_x, _, contradicted = feed(stepped, x, y, readings(np.concatenate([rest, rest + 4.5])))
+    assert stepped.reference_jumps == 1 and stepped.changes == 0 and not contradicted
+    assert (new_x == x).all() and not stepped.in_transit
+    assert stepped.anchor_m is not None and abs(stepped.anchor_m - 104.5) < 0.3
+    # Without the frames' times (an app that sends no timestamps) no speed is known, and
+    # the step is what it was before the test: a ride from the car.
+    untimed = FloorTracker(VENUE)
+    log_w = np.zeros(x.size)
+    for r in readings(np.concatenate([rest, rest + 4.5])):
+        _, log_w, _ = untimed.apply(x, y, log_w, AltitudeReading(r, 0.5), rng)
+    assert untimed.reference_jumps == 0 and untimed.changes == 1
+    # A lift at 2.5 m/s (0.5 m a frame at 5 frames/s): a ride.
+    ride = np.concatenate([rest, 100.0 + np.minimum(0.5 * np.arange(1, 30), 4.5)])
+    lift = FloorTracker(VENUE)
+    new_x, _, _ = feed(lift, x, y, readings(ride))
+    assert lift.reference_jumps == 0 and lift.changes == 1
+    assert (VENUE.layout.level_of_plane_x(new_x) == 1).all()
+    # The same lift through a barometer that updates once a second, its reading repeated
+    # over the frames between (10 frames/s): each update steps 2.5 m, as fast as the
+    # lift, and the ride is a ride.
+    once_a_second = FloorTracker(VENUE)
+    held = np.repeat(readings(ride[::5]), 10)
+    log_w = np.zeros(x.size)
+    moved_x = x
+    for r in held:
+        moved_x, log_w, _ = once_a_second.apply(
+            moved_x, y, log_w, AltitudeReading(float(r), 0.5), rng, seconds=0.1
+        )
+    assert once_a_second.reference_jumps == 0 and once_a_second.changes == 1
+    assert (VENUE.layout.level_of_plane_x(moved_x) == 1).all()
+    # One reading 4.5 m up among readings at rest: nothing.
+    spike = rest.copy()
+    spike[40] += 4.5
+    noisy = FloorTracker(VENUE)
+    feed(noisy, x, y, readings(spike))
+    assert noisy.reference_jumps == 0 and noisy.changes == 0
