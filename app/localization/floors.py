@@ -90,6 +90,7 @@ from __future__ import annotations
 from collections import deque
 from collections.abc import Mapping
 from dataclasses import dataclass
+from statistics import NormalDist
 from typing import Any
 
 import numpy as np
@@ -147,8 +148,9 @@ STEP_UPDATES = 6
 #: figure, the readings say what it is.
 NOISE_UPDATES = 50
 NOISE_MIN_UPDATES = 10
-#: Median |N(0, 2)| over the standard deviation of one reading: sqrt(2) * 0.6745.
-_MEDIAN_ABS_DIFF = float(np.sqrt(2.0) * 0.6744897501960817)
+#: Median |N(0, 2)| over the standard deviation of one reading: sqrt(2) times the
+#: normal's upper quartile.
+_MEDIAN_ABS_DIFF = float(np.sqrt(2.0)) * NormalDist().inv_cdf(0.75)
 #: Likelihood of the barometer's level change for a particle that could not change level.
 STAY_LIKELIHOOD = 1e-4
 STAY_LOG = float(np.log(STAY_LIKELIHOOD))
@@ -249,12 +251,13 @@ class FloorTracker:
     def reset(self) -> None:
         """Forget the barometer (a new start)."""
         self._readings: deque[float] = deque(maxlen=RATE_FRAMES)
-        #: When each reading came (seconds on the tracker's own clock).
-        self._times: deque[float] = deque(maxlen=RATE_FRAMES)
+        #: Frames with altitude so far, and their time (seconds, the tracker's own clock).
+        self._frames = 0
         self._clock = 0.0
-        #: The latest updates (a reading other than the one before) and when each first
-        #: came, for the step test (STEP_UPDATES) ...
-        self._updates: deque[tuple[float, float]] = deque(maxlen=STEP_UPDATES)
+        #: The latest updates (a reading other than the one before): the reading, and
+        #: the time and number of the frame it first came with, for the step test
+        #: (STEP_UPDATES) ...
+        self._updates: deque[tuple[float, float, int]] = deque(maxlen=STEP_UPDATES)
         #: ... and the latest |differences| of consecutive updates (NOISE_UPDATES).
         self._diffs: deque[float] = deque(maxlen=NOISE_UPDATES)
         self.anchor_m: float | None = None
@@ -375,11 +378,11 @@ class FloorTracker:
             self._clock += max(float(seconds), 0.0)
         reading = float(altitude.relative_m)
         self._readings.append(reading)
-        self._times.append(self._clock)
+        self._frames += 1
         if not self._updates or reading != self._updates[-1][0]:
             if self._updates:
                 self._diffs.append(abs(reading - self._updates[-1][0]))
-            self._updates.append((reading, self._clock))
+            self._updates.append((reading, self._clock, self._frames))
             self._follow_step(float(altitude.std_m))
         recent = list(self._readings)
         smoothed = float(np.mean(recent[-SMOOTH_FRAMES:]))
@@ -482,8 +485,8 @@ class FloorTracker:
         if the reference had always been the new one."""
         if len(self._updates) < STEP_UPDATES or self.anchor_m is None:
             return
-        values = np.array([v for v, _ in self._updates])
-        times = np.array([t for _, t in self._updates])
+        values = np.array([v for v, _, _ in self._updates])
+        times = np.array([t for _, t, _ in self._updates])
         rise = values[-2:] - float(np.median(values[:-2]))
         if rise[0] * rise[1] <= 0.0:
             return
@@ -498,16 +501,14 @@ class FloorTracker:
         if abs(float(np.mean(rise))) < needed or float(np.min(np.abs(rise))) < 0.5 * needed:
             return
         step = float(np.mean(rise))
-        since = float(times[-2])  # the step's first update came with that frame
-        self._readings = deque(
-            (
-                v if t >= since else v + step
-                for v, t in zip(self._readings, self._times, strict=True)
-            ),
-            maxlen=RATE_FRAMES,
-        )
+        first = self._updates[-2][2]  # the frame the step first came with
+        after = self._frames - first + 1  # readings since then, the newest ones
+        readings = list(self._readings)
+        cut = max(len(readings) - after, 0)
+        moved = [v + step for v in readings[:cut]] + readings[cut:]
+        self._readings = deque(moved, maxlen=RATE_FRAMES)
         self._updates = deque(
-            ((v, t) if t >= since else (v + step, t) for v, t in self._updates),
+            ((v, t, k) if k >= first else (v + step, t, k) for v, t, k in self._updates),
             maxlen=STEP_UPDATES,
         )
         self.anchor_m += step
@@ -769,7 +770,7 @@ class FloorTracker:
     def checkpoint(self) -> dict[str, Any]:
         return {
             "readings": list(self._readings),
-            "times": list(self._times),
+            "frames": self._frames,
             "clock": self._clock,
             "updates": [list(u) for u in self._updates],
             "diffs": list(self._diffs),
@@ -788,15 +789,12 @@ class FloorTracker:
 
     def restore(self, state: Mapping[str, Any]) -> None:
         self._readings = deque((float(v) for v in state["readings"]), maxlen=RATE_FRAMES)
-        # (An older checkpoint: no updates timed, no noise measured yet; its readings all
-        # came before any update to come.)
+        # (An older checkpoint: no updates, no noise measured yet.)
+        self._frames = int(state.get("frames", 0))
         self._clock = float(state.get("clock", 0.0))
-        times = state.get("times")
-        if times is None or len(times) != len(self._readings):
-            times = [self._clock - 1.0] * len(self._readings)
-        self._times = deque((float(v) for v in times), maxlen=RATE_FRAMES)
+        updates = [u for u in state.get("updates", []) if len(u) == 3]
         self._updates = deque(
-            ((float(v), float(t)) for v, t in state.get("updates", [])), maxlen=STEP_UPDATES
+            ((float(v), float(t), int(k)) for v, t, k in updates), maxlen=STEP_UPDATES
         )
         self._diffs = deque((float(v) for v in state.get("diffs", [])), maxlen=NOISE_UPDATES)
         anchor = state["anchor_m"]
