@@ -10,7 +10,7 @@ level; an escalator only its way), its x shifted by the two levels' offsets.
 
 When frames carry the phone's barometric altitude (relative to a reference of the
 phone's own, and wandering slowly: weather, ventilation), a :class:`FloorTracker`
-follows it. The readings are smoothed over the last ``SMOOTH_FRAMES``; an *anchor* holds
+follows it. The readings are smoothed over the last ``SMOOTH_S``; an *anchor* holds
 the altitude of the floor the person is on and follows slow drift while the altitude
 stays near it. When the smoothed altitude leaves the anchor by ``CHANGE_SHARE`` of a
 storey (up or down), a level change is under way: every particle in a stop whose
@@ -104,14 +104,27 @@ from app.maps.geometry import (
 )
 from app.maps.model import SemanticMap
 
-#: Readings averaged for the level-change test (at 5 frames/s: one second).
-SMOOTH_FRAMES = 5
+#: The tracker's windows and rates are set in seconds and turned into frames by the
+#: session's frame period: the median of the latest ``PERIOD_FRAMES`` times between
+#: frames (rounded to ``PERIOD_ROUND_S``: a phone's timestamps jitter by less), or
+#: ``NOMINAL_PERIOD_S`` until a frame's time is known. Counted in frames, the same
+#: windows at 10 frames/s smoothed half as long and let the anchor follow a ride twice
+#: as fast: measured on the venue's walks re-simulated at 10 frames/s, a walk on the
+#: stairs was confidently one floor off for 5 frames (the anchor drifted towards the
+#: climb, and the change came 5 frames after the truth passed the stairs' midpoint).
+NOMINAL_PERIOD_S = 0.2
+PERIOD_FRAMES = 25
+PERIOD_ROUND_S = 1e-3
+#: Frames faster than this are taken to come at this period (the windows' longest).
+MIN_PERIOD_S = 1.0 / 60.0
+#: Seconds of readings averaged for the level-change test.
+SMOOTH_S = 1.0
 #: A lift passing a floor without stopping is between floors too: the means of the newer
-#: and the older half of the last ``RATE_FRAMES`` readings differ by ``LIFT_RISE_M`` or
-#: more (at 5 frames/s, 0.6 m/s: lifts run at 1-2.5 m/s; a person on stairs or an
+#: and the older half of the last ``2 * RATE_HALF_S`` of readings differ by
+#: ``LIFT_RISE_M`` or more (0.6 m/s: lifts run at 1-2.5 m/s; a person on stairs or an
 #: escalator rises about 0.3 m/s; the noise of that difference is about 0.16 m for
-#: readings of 0.25 m).
-RATE_FRAMES = 10
+#: readings of 0.25 m at 5 frames/s, less at more).
+RATE_HALF_S = 1.0
 LIFT_RISE_M = 0.6
 #: How far the smoothed altitude must also have left the anchor for the rate test to
 #: start a ride (m): about 2 stds of a 5-reading mean of readings 0.4 m apart (a poor
@@ -122,9 +135,9 @@ RATE_ENTRY_M = 0.4
 #: anchor moves a storey, the way back needs a fifth of a storey more).
 CHANGE_SHARE = 0.6
 #: While the smoothed altitude is within this share of a storey of the anchor, the
-#: anchor follows it by ``DRIFT_GAIN`` of the difference a frame (drift tolerance: a
-#: time constant of about 50 frames, 10 s at 5 frames/s; a ride crosses the band in a
-#: few seconds and moves the anchor by a few centimetres).
+#: anchor follows it by ``DRIFT_GAIN`` of the difference every ``NOMINAL_PERIOD_S``
+#: (drift tolerance: a time constant of about 10 s; a ride crosses the band in a few
+#: seconds and moves the anchor by a few centimetres).
 DRIFT_SHARE = 0.25
 DRIFT_GAIN = 0.02
 #: A step of the barometer's readings faster than any rider climbs is its reference
@@ -173,7 +186,8 @@ PINNED_SHARE = 0.99
 JUMP_MARGIN_M = 1.0
 #: Rounds of drawing points in a stop before :meth:`FloorTracker.arrivals` gives up.
 ARRIVAL_TRIES = 8
-#: Without altitude: per frame, the probability that a particle in a stop moves.
+#: Without altitude: every ``NOMINAL_PERIOD_S``, the probability that a particle in a
+#: stop moves.
 BLIND_RATE = 0.02
 #: A level change the barometer shows rising or falling at a lift's rate (the rate test,
 #: ``LIFT_RISE_M``) weighs the particles that changed level by stairs, an escalator or a
@@ -184,12 +198,14 @@ WALKED_AT_LIFT_RATE = 0.1
 #: The smallest storey height believed, metres (levels closer than this are one storey).
 MIN_STOREY_M = 1.0
 #: A level the barometer counted storeys to from a fix is confirmed without a new fix
-#: once at least this share of the belief has stood on it for ``LEVEL_SURE_FRAMES``
-#: frames in a row (at 5 frames/s, one second): the person hears the floor while the
+#: once at least this share of the belief has stood on it for ``LEVEL_SURE_S`` seconds
+#: of frames in a row: the person hears the floor while the
 #: view, through a phone's narrow camera leaving a lift car, has yet to show where on it
 #: they are.
 LEVEL_SURE_SHARE = 0.99
-LEVEL_SURE_FRAMES = 5
+LEVEL_SURE_S = 1.0
+#: The readings kept: the rate test's window at ``MIN_PERIOD_S``.
+MAX_READINGS = int(np.ceil(2.0 * RATE_HALF_S / MIN_PERIOD_S))
 
 
 @dataclass(frozen=True, slots=True)
@@ -250,10 +266,12 @@ class FloorTracker:
 
     def reset(self) -> None:
         """Forget the barometer (a new start)."""
-        self._readings: deque[float] = deque(maxlen=RATE_FRAMES)
+        self._readings: deque[float] = deque(maxlen=MAX_READINGS)
         #: Frames with altitude so far, and their time (seconds, the tracker's own clock).
         self._frames = 0
         self._clock = 0.0
+        #: The latest times between frames, seconds (the frame period, :meth:`_period`).
+        self._intervals: deque[float] = deque(maxlen=PERIOD_FRAMES)
         #: The latest updates (a reading other than the one before): the reading, and
         #: the time and number of the frame it first came with, for the step test
         #: (STEP_UPDATES) ...
@@ -366,6 +384,8 @@ class FloorTracker:
         self.changed = False
         self.first_change = False
         self.shift_x_m = 0.0
+        if seconds is not None and seconds > 0.0:
+            self._intervals.append(float(seconds))
         if altitude is None:
             self.carried_level = None
             self.in_transit = False
@@ -385,10 +405,11 @@ class FloorTracker:
             self._updates.append((reading, self._clock, self._frames))
             self._follow_step(float(altitude.std_m))
         recent = list(self._readings)
-        smoothed = float(np.mean(recent[-SMOOTH_FRAMES:]))
-        half = RATE_FRAMES // 2
-        moving = len(recent) == RATE_FRAMES and (
-            abs(float(np.mean(recent[half:])) - float(np.mean(recent[:half]))) >= LIFT_RISE_M
+        smoothed = float(np.mean(recent[-self._frames_in(SMOOTH_S) :]))
+        half = self._frames_in(RATE_HALF_S)
+        window = recent[-2 * half :]
+        moving = len(window) == 2 * half and (
+            abs(float(np.mean(window[half:])) - float(np.mean(window[:half]))) >= LIFT_RISE_M
         )
         if self.anchor_m is None:
             self.anchor_m = smoothed
@@ -418,7 +439,7 @@ class FloorTracker:
                 x, y, log_w
             ) >= CONTRADICTED_SHARE
             if not (self.in_transit and riding):
-                self.anchor_m += DRIFT_GAIN * delta
+                self.anchor_m += DRIFT_GAIN * self._periods() * delta
             if not self.in_transit:
                 self._changed_in_transit = False
             return x, log_w, False
@@ -479,6 +500,24 @@ class FloorTracker:
             self.carried_level = None
         return new_x, log_w, moved_share < CONTRADICTED_SHARE
 
+    def _period(self) -> float:
+        """The session's frame period, seconds: the median of the latest times between
+        frames (``NOMINAL_PERIOD_S`` before one is known), rounded to
+        ``PERIOD_ROUND_S``, no shorter than ``MIN_PERIOD_S``."""
+        if not self._intervals:
+            return NOMINAL_PERIOD_S
+        median = float(np.median(np.fromiter(self._intervals, dtype=np.float64)))
+        return max(round(median / PERIOD_ROUND_S) * PERIOD_ROUND_S, MIN_PERIOD_S)
+
+    def _frames_in(self, seconds: float) -> int:
+        """How many frames make ``seconds`` at the session's frame period (at least 1)."""
+        return max(round(seconds / self._period()), 1)
+
+    def _periods(self) -> float:
+        """A frame's length in ``NOMINAL_PERIOD_S`` (what a rate given per nominal
+        period is scaled by)."""
+        return self._period() / NOMINAL_PERIOD_S
+
     def _follow_step(self, reported_std_m: float) -> None:
         """Take a step of the updates faster than any rider climbs (``MAX_CLIMB_MPS``)
         for the reference moving: the readings before it, and the anchor, move by it, as
@@ -506,7 +545,7 @@ class FloorTracker:
         readings = list(self._readings)
         cut = max(len(readings) - after, 0)
         moved = [v + step for v in readings[:cut]] + readings[cut:]
-        self._readings = deque(moved, maxlen=RATE_FRAMES)
+        self._readings = deque(moved, maxlen=MAX_READINGS)
         self._updates = deque(
             ((v, t, k) if k >= first else (v + step, t, k) for v, t, k in self._updates),
             maxlen=STEP_UPDATES,
@@ -675,7 +714,7 @@ class FloorTracker:
         self, x: NDArray[np.float64], y: NDArray[np.float64], rng: np.random.Generator
     ) -> NDArray[np.float64]:
         """No altitude: a few particles in stops move to a level their connector reaches."""
-        pick = np.flatnonzero(rng.random(x.shape[0]) < BLIND_RATE)
+        pick = np.flatnonzero(rng.random(x.shape[0]) < BLIND_RATE * self._periods())
         if not pick.size:
             return x
         stop = self.stop_of(x[pick], y[pick])
@@ -732,7 +771,7 @@ class FloorTracker:
         :attr:`newly_confirmed` when it changed) when the estimate is converged, or when
         it is the level the barometer's steps lead to from the last fix
         (:meth:`counted_level`) and the belief has agreed (``LEVEL_SURE_SHARE``) for
-        ``LEVEL_SURE_FRAMES`` frames while nobody is between floors. The second is the
+        ``LEVEL_SURE_S`` seconds of frames while nobody is between floors. The second is the
         floor without the place: the storeys counted from a fix say which floor the
         person left the lift or the stairs on, while through a narrow camera the place
         on it takes a few more seconds of looking (the cloud may even have lost the
@@ -749,7 +788,7 @@ class FloorTracker:
             and self.level_probability >= LEVEL_SURE_SHARE
         )
         self._sure_frames = self._sure_frames + 1 if counted else 0
-        confirmed = converged or self._sure_frames >= LEVEL_SURE_FRAMES
+        confirmed = converged or self._sure_frames >= self._frames_in(LEVEL_SURE_S)
         self.confirmed_now = confirmed
         self.newly_confirmed = confirmed and mine != self.confirmed_level
         if confirmed:
@@ -772,6 +811,7 @@ class FloorTracker:
             "readings": list(self._readings),
             "frames": self._frames,
             "clock": self._clock,
+            "intervals": list(self._intervals),
             "updates": [list(u) for u in self._updates],
             "diffs": list(self._diffs),
             "anchor_m": self.anchor_m,
@@ -788,10 +828,13 @@ class FloorTracker:
         }
 
     def restore(self, state: Mapping[str, Any]) -> None:
-        self._readings = deque((float(v) for v in state["readings"]), maxlen=RATE_FRAMES)
+        self._readings = deque((float(v) for v in state["readings"]), maxlen=MAX_READINGS)
         # (An older checkpoint: no updates, no noise measured yet.)
         self._frames = int(state.get("frames", 0))
         self._clock = float(state.get("clock", 0.0))
+        self._intervals = deque(
+            (float(v) for v in state.get("intervals", [])), maxlen=PERIOD_FRAMES
+        )
         updates = [u for u in state.get("updates", []) if len(u) == 3]
         self._updates = deque(
             ((float(v), float(t), int(k)) for v, t, k in updates), maxlen=STEP_UPDATES

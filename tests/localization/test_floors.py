@@ -14,7 +14,7 @@ from app.localization.filter import ParticleFilter
 from app.localization.floors import (
     ARRIVAL_SHARE,
     BLIND_RATE,
-    LEVEL_SURE_FRAMES,
+    LEVEL_SURE_S,
     STAY_LIKELIHOOD,
     AltitudeReading,
     FloorTracker,
@@ -31,6 +31,8 @@ from tests.helpers import seen_from
 VENUE = venue_map()
 PITCH = VENUE.layout.pitch_m
 RNG = np.random.default_rng(0)
+#: Frames of a second of agreement at the 5 frames/s ``feed`` gives.
+SURE_FRAMES = round(LEVEL_SURE_S * 5)
 
 
 def particles(x: float, y: float, level: int, n: int = 200) -> tuple[np.ndarray, np.ndarray]:
@@ -585,8 +587,8 @@ def test_the_floor_the_barometer_counted_from_a_fix_is_confirmed_once_the_belief
     tracker = FloorTracker(VENUE)
     _fix_then_ride_up(tracker)
     assert tracker.counted_level() == 1
-    said = _agree(tracker, 1, LEVEL_SURE_FRAMES + 2)
-    assert said == [False] * (LEVEL_SURE_FRAMES - 1) + [True] * 3
+    said = _agree(tracker, 1, SURE_FRAMES + 2)
+    assert said == [False] * (SURE_FRAMES - 1) + [True] * 3
     assert tracker.confirmed_level == 1
     # A checkpoint keeps the count.
     restored = FloorTracker(VENUE)
@@ -597,12 +599,12 @@ def test_the_floor_the_barometer_counted_from_a_fix_is_confirmed_once_the_belief
 def test_a_belief_on_a_floor_the_count_does_not_lead_to_is_never_confirmed_by_it() -> None:
     tracker = FloorTracker(VENUE)
     _fix_then_ride_up(tracker)
-    assert _agree(tracker, 2, 3 * LEVEL_SURE_FRAMES) == [False] * (3 * LEVEL_SURE_FRAMES)
+    assert _agree(tracker, 2, 3 * SURE_FRAMES) == [False] * (3 * SURE_FRAMES)
     assert tracker.confirmed_level == 0
     # Below LEVEL_SURE_SHARE of the belief on the counted level confirms nothing either.
     x = np.concatenate([particles(6.0, 11.0, 1, 98)[0], particles(6.0, 11.0, 2, 2)[0]])
     w = np.full(x.size, 1.0 / x.size)
-    for _ in range(2 * LEVEL_SURE_FRAMES):
+    for _ in range(2 * SURE_FRAMES):
         tracker.after_estimate(x, w, float(x[0]), False)
     assert tracker.confirmed_level == 0 and tracker.level_probability == pytest.approx(0.98)
     # A frame without altitude breaks the count: the person may have changed floor unseen.
@@ -616,11 +618,11 @@ def test_without_a_fix_only_a_ride_that_leaves_one_floor_possible_counts() -> No
     x, y = particles(1.5, 1.5, 0)
     feed(tracker, x, y, [0.0] * 5 + list(np.linspace(0, 4.5, 25)) + [4.5] * 10)
     assert tracker.counted_level() is None
-    assert not any(_agree(tracker, 1, 2 * LEVEL_SURE_FRAMES))
+    assert not any(_agree(tracker, 1, 2 * SURE_FRAMES))
     # Two storeys up: the top floor, wherever the person started.
     feed(tracker, x + PITCH, y, list(np.linspace(4.5, 9.0, 25)) + [9.0] * 10)
     assert tracker.net_storeys == 2 and tracker.counted_level() == 2
-    assert _agree(tracker, 2, LEVEL_SURE_FRAMES)[-1] and tracker.confirmed_level == 2
+    assert _agree(tracker, 2, SURE_FRAMES)[-1] and tracker.confirmed_level == 2
 
 
 def _pass_the_escalators_foot(seen_in_stop: bool) -> tuple[list[bool], list[bool]]:
@@ -903,3 +905,35 @@ def test_a_step_of_the_readings_faster_than_any_lift_is_the_reference_moving() -
     noisy = FloorTracker(VENUE)
     feed(noisy, x, y, readings(spike))
     assert noisy.reference_jumps == 0 and noisy.changes == 0
+
+
+def test_the_stairs_are_told_at_the_same_moment_at_5_and_at_10_frames_a_second() -> None:
+    """The tracker's windows and the anchor's drift are set in seconds, not frames: the
+    same climb of the stairs (0.3 m/s after 10 s at rest) read at 5 and at 10 frames/s
+    puts the person between floors, and on the next floor, at the same moment. Counted in
+    frames, the anchor followed the climb twice as fast at 10 frames/s and the change
+    came 2 s later (measured on the venue's walks re-simulated at 10 frames/s: a walk
+    down the stairs confidently one floor off for 5 frames)."""
+    moments = []
+    for rate in (5, 10):
+        tracker = FloorTracker(VENUE)
+        x, y = particles(22.0, 2.0, 0)  # at the foot of the stairs
+        log_w = np.zeros(x.size)
+        t = np.arange(int(30 * rate)) / rate
+        climb = np.clip(0.3 * (t - 10.0), 0.0, 4.5)
+        transit = change = None
+        for k, r in enumerate(climb):
+            x, log_w, _ = tracker.apply(
+                x, y, log_w, AltitudeReading(float(r), 0.25), RNG, seconds=1.0 / rate
+            )
+            if transit is None and tracker.in_transit:
+                transit = t[k]
+            if change is None and tracker.changed:
+                change = t[k]
+        assert transit is not None and change is not None
+        assert (VENUE.layout.level_of_plane_x(x) == 1).all() and tracker.changes == 1
+        moments.append((transit, change))
+    (transit5, change5), (transit10, change10) = moments
+    # (The 1 s mean of the readings lags by half its span less half a frame: 0.05 s
+    # more at 10 frames/s; and each moment is known to a frame.)
+    assert abs(transit10 - transit5) <= 0.25 and abs(change10 - change5) <= 0.25
