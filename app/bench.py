@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import platform
 import time
 from dataclasses import asdict
@@ -64,6 +65,23 @@ def cpu_model() -> str:
     except OSError:
         pass
     return platform.processor() or platform.machine()
+
+
+def kernel_target() -> str:
+    """The CPU the compiled kernels are built for (``NUMBA_CPU_NAME`` when set, else the
+    host's as LLVM names it): float32 results, and so a walk's particles, can differ in
+    the last bits between targets, and a marginal walk's outcome with them."""
+    name = os.environ.get("NUMBA_CPU_NAME")
+    if name:
+        return name
+    from llvmlite import binding
+
+    return str(binding.get_host_cpu_name())
+
+
+def machine_line() -> str:
+    """One line for a results file: the CPU and the kernels' target."""
+    return f"Machine: {cpu_model()}; compiled kernels built for `{kernel_target()}`."
 
 
 def bench_step(

@@ -28,6 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
+from app.bench import machine_line
 from app.experiments import integrity as m
 from app.experiments.hard_maps import (
     BUILDING_KIDNAP_AT_S,
@@ -205,6 +206,8 @@ def markdown(rows: list[dict[str, object]], *, seconds: float, particles: int, s
             "start in the west corridor, 5 frames/s, 0.5 m/s, bearing noise 2 deg, odometry "
             "noise 2 cm and 1 deg per frame, camera range 15 m. Walk and conditions: "
             "`app/experiments/building.py`; metrics: `app/experiments/integrity.py`.",
+            "",
+            machine_line(),
             "",
             "* first fix: median over seeds of the time of the first converged frame; "
             "'within 1 m': the first converged frame that is also right",

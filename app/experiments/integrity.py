@@ -27,6 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
+from app.bench import machine_line
 from app.experiments.hard_maps import BUILDERS, hard_map
 from app.experiments.runner import map_jobs
 from app.localization.compass import CompassReading
@@ -314,6 +315,8 @@ def markdown(summary: dict[str, object], *, seconds: float, particles: int, seed
             "start, 5 frames/s, 0.5 m/s, bearing noise 2 deg, odometry noise 2 cm and 1 deg "
             "per frame, camera range 15 m. Maps: `app/experiments/hard_maps.py`; conditions "
             "and metrics: `app/experiments/integrity.py`.",
+            "",
+            machine_line(),
             "",
             f"* confidently wrong: converged and more than {WRONG_M:g} m off (frames, share)",
             f"* availability: share of frames converged among those within {RIGHT_M:g} m",

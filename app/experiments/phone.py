@@ -39,6 +39,7 @@ from pathlib import Path
 
 import numpy as np
 
+from app.bench import machine_line
 from app.experiments.hard_maps import hard_map
 from app.experiments.integrity import FLIP_M, RIGHT_M, WRONG_M, format_cell
 from app.experiments.runner import map_jobs
@@ -537,6 +538,8 @@ def markdown(
             "service's session (`Session.process_sync`). The phone model and the sources "
             "of its magnitudes: `app/simulation/phone.py`; scenarios and metrics: "
             f"`app/experiments/phone.py`. Frames' `detections_age_s`: {passed}.",
+            "",
+            machine_line(),
             "",
             "Conditions: `vio-*` / `pdr-*` every effect at once (latency 0.1-0.3 s "
             "announced, duplicates 15 %, class confusion 3 %, detection falling with "

@@ -61,6 +61,7 @@ from pathlib import Path
 
 import numpy as np
 
+from app.bench import machine_line
 from app.localization.config import FilterConfig
 from app.localization.filter import ParticleFilter
 from app.localization.types import Estimate, InitialPose
@@ -512,6 +513,8 @@ def markdown(
         f"`{command}` ({counted}, {particles:,} "
         f"particles, {seconds:.0f} s). The walk, the venue and the definitions are in "
         "`app/experiments/venue.py`; every number below comes from that run.",
+        "",
+        machine_line(),
         "",
         markdown_table(rows),
         "",

@@ -998,7 +998,8 @@ class ParticleFilter:
             self.unseen.update(raw.x, raw.y, raw.theta_rad, obs, row)
             if self.unseen.contradicted and self._place_is_unique(raw):
                 # A stale map: the objects are moved or gone; the moved ones explain no
-                # detection any more.
+                # detection any more. A fixture (a door, a window) is never taken for
+                # moved, only for gone: it stays in the sensor model (unseen.forgive).
                 moved = int(self.unseen.moved.sum())
                 self.unseen.forgive()
                 if self.unseen.moved.sum() > moved:

@@ -165,7 +165,10 @@ class UnseenObjects:
 
     def forgive(self) -> int:
         """Take the objects flagged now for moved or gone from the world (those with near
-        misses for moved, :attr:`moved`); how many there were.
+        misses for moved, :attr:`moved`); how many there were. A fixture (a door, a
+        window: :attr:`~app.maps.model.SemanticMap.fixed`) is never taken for moved: it
+        is taken for gone (an opening drawn as a door that the detector never calls
+        one), and stays in the sensor model.
 
         For a caller that knows the estimate is right although an object in clear view
         goes unreported: the filter calls it when a global search of the last few
@@ -175,8 +178,10 @@ class UnseenObjects:
         odometry. What is left is a map drawn before the object was moved or taken away.
         """
         flagged = self._flagged()
+        fixed = self.map.fixed
         self.absent |= flagged
-        self.moved |= flagged & (self.near > self.settings.max_seen_share * self.expected)
+        near = self.near > self.settings.max_seen_share * self.expected
+        self.moved |= flagged & near & ~fixed
         self._contradicted = None
         return int(flagged.sum())
 

@@ -42,6 +42,12 @@ CLASS_PATTERN = re.compile(r"^[a-z][a-z0-9_-]*$")
 NAME_PATTERN = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]*$")
 #: An object closer than this to a wall is mounted in it (doors, windows), in metres.
 MOUNT_TOLERANCE_M = 0.05
+#: Classes that are part of the building: they stay where the plan puts them (a door
+#: drawn in a gap between two walls is no farther than its frame from where it is).
+#: Furniture, plants and machines move; these do not (:attr:`SemanticMap.fixed`).
+FIXTURE_CLASSES = frozenset(
+    {"door", "window", "exit", "entrance", "elevator", "lift", "stairs", "escalator"}
+)
 #: Values kept per map in :attr:`SemanticMap.derived` (per set of detected classes: a
 #: few dozen in a real walk).
 DERIVED_LIMIT = 1024
@@ -243,6 +249,16 @@ class SemanticMap:
 
     def class_of(self, index: int) -> str:
         return self.classes[int(self.object_class[index])]
+
+    @cached_property
+    def fixed(self) -> NDArray[np.bool_]:
+        """Per object, whether it is part of the building and cannot have been moved
+        since the map was drawn: of a :data:`FIXTURE_CLASSES` class or mounted in a
+        wall, shape (N,)."""
+        fixture = np.array([c in FIXTURE_CLASSES for c in self.classes], dtype=bool)
+        if not self.object_count:
+            return np.zeros(0, dtype=bool)
+        return fixture[self.object_class] | self.mounted_walls.any(axis=1)
 
     @cached_property
     def bounds(self) -> tuple[float, float, float, float]:

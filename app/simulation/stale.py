@@ -13,10 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from app.maps.model import SemanticMap, parse_map
-
-#: Classes that sit in walls: never moved (a moved door is a different building).
-MOUNTED_CLASSES = frozenset({"door", "window", "exit", "entrance"})
+from app.maps.model import FIXTURE_CLASSES, SemanticMap, parse_map
 
 
 @dataclass(frozen=True)
@@ -51,7 +48,8 @@ def stale_world(
     objects = [dict(o) for o in spec["objects"]]  # type: ignore[attr-defined]
     n = len(objects)
     free = semantic_map.free_space
-    movable = [i for i, o in enumerate(objects) if o["class"] not in MOUNTED_CLASSES]
+    # Fixtures are never moved (a moved door is a different building).
+    movable = [i for i, o in enumerate(objects) if o["class"] not in FIXTURE_CLASSES]
     n_move = min(_count(stale.moved_share, n), len(movable))
     for i in rng.permutation(movable)[:n_move]:
         x0, y0 = float(objects[i]["x"]), float(objects[i]["y"])
@@ -65,7 +63,7 @@ def stale_world(
     n_remove = min(_count(stale.removed_share, n), n - 1)
     removed = set(int(i) for i in rng.permutation(n)[:n_remove])
     kept = [o for i, o in enumerate(objects) if i not in removed]
-    loose = sorted({o["class"] for o in objects if o["class"] not in MOUNTED_CLASSES})
+    loose = sorted({o["class"] for o in objects if o["class"] not in FIXTURE_CLASSES})
     classes = loose or sorted({o["class"] for o in objects})
     for _ in range(_count(stale.added_share, n)):
         x, y = free.sample(1, rng)[0]

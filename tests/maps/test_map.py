@@ -144,3 +144,28 @@ def test_derived_values_are_made_once_and_the_oldest_go_first(
     assert [value(k) for k in (1, 2, 1, 3, 4, 1)] == [1, 2, 1, 3, 4, 1]
     assert made == [1, 2, 3, 4, 1]  # 1 made again: the oldest, it went when 4 came
     assert len(m.derived) == 3
+
+
+def test_fixtures_are_doors_windows_and_what_is_mounted_in_a_wall() -> None:
+    """A door drawn in a gap between two walls is no farther than its frame from a wall
+    it is not within reach of; it is a fixture by its class. A sign on a wall is one by
+    being mounted in it; a table and a plant are neither."""
+    sm = parse_map(
+        {
+            "name": "fixtures",
+            "walls": [
+                {"x1": 0, "y1": 0, "x2": 2.5, "y2": 0},
+                {"x1": 3.5, "y1": 0, "x2": 8, "y2": 0},
+                {"x1": 8, "y1": 0, "x2": 8, "y2": 6},
+            ],
+            "objects": [
+                {"class": "door", "x": 3.0, "y": 0.0},
+                {"class": "sign", "x": 8.0, "y": 3.0},
+                {"class": "table", "x": 4.0, "y": 3.0},
+                {"class": "plant", "x": 1.0, "y": 0.5},
+                {"class": "window", "x": 6.0, "y": 0.0},
+            ],
+        }
+    )
+    assert not sm.mounted_walls[0].any()  # (the door sits in the gap)
+    assert sm.fixed.tolist() == [True, True, False, False, True]
