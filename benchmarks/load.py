@@ -156,12 +156,24 @@ async def cpu_at(pid: int, when: float) -> float:
     return cpu_seconds(pid)
 
 
-def paper_walk_frames() -> list[dict]:
-    """The clients' frames: the paper office walked there and back, as JSON-ready data."""
+def paper_walk_frames(phone_rate_hz: float | None = None) -> list[dict]:
+    """The clients' frames: the paper office walked there and back, as JSON-ready data.
+
+    By default the paper's walk (a frame every 0.2 s of walking, no timestamps), which
+    the clients send at their rate (at 10 Hz, a walk at twice the speed). With
+    ``phone_rate_hz``, as a phone sends it: a frame every 1 / rate s of the walk at its
+    own speed, each with its ``timestamp`` (the walk's time)."""
     office = load_map(bundled_maps_dir() / "paper_office.json")
     there_and_back = PAPER_PATH + PAPER_PATH[-2::-1] + PAPER_PATH[1:]
     config = replace(paper_config("nominal", 360), path=there_and_back)
-    return [f.to_contract() for f in simulate(office, config, np.random.default_rng(0))]
+    if phone_rate_hz is not None:
+        config = replace(config, rate_hz=phone_rate_hz)
+    frames = simulate(office, config, np.random.default_rng(0))
+    out = [f.to_contract() for f in frames]
+    if phone_rate_hz is not None:
+        for f, d in zip(frames, out, strict=True):
+            d["timestamp"] = round(f.t, 4)
+    return out
 
 
 def quiet_collector() -> None:
@@ -181,7 +193,7 @@ def quiet_collector() -> None:
 
 
 async def run(args: argparse.Namespace, url: str, pid: int | None = None) -> dict[str, object]:
-    frames = paper_walk_frames()
+    frames = paper_walk_frames(args.rate if args.phone else None)
     quiet_collector()
     t0, cpu0 = time.perf_counter(), time.process_time()
     window = (t0 + args.stagger + args.warmup, t0 + args.seconds)
@@ -214,6 +226,7 @@ async def run(args: argparse.Namespace, url: str, pid: int | None = None) -> dic
     return {
         "sessions": args.sessions,
         "rate_hz": args.rate,
+        "phone": args.phone,
         "seconds": args.seconds,
         "particles": args.particles,
         "frames": len(lat_ms),
@@ -252,6 +265,12 @@ def main() -> None:
         "--stagger", type=float, default=0.0,
         help="sessions start at random moments within this many seconds (default 0: all "
         "at once, so their filters' periodic searches fall on the same frames)",
+    )  # fmt: skip
+    parser.add_argument(
+        "--phone", action="store_true",
+        help="frames as a phone sends them: the walk at its own speed, a frame every "
+        "1 / --rate s with its timestamp (default: the paper's 5 Hz walk sent at --rate, "
+        "no timestamps)",
     )  # fmt: skip
     parser.add_argument(
         "--warmup", type=float, default=10.0,

@@ -35,8 +35,15 @@ def main() -> None:
     parser.add_argument("--warmup", type=int, default=40, help="frames of each session first")
     parser.add_argument("--frames", type=int, default=100, help="timed frames of each session")
     parser.add_argument("--particles", type=int, default=10_000)
+    parser.add_argument(
+        "--phone-rate",
+        type=float,
+        default=None,
+        help="frames as a phone sends them at this rate, with timestamps "
+        "(load.paper_walk_frames); default: the paper's walk, no timestamps",
+    )
     args = parser.parse_args()
-    texts = [json.dumps(f) for f in paper_walk_frames()]
+    texts = [json.dumps(f) for f in paper_walk_frames(args.phone_rate)]
     manager = SessionManager(
         load_map_dir(bundled_maps_dir()), Settings(max_sessions=max(args.sessions, 1)), Metrics()
     )
@@ -63,6 +70,7 @@ def main() -> None:
             {
                 "sessions": args.sessions,
                 "frames_each": args.frames,
+                "phone_rate": args.phone_rate,
                 "cpu_ms_per_frame": round(per_frame_ms, 4),
             }
         )

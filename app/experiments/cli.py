@@ -49,6 +49,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "fresh walks beside the committed results' seeds 0-9 (default 0)",
     )
     parser.add_argument(
+        "--rate-hz",
+        type=float,
+        default=None,
+        help="phone: frames a second the phone sends (default 5; a phone app often sends 10)",
+    )
+    parser.add_argument(
         "--scenarios",
         default=None,
         help="integrity and phone: comma-separated MAP or MAP/CONDITION (* for any map), "
@@ -64,6 +70,12 @@ def run(args: argparse.Namespace) -> int:
             "bearings experiments: --first-seed is for the phone and venue suites, "
             f"not {args.suite}"
         )
+    if args.rate_hz is not None and args.suite != "phone":
+        raise SystemExit(
+            f"bearings experiments: --rate-hz is for the phone suite, not {args.suite}"
+        )
+    if args.rate_hz is not None and not 0.5 <= args.rate_hz <= 60.0:
+        raise SystemExit(f"bearings experiments: need 0.5 <= --rate-hz <= 60, got {args.rate_hz}")
     if args.suite == "integrity":
         return _run_integrity(args)
     if args.suite == "building":
@@ -152,6 +164,7 @@ def _run_phone(args: argparse.Namespace) -> int:
         summary = phone.run(
             args.out, seeds=seeds, particles=args.particles, workers=max(1, args.workers),
             quick=args.quick, select=args.scenarios, first_seed=args.first_seed,
+            rate_hz=phone.RATE_HZ if args.rate_hz is None else args.rate_hz,
         )  # fmt: skip
     except ValueError as exc:
         raise SystemExit(f"bearings experiments: {exc}") from None

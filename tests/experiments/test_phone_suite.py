@@ -118,7 +118,7 @@ def test_frames_reach_the_service_with_or_without_the_age_field() -> None:
 def test_quick_suite_end_to_end(tmp_path: Path) -> None:
     args = argparse.Namespace(
         suite="phone", quick=True, seeds=10, particles=1000, workers=1, out=tmp_path,
-        scenarios=None, first_seed=0,
+        scenarios=None, first_seed=0, rate_hz=None,
     )  # fmt: skip
     assert cli.run(args) == 0
     summary = json.loads((tmp_path / "phone.json").read_text())
@@ -169,3 +169,24 @@ def test_a_first_seed_is_refused_where_the_suite_has_none(suite: str, tmp_path: 
     args = parser.parse_args(["--suite", suite, "--first-seed", "10", "--out", str(tmp_path)])
     with pytest.raises(SystemExit, match="--first-seed is for the phone and venue suites"):
         cli.run(args)
+
+
+def test_the_suite_walks_at_the_rate_asked_and_only_it(tmp_path: Path) -> None:
+    """`--rate-hz 10`: the phone sends 10 frames a second (twice the frames of a walk),
+    and the report says so; other suites, and rates out of range, are refused."""
+    parser = argparse.ArgumentParser()
+    cli.add_arguments(parser)
+    args = parser.parse_args(
+        ["--suite", "phone", "--quick", "--scenarios", "office_suite/ideal-360",
+         "--rate-hz", "10", "--seeds", "1", "--workers", "1", "--out", str(tmp_path)]
+    )  # fmt: skip
+    assert cli.run(args) == 0
+    text = (tmp_path / "phone.md").read_text()
+    assert "--rate-hz 10" in text and "10 frames/s" in text
+    five = run_scenario(Scenario("office_suite", "ideal-360"), 0, 500, max_s=4.0)
+    ten = run_scenario(Scenario("office_suite", "ideal-360"), 0, 500, max_s=4.0, rate_hz=10.0)
+    assert np.median(np.diff(ten.t)) == pytest.approx(0.1)
+    assert np.median(np.diff(five.t)) == pytest.approx(0.2)
+    for bad in (["--suite", "venue", "--rate-hz", "10"], ["--suite", "phone", "--rate-hz", "0"]):
+        with pytest.raises(SystemExit, match="--rate-hz"):
+            cli.run(parser.parse_args([*bad, "--out", str(tmp_path)]))

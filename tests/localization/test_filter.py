@@ -357,3 +357,49 @@ def test_a_fix_known_to_more_than_a_metre_forgives_nothing(monkeypatch: pytest.M
     assert pf.sensor.excluded == ()  # type: ignore[attr-defined]
     # Held at first, let go once the moved object contradicts it, and not held since.
     assert any(held) and not any(held[-10:])
+
+
+def test_frames_ten_a_second_are_weighed_five_a_second_and_answered_between(
+    paper_office: SemanticMap,
+) -> None:
+    """At 10 frames/s every other frame is weighed (filter.WEIGH_PERIOD_S): the one
+    between is the last answer moved on by its odometry, its motion carried into the
+    next step; a filter restored between the two goes on exactly the same; at 5
+    frames/s every frame is weighed."""
+    sim = replace(paper_config("nominal", 360), duration_s=12.0, rate_hz=10.0)
+    frames = simulate(paper_office, sim, np.random.default_rng(4))
+    pf = ParticleFilter(paper_office, FilterConfig(particles=3000), rng=np.random.default_rng(5))
+    answers, steps = [], []
+    for k, f in enumerate(frames):
+        answers.append(pf.step(f.odometry, f.detections, frame_s=None if k == 0 else 0.1))
+        steps.append(pf.steps)
+    assert steps[:6] == [1, 1, 2, 2, 3, 3]
+    assert steps[-1] == (len(frames) + 1) // 2
+    for k in range(1, len(frames), 2):  # answered between two steps
+        o, before, now = frames[k].odometry, answers[k - 1], answers[k]
+        c, s = np.cos(before.theta_rad), np.sin(before.theta_rad)
+        assert now.x == pytest.approx(before.x + c * o.forward_m - s * o.left_m, abs=1e-12)
+        assert now.y == pytest.approx(before.y + s * o.forward_m + c * o.left_m, abs=1e-12)
+        assert (now.converged, now.protection_m) == (before.converged, before.protection_m)
+    late = [(f, e) for f, e in zip(frames, answers, strict=True) if f.t >= 6.0]
+    assert all(e.converged for _, e in late)
+    assert np.mean([np.hypot(e.x - f.truth.x, e.y - f.truth.y) for f, e in late]) < 0.15
+    # Restored between two steps: the carried motion goes along.
+    pf = ParticleFilter(paper_office, FilterConfig(particles=3000), rng=np.random.default_rng(5))
+    for k, f in enumerate(frames[:21]):
+        pf.step(f.odometry, f.detections, frame_s=None if k == 0 else 0.1)
+    assert pf.steps == 11
+    again = ParticleFilter(
+        paper_office, FilterConfig(particles=3000), rng=np.random.default_rng(9),
+        state=pf.checkpoint(max_particles=10**6),
+    )  # fmt: skip
+    for f in frames[21:25]:
+        a = pf.step(f.odometry, f.detections, frame_s=0.1)
+        b = again.step(f.odometry, f.detections, frame_s=0.1)
+        assert (a.x, a.y, a.theta_rad, a.converged) == (b.x, b.y, b.theta_rad, b.converged)
+    # Five a second: every frame weighed.
+    five = simulate(paper_office, replace(sim, rate_hz=5.0), np.random.default_rng(4))
+    pf = ParticleFilter(paper_office, FilterConfig(particles=3000), rng=np.random.default_rng(5))
+    for k, f in enumerate(five):
+        pf.step(f.odometry, f.detections, frame_s=None if k == 0 else 0.2)
+    assert pf.steps == len(five)
