@@ -146,6 +146,13 @@ WEIGH_PERIOD_S = 0.2
 WALK_BOUND_SCALE = 1.25
 
 
+def turned(reading: CompassReading | None, turn_rad: float) -> CompassReading | None:
+    """A compass reading carried through a turn of the body (None stays None)."""
+    if reading is None:
+        return None
+    return CompassReading(reading.heading_rad + turn_rad, reading.std_rad)
+
+
 class ParticleFilter:
     """Monte Carlo localization of one person on one map.
 
@@ -289,6 +296,8 @@ class ParticleFilter:
         self._paced = 0
         self._paced_motion = Odometry(0.0, 0.0, 0.0)
         self._paced_s = 0.0
+        self._paced_heading: CompassReading | None = None
+        self._paced_altitude: AltitudeReading | None = None
         self._answer: Estimate | None = None
         #: Whether the convergence gate held a fix when the last ride between levels began.
         self._located_at_ride = False
@@ -517,8 +526,10 @@ class ParticleFilter:
         (less half its own ``frame_s``), with odometry, is not weighed: the answer is the
         last one moved on by the motion since (its convergence and radius as they were),
         and the motion waits for the next frame weighed, as frames merged in a queue do
-        (its detections, compass and barometer readings are dropped: the next frame's
-        are 0.1 s newer views of the same).
+        (its detections are not weighed: the next frame's are a 0.1 s newer view of the
+        same). Its compass and barometer readings go with the motion to the next frame
+        weighed when that one has none of its own (the compass turned on by the turns
+        since): an app that sends a reading only when it changes loses none.
         """
         if (
             odometry is not None
@@ -532,14 +543,21 @@ class ParticleFilter:
             self._paced += 1
             self._paced_motion = motion
             self._paced_s += frame_s
+            self._paced_heading = heading or turned(self._paced_heading, odometry.turn_rad)
+            self._paced_altitude = altitude or self._paced_altitude
             self.last_observation = None  # (this frame's detections were not prepared)
             return moved_forward(self._answer, motion)
         if self._paced:
+            if heading is None and odometry is not None:
+                heading = turned(self._paced_heading, odometry.turn_rad)
+            altitude = altitude or self._paced_altitude
             odometry = compose_odometry(self._paced_motion, odometry)
             frame_s = None if frame_s is None else frame_s + self._paced_s
             self._paced = 0
             self._paced_motion = Odometry(0.0, 0.0, 0.0)
             self._paced_s = 0.0
+            self._paced_heading = None
+            self._paced_altitude = None
         raw_odometry = odometry
         seconds = frame_s if frame_s is not None and frame_s > 0.0 else DEFAULT_FRAME_S
         if self.odometry_bias is not None:
@@ -956,6 +974,7 @@ class ParticleFilter:
                 self._paced_s,
             ],
             "answer": self._answer,
+            "paced_readings": [self._paced_heading, self._paced_altitude],
             "estimate": self.estimate,
             "capture": self.capture.checkpoint(),
             "geometry": self.geometry.checkpoint(),
@@ -1014,6 +1033,9 @@ class ParticleFilter:
         self._paced_motion = Odometry(float(paced[1]), float(paced[2]), float(paced[3]))
         self._paced_s = float(paced[4])
         self._answer = from_plain(Estimate | None, state.get("answer"))
+        heading, altitude = state.get("paced_readings") or (None, None)
+        self._paced_heading = from_plain(CompassReading | None, heading)
+        self._paced_altitude = from_plain(AltitudeReading | None, altitude)
         self.estimate = from_plain(Estimate, state["estimate"])
         self.continuation.restore(state)
         self.capture.restore(state.get("capture"))

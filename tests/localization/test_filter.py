@@ -403,3 +403,36 @@ def test_frames_ten_a_second_are_weighed_five_a_second_and_answered_between(
     for k, f in enumerate(five):
         pf.step(f.odometry, f.detections, frame_s=None if k == 0 else 0.2)
     assert pf.steps == len(five)
+
+
+def test_a_compass_or_barometer_reading_on_a_frame_not_weighed_goes_to_the_next(
+    small_room: SemanticMap, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """An app may send a reading only when it changes: one on a frame answered between
+    steps is weighed with the next frame (the compass turned on by that frame's turn),
+    unless that frame brings its own."""
+    from app.localization.compass import CompassReading
+    from app.localization.floors import AltitudeReading
+
+    pf = ParticleFilter(small_room, FilterConfig(particles=500), rng=np.random.default_rng(1))
+    seen: list[tuple[object, object]] = []
+    real = pf._step
+
+    def spy(odometry, detections, heading, altitude=None, frame_s=None):  # type: ignore[no-untyped-def]
+        seen.append((heading, altitude))
+        return real(odometry, detections, heading, altitude, frame_s)
+
+    monkeypatch.setattr(pf, "_step", spy)
+    walk = Odometry(0.05, 0.0, 0.1)
+    north, up = CompassReading(1.0, 0.1), AltitudeReading(3.0, 0.5)
+    pf.step(walk, [], frame_s=None)  # weighed
+    pf.step(walk, [], north, up, frame_s=0.1)  # between: its readings wait
+    pf.step(walk, [], frame_s=0.1)  # weighed, with them
+    pf.step(walk, [], north, frame_s=0.1)  # between
+    own = CompassReading(2.0, 0.1)
+    pf.step(walk, [], own, frame_s=0.1)  # weighed with its own
+    assert len(seen) == 3 and seen[0] == (None, None)
+    heading, altitude = seen[1]
+    assert isinstance(heading, CompassReading) and heading.heading_rad == pytest.approx(1.1)
+    assert altitude == up
+    assert seen[2] == (own, None)
