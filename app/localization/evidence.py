@@ -420,6 +420,7 @@ class EvidenceTracker:
         heading: CompassReading | None = None,
         search_ok: bool = True,
         gain_waits: bool = False,
+        steps: int = 1,
     ) -> bool:
         """Move and weigh the alternatives, search when due; True if a swap is due.
 
@@ -437,6 +438,7 @@ class EvidenceTracker:
             gain_waits: whether a gain of ``converged`` waits for a search (the gate
                 gains only after one during its run of steady frames): searches then
                 come every ``search_every`` frames, not at the lengthened interval.
+            steps: frames ``odometry`` adds up (the motion noise's floors add up).
         """
         # Frames without detections are kept too: their odometry chains the window.
         self._history.append((odometry, obs, heading))
@@ -454,7 +456,7 @@ class EvidenceTracker:
         if self._anchor is not None:
             # While the main belief does not explain the detections, converged can be
             # neither gained nor held: the places are only carried along.
-            self._track(odometry, obs, heading, steady, weigh=search_ok)
+            self._track(odometry, obs, heading, steady, weigh=search_ok, steps=steps)
         if main is not None:
             self._follow_main(main, particles, search_ok)
             self._forget_covered(main)
@@ -505,6 +507,7 @@ class EvidenceTracker:
         heading: CompassReading | None,
         count: bool = True,
         weigh: bool = True,
+        steps: int = 1,
     ) -> None:
         """Move the anchor by the odometry; weigh it and its carried copies (their
         ratios gain this frame's evidence only if ``count``; nothing is weighed unless
@@ -515,7 +518,9 @@ class EvidenceTracker:
         rows = a + 1 if a and weigh else 1
         # Row 0 the moved anchor, rows 1.. its copies: x, y, theta, each (rows, P).
         poses = np.empty((3, rows, p))
-        nx, ny, nt = self.motion.sample(x0, y0, t0, odometry, self.rng, out=poses[:, 0])
+        nx, ny, nt = self.motion.sample(
+            x0, y0, t0, odometry, self.rng, out=poses[:, 0], steps=steps
+        )
         if rows == 1:
             # Nothing to weigh (no alternative, or no evidence worth counting): the
             # anchor only has to follow the main mode (it is redrawn from the filter's

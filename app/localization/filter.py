@@ -296,6 +296,8 @@ class ParticleFilter:
         self._paced = 0
         self._paced_motion = Odometry(0.0, 0.0, 0.0)
         self._paced_s = 0.0
+        #: Frames the step being taken adds up (1, or 1 + the frames paced before it).
+        self._steps_in_frame = 1
         self._paced_heading: CompassReading | None = None
         self._paced_altitude: AltitudeReading | None = None
         self._answer: Estimate | None = None
@@ -325,11 +327,12 @@ class ParticleFilter:
         return normalized_weights(self.log_w)
 
     # ----------------------------------------------------------------- steps
-    def predict(self, odometry: Odometry | None) -> None:
-        """Move every particle by the noisy odometry; impossible moves lose their weight."""
+    def predict(self, odometry: Odometry | None, steps: int = 1) -> None:
+        """Move every particle by the noisy odometry (adding up ``steps`` frames' motion);
+        impossible moves lose their weight."""
         x0, y0 = self.x, self.y
         self.x, self.y, self.theta = self.motion.sample(
-            self.x, self.y, self.theta, odometry, self.rng
+            self.x, self.y, self.theta, odometry, self.rng, steps=steps
         )
         self.log_w, possible = self.motion.weigh_moves(x0, y0, self.x, self.y, self.log_w)
         if not possible:
@@ -537,6 +540,7 @@ class ParticleFilter:
             and frame_s > 0.0
             and self._answer is not None
             and self._paced_s + frame_s < WEIGH_PERIOD_S - frame_s / 2.0
+            and not self._near_a_ride(self._answer)
         ):
             motion = compose_odometry(self._paced_motion, odometry)
             assert motion is not None
@@ -546,7 +550,10 @@ class ParticleFilter:
             self._paced_heading = heading or turned(self._paced_heading, odometry.turn_rad)
             self._paced_altitude = altitude or self._paced_altitude
             self.last_observation = None  # (this frame's detections were not prepared)
+            if self.floors is not None:
+                self.floors.quiet_frame()
             return moved_forward(self._answer, motion)
+        self._steps_in_frame = 1 + self._paced
         if self._paced:
             if heading is None and odometry is not None:
                 heading = turned(self._paced_heading, odometry.turn_rad)
@@ -582,6 +589,14 @@ class ParticleFilter:
         self._answer = est
         return est
 
+    def _near_a_ride(self, answer: Estimate) -> bool:
+        """Whether the person may be riding between floors, or about to: the barometer
+        says so, or the last answer stands in a connector's stop. Every frame is
+        weighed there (:data:`WEIGH_PERIOD_S`): a lift car's door opening on another
+        floor is news that cannot wait a frame."""
+        floors = self.floors
+        return floors is not None and (floors.in_transit or floors.in_stop(answer.x, answer.y))
+
     def _step(
         self,
         odometry: Odometry | None,
@@ -596,7 +611,7 @@ class ParticleFilter:
         # A ride the belief was not located for, but placed the person in one connector
         # for (its stop: centre and radius), FloorTracker.pinned_stop.
         pinned: tuple[float, float, float] | None = None
-        self.predict(odometry)
+        self.predict(odometry, self._steps_in_frame)
         if odometry is None:
             self._last_fix = None
         elif self._last_fix is not None:
@@ -894,7 +909,10 @@ class ParticleFilter:
             and gate.streak >= gate.frames - 1
             and (ago is None or ago >= gate.streak)
         )
-        swap = self.evidence.update(odometry, obs, top, tight, particles, heading, fits, gain_waits)
+        swap = self.evidence.update(
+            odometry, obs, top, tight, particles, heading, fits, gain_waits,
+            steps=self._steps_in_frame,
+        )  # fmt: skip
         if carry_only or not swap:
             return raw, w, ess
         told = self.estimate

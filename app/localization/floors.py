@@ -330,6 +330,14 @@ class FloorTracker:
             return np.full(x.shape, -1, dtype=np.int64)
         return first_polygon(np.column_stack([x, y]), self._edges, self._starts)
 
+    def quiet_frame(self) -> None:
+        """A frame answered between two steps (the filter's pacing): no level changed
+        or was confirmed on it, whatever the last step did."""
+        self.changed = False
+        self.first_change = False
+        self.newly_confirmed = False
+        self.confirmed_now = False
+
     def in_stop(self, x: float, y: float) -> bool:
         """Whether plane point (x, y) lies in a connector's stop (a lift car, the foot
         or head of stairs or an escalator)."""

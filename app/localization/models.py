@@ -109,8 +109,10 @@ class MotionModel(Protocol):
         odometry: Odometry | None,
         rng: np.random.Generator,
         out: Array | None = None,
+        steps: int = 1,
     ) -> Poses:
-        """New poses after one noisy step of ``odometry`` (None: unknown motion)."""
+        """New poses after one noisy step of ``odometry`` (None: unknown motion) that
+        adds up ``steps`` frames' motion (their noise floors add up too)."""
         ...
 
     def weigh_moves(
@@ -197,8 +199,9 @@ class OdometryMotionModel:
         odometry: Odometry | None,
         rng: np.random.Generator,
         out: Array | None = None,
+        steps: int = 1,
     ) -> Poses:
-        return sample_motion(x, y, theta, odometry, self.config, rng, out=out)
+        return sample_motion(x, y, theta, odometry, self.config, rng, out=out, steps=steps)
 
     def weigh_moves(
         self, x0: Array, y0: Array, x1: Array, y1: Array, log_w: Array

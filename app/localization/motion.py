@@ -54,6 +54,7 @@ def sample_motion(
     config: FilterConfig,
     rng: np.random.Generator,
     out: NDArray[np.float64] | None = None,
+    steps: int = 1,
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
     """New particle poses after one noisy odometry step (the inputs are not modified).
 
@@ -62,6 +63,8 @@ def sample_motion(
         odometry: motion in the previous body frame, or None (unknown motion).
         out: optional array of shape (3, N), each row C-contiguous and none an input, to
             write the new poses into (its rows are returned): saves stacking them.
+        steps: frames the odometry adds up (a filter weighing every other frame): the
+            noise floors, each frame's own, add up over them (``sqrt(steps)`` times).
 
     Returns:
         New (x, y, theta), each shape (N,); theta wrapped to (-pi, pi].
@@ -71,10 +74,12 @@ def sample_motion(
         std_t, std_r = NO_ODOMETRY_STD_M, float(NO_ODOMETRY_STD_RAD)
     else:
         dist = hypot(odometry.forward_m, odometry.left_m)
-        std_t = config.trans_noise_frac * dist + config.trans_noise_floor_m
+        floors = 1.0 if steps == 1 else math.sqrt(steps)
+        std_t = config.trans_noise_frac * dist + config.trans_noise_floor_m * floors
         # (math.radians multiplies by the same pi / 180 as np.radians: the same bits)
-        std_r = config.rot_noise_frac * abs(odometry.turn_rad) + math.radians(
-            config.rot_noise_floor_deg
+        std_r = (
+            config.rot_noise_frac * abs(odometry.turn_rad)
+            + math.radians(config.rot_noise_floor_deg) * floors
         )
         fwd, left, turn = odometry.forward_m, odometry.left_m, odometry.turn_rad
     n = x.shape[0]

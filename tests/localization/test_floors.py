@@ -937,3 +937,34 @@ def test_the_stairs_are_told_at_the_same_moment_at_5_and_at_10_frames_a_second()
     # (The 1 s mean of the readings lags by half its span less half a frame: 0.05 s
     # more at 10 frames/s; and each moment is known to a frame.)
     assert abs(transit10 - transit5) <= 0.25 and abs(change10 - change5) <= 0.25
+
+
+def test_ten_frames_a_second_all_weighed_in_a_connector_paced_ones_confirm_nothing() -> None:
+    """At 10 frames/s every other frame is weighed (filter.WEIGH_PERIOD_S), but not in a
+    lift car, on stairs or an escalator's stop: there a door opening on another floor is
+    news. A frame answered between steps changes and confirms no level, whatever the
+    step before did (the narrator would say the floor again)."""
+
+    def steps(x: float, y: float) -> tuple[ParticleFilter, list[int]]:
+        start = InitialPose(x, y, 0.0, 0.05, 0.02)
+        pf = ParticleFilter(
+            VENUE, FilterConfig(particles=1000), rng=np.random.default_rng(0), initial_pose=start
+        )
+        counts = []
+        for k in range(5):
+            pf.step(
+                Odometry(0.0, 0.0, 0.0), [], altitude=AltitudeReading(3.0),
+                frame_s=None if k == 0 else 0.1,
+            )  # fmt: skip
+            counts.append(pf.steps)
+        return pf, counts
+
+    assert steps(1.5, 1.5)[1] == [1, 2, 3, 4, 5]  # in the lift car
+    hall, counts = steps(6.0, 11.0)
+    assert counts == [1, 1, 2, 2, 3]
+    floors = hall.floors
+    assert floors is not None
+    floors.confirmed_now = floors.newly_confirmed = floors.changed = True
+    hall.step(Odometry(0.1, 0.0, 0.0), [], altitude=AltitudeReading(3.0), frame_s=0.1)
+    assert hall.steps == 3  # answered between steps
+    assert not (floors.confirmed_now or floors.newly_confirmed or floors.changed)

@@ -70,8 +70,8 @@ def test_given_models_are_the_only_ones_used_and_change_nothing() -> None:
 class StandingStill(OdometryMotionModel):
     """A motion model for which nobody ever moves (whatever the odometry says)."""
 
-    def sample(self, x, y, theta, odometry, rng, out=None):  # type: ignore[no-untyped-def]
-        return super().sample(x, y, theta, Odometry(0.0, 0.0, 0.0), rng, out)
+    def sample(self, x, y, theta, odometry, rng, out=None, steps=1):  # type: ignore[no-untyped-def]
+        return super().sample(x, y, theta, Odometry(0.0, 0.0, 0.0), rng, out, steps)
 
 
 def test_another_motion_model_moves_the_particles_its_way() -> None:

@@ -122,3 +122,20 @@ def test_wall_test_of_long_moves_agrees_with_the_geometry_module() -> None:
     )
     assert np.array_equal(penalty == 0.0, expected)
     assert 100 < np.count_nonzero(~expected) < 4900  # both outcomes are exercised
+
+
+def test_an_odometry_adding_up_frames_adds_up_their_noise_floors() -> None:
+    """Standing still, one step standing for four frames spreads the particles twice as
+    far as one frame's (the floors are each frame's own, independent: sqrt(4))."""
+    cfg = FilterConfig()
+    n = 200_000
+    zero = np.zeros(n)
+    spread = {}
+    for steps in (1, 4):
+        x, _, theta = sample_motion(
+            zero, zero, zero, Odometry(0.0, 0.0, 0.0), cfg, default_rng(3), steps=steps
+        )
+        spread[steps] = (float(np.std(x)), float(np.std(theta)))
+    assert spread[1][0] == pytest.approx(cfg.trans_noise_floor_m, rel=0.02)
+    assert spread[4][0] == pytest.approx(2.0 * spread[1][0], rel=0.02)
+    assert spread[4][1] == pytest.approx(2.0 * spread[1][1], rel=0.02)
