@@ -164,7 +164,7 @@ def _run_phone(args: argparse.Namespace) -> int:
         summary = phone.run(
             args.out, seeds=seeds, particles=args.particles, workers=max(1, args.workers),
             quick=args.quick, select=args.scenarios, first_seed=args.first_seed,
-            rate_hz=phone.RATE_HZ if args.rate_hz is None else args.rate_hz,
+            rate_hz=args.rate_hz,
         )  # fmt: skip
     except ValueError as exc:
         raise SystemExit(f"bearings experiments: {exc}") from None

@@ -51,8 +51,8 @@ from app.localization.models import (
     OdometryMotionModel,
     SensorModel,
 )
-from app.localization.motion import compose_odometry
 from app.localization.odometry_bias import BIAS_PRIORS, OdometryBias
+from app.localization.pacing import Pacing
 from app.localization.recovery import AugmentedMCL
 from app.localization.resampling import (
     effective_sample_size,
@@ -130,27 +130,10 @@ FORGIVE_SLIDE_M = 0.25
 #: confidently-wrong frames with 2, availability 0.88 as before; with 3, 25 frames and
 #: 66-degree cameras 0.05-0.08 less available.
 NARROW_FRAMES = 2
-#: The filter weighs what is seen at most this often (s). A phone sending 10 frames a
-#: second shows the same view twice 0.1 s apart: weighed as two views, the evidence piled
-#: up twice as fast as the gate's frame counts, the evidence tracker's windows and the
-#: bearings' noise were set for (measured on the phone suite at 10 frames/s: corridors
-#: flipping 1.2-1.7 times a minute, a tail p95 of 6-9 m at 180 deg). A frame that ends
-#: less than this, less half its own length, after the last one weighed is answered by
-#: dead reckoning from that one's answer (:meth:`ParticleFilter.step`), its motion kept
-#: for the next: at 10 frames/s every other frame is weighed, at 5 (or anything slower
-#: than about 6.7) every one, and a faster stream is paced to about 5 a second.
-WEIGH_PERIOD_S = 0.2
 #: How much farther than the odometry's path a person may have walked since the last fix
 #: told (PDR-grade step lengths are off by up to 10 %; dropped frames are carried by the
 #: next frame's odometry).
 WALK_BOUND_SCALE = 1.25
-
-
-def turned(reading: CompassReading | None, turn_rad: float) -> CompassReading | None:
-    """A compass reading carried through a turn of the body (None stays None)."""
-    if reading is None:
-        return None
-    return CompassReading(reading.heading_rad + turn_rad, reading.std_rad)
 
 
 class ParticleFilter:
@@ -291,16 +274,8 @@ class ParticleFilter:
         #: How often every particle became impossible and the filter started again.
         self.restarts = 0
         self.steps = 0
-        #: Frames answered by dead reckoning since the last step (WEIGH_PERIOD_S): their
-        #: motion composed, their seconds, and the answer they move on from.
-        self._paced = 0
-        self._paced_motion = Odometry(0.0, 0.0, 0.0)
-        self._paced_s = 0.0
-        #: Frames the step being taken adds up (1, or 1 + the frames paced before it).
-        self._steps_in_frame = 1
-        self._paced_heading: CompassReading | None = None
-        self._paced_altitude: AltitudeReading | None = None
-        self._answer: Estimate | None = None
+        #: Frames answered by dead reckoning since the last step (pacing.WEIGH_PERIOD_S).
+        self._pacing = Pacing()
         #: Whether the convergence gate held a fix when the last ride between levels began.
         self._located_at_ride = False
         #: Since a ride that began located (without a barometer: since the view settled
@@ -525,7 +500,8 @@ class ParticleFilter:
         The estimate summarizes the weighted particles before resampling: resampling
         only adds noise to what they say (and to what the injected particles say).
 
-        A frame that comes less than :data:`WEIGH_PERIOD_S` after the last one weighed
+        A frame that comes less than :data:`~app.localization.pacing.WEIGH_PERIOD_S` after
+        the last one weighed
         (less half its own ``frame_s``), with odometry, is not weighed: the answer is the
         last one moved on by the motion since (its convergence and radius as they were),
         and the motion waits for the next frame weighed, as frames merged in a queue do
@@ -534,48 +510,30 @@ class ParticleFilter:
         weighed when that one has none of its own (the compass turned on by the turns
         since): an app that sends a reading only when it changes loses none.
         """
+        answer = self._last_answer()
         if (
-            odometry is not None
-            and frame_s is not None
-            and frame_s > 0.0
-            and self._answer is not None
-            and self._paced_s + frame_s < WEIGH_PERIOD_S - frame_s / 2.0
-            and not self._near_a_ride(self._answer)
+            answer is not None
+            and self._pacing.waits(odometry, frame_s)
+            and not self._near_a_ride(answer)
         ):
-            motion = compose_odometry(self._paced_motion, odometry)
-            assert motion is not None
-            self._paced += 1
-            self._paced_motion = motion
-            self._paced_s += frame_s
-            self._paced_heading = heading or turned(self._paced_heading, odometry.turn_rad)
-            self._paced_altitude = altitude or self._paced_altitude
+            assert odometry is not None and frame_s is not None  # (waits says so)
+            motion = self._pacing.hold(odometry, frame_s, heading, altitude)
             self.last_observation = None  # (this frame's detections were not prepared)
             if self.floors is not None:
                 self.floors.quiet_frame()
-            return moved_forward(self._answer, motion)
-        self._steps_in_frame = 1 + self._paced
-        if self._paced:
-            if heading is None and odometry is not None:
-                heading = turned(self._paced_heading, odometry.turn_rad)
-            altitude = altitude or self._paced_altitude
-            odometry = compose_odometry(self._paced_motion, odometry)
-            frame_s = None if frame_s is None else frame_s + self._paced_s
-            self._paced = 0
-            self._paced_motion = Odometry(0.0, 0.0, 0.0)
-            self._paced_s = 0.0
-            self._paced_heading = None
-            self._paced_altitude = None
+            return moved_forward(answer, motion)
+        weighed = self._pacing.release(odometry, frame_s, heading, altitude)
+        odometry, frame_s = weighed.odometry, weighed.frame_s
+        heading, altitude = weighed.heading, weighed.altitude
         raw_odometry = odometry
         seconds = frame_s if frame_s is not None and frame_s > 0.0 else DEFAULT_FRAME_S
         if self.odometry_bias is not None:
             odometry = self.odometry_bias.correct(odometry, seconds)
         odometry = self.capture.step(odometry, frame_s, detections_age_s)
         known_s = frame_s if frame_s is not None and frame_s > 0.0 else None
-        self._step(odometry, detections, heading, altitude, known_s)
-        back = self.capture.back
-        est = self.estimate
-        if not (back.forward_m == 0.0 and back.left_m == 0.0 and back.turn_rad == 0.0):
-            est = moved_forward(est, back)
+        self._step(odometry, detections, heading, altitude, known_s, weighed.steps)
+        est = self._last_answer()
+        assert est is not None
         if self.odometry_bias is not None:
             rode = self.floors is not None and self.floors.changed
             self.odometry_bias.observe(
@@ -586,13 +544,22 @@ class ParticleFilter:
                 max(est.std_x_m, est.std_y_m),
                 est.std_theta_rad,
             )
-        self._answer = est
         return est
+
+    def _last_answer(self) -> Estimate | None:
+        """What the last step answered (None before the first): :attr:`estimate`, at the
+        detections' capture, moved on to the frame's end."""
+        if not self.steps:
+            return None
+        back = self.capture.back
+        if back.forward_m == 0.0 and back.left_m == 0.0 and back.turn_rad == 0.0:
+            return self.estimate
+        return moved_forward(self.estimate, back)
 
     def _near_a_ride(self, answer: Estimate) -> bool:
         """Whether the person may be riding between floors, or about to: the barometer
         says so, or the last answer stands in a connector's stop. Every frame is
-        weighed there (:data:`WEIGH_PERIOD_S`): a lift car's door opening on another
+        weighed there (:mod:`~app.localization.pacing`): a lift car's door opening on another
         floor is news that cannot wait a frame."""
         floors = self.floors
         return floors is not None and (floors.in_transit or floors.in_stop(answer.x, answer.y))
@@ -604,14 +571,16 @@ class ParticleFilter:
         heading: CompassReading | None,
         altitude: AltitudeReading | None = None,
         frame_s: float | None = None,
+        steps: int = 1,
     ) -> None:
         """:meth:`step` in capture time: ``odometry`` is the motion between captures,
-        ``frame_s`` the time since the previous frame (None: not known)."""
+        ``frame_s`` the time since the previous frame (None: not known), adding up
+        ``steps`` frames (:mod:`~app.localization.pacing`)."""
         rode = False  # a ride between levels ended with this frame's level change
         # A ride the belief was not located for, but placed the person in one connector
         # for (its stop: centre and radius), FloorTracker.pinned_stop.
         pinned: tuple[float, float, float] | None = None
-        self.predict(odometry, self._steps_in_frame)
+        self.predict(odometry, steps)
         if odometry is None:
             self._last_fix = None
         elif self._last_fix is not None:
@@ -736,9 +705,9 @@ class ParticleFilter:
             # filter's cloud walked away from the tracker's anchor and take the fix's
             # own place for an alternative (measured: a fix held through a stop without
             # a barometer, swapped out on the frame it stepped out).
-            self._weigh_alternatives(odometry, raw, w, ess, heading, carry_only=True)
+            self._weigh_alternatives(odometry, raw, w, ess, heading, carry_only=True, steps=steps)
         elif self.evidence is not None:
-            raw, w, ess = self._weigh_alternatives(odometry, raw, w, ess, heading)
+            raw, w, ess = self._weigh_alternatives(odometry, raw, w, ess, heading, steps=steps)
             share, searched_ago = self.evidence.alternative_share, self.evidence.searched_ago
             confirmed, gain_share = self.evidence.confirmed_share, self.evidence.gain_share
             if self.evidence.prior_confines:
@@ -874,10 +843,11 @@ class ParticleFilter:
         ess: float,
         heading: CompassReading | None = None,
         carry_only: bool = False,
+        steps: int = 1,
     ) -> tuple[Estimate, NDArray[np.float64], float]:
         """Move and weigh the alternatives; swap the strongest in if the evidence says so.
         With ``carry_only`` (between floors) they are only moved: no weighing, no search,
-        no swap."""
+        no swap. ``steps``: frames the odometry adds up."""
         assert self.evidence is not None and self.last_observation is not None
         top = raw.hypotheses[0] if raw.hypotheses else None
         tight = top is not None and top.std_xy_m <= SEARCH_MAX_SPREAD_M
@@ -911,7 +881,7 @@ class ParticleFilter:
         )
         swap = self.evidence.update(
             odometry, obs, top, tight, particles, heading, fits, gain_waits,
-            steps=self._steps_in_frame,
+            steps=steps,
         )  # fmt: skip
         if carry_only or not swap:
             return raw, w, ess
@@ -984,15 +954,7 @@ class ParticleFilter:
             "last_fix": None if self._last_fix is None else list(self._last_fix),
             **self.continuation.checkpoint(levels=self.floors is not None),
             "steps": self.steps,
-            "paced": [
-                self._paced,
-                self._paced_motion.forward_m,
-                self._paced_motion.left_m,
-                self._paced_motion.turn_rad,
-                self._paced_s,
-            ],
-            "answer": self._answer,
-            "paced_readings": [self._paced_heading, self._paced_altitude],
+            **self._pacing.checkpoint(),
             "estimate": self.estimate,
             "capture": self.capture.checkpoint(),
             "geometry": self.geometry.checkpoint(),
@@ -1045,15 +1007,8 @@ class ParticleFilter:
         last = state.get("last_fix")
         self._last_fix = None if last is None else (float(last[0]), float(last[1]), float(last[2]))
         self.steps = int(state["steps"])
-        # (An older checkpoint paced nothing; its next frame is weighed.)
-        paced = state.get("paced") or [0, 0.0, 0.0, 0.0, 0.0]
-        self._paced = int(paced[0])
-        self._paced_motion = Odometry(float(paced[1]), float(paced[2]), float(paced[3]))
-        self._paced_s = float(paced[4])
-        self._answer = from_plain(Estimate | None, state.get("answer"))
-        heading, altitude = state.get("paced_readings") or (None, None)
-        self._paced_heading = from_plain(CompassReading | None, heading)
-        self._paced_altitude = from_plain(AltitudeReading | None, altitude)
+        self._pacing = Pacing()
+        self._pacing.restore(state)
         self.estimate = from_plain(Estimate, state["estimate"])
         self.continuation.restore(state)
         self.capture.restore(state.get("capture"))

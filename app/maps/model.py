@@ -256,8 +256,6 @@ class SemanticMap:
         since the map was drawn: of a :data:`FIXTURE_CLASSES` class or mounted in a
         wall, shape (N,)."""
         fixture = np.array([c in FIXTURE_CLASSES for c in self.classes], dtype=bool)
-        if not self.object_count:
-            return np.zeros(0, dtype=bool)
         return fixture[self.object_class] | self.mounted_walls.any(axis=1)
 
     @cached_property

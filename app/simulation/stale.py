@@ -49,7 +49,7 @@ def stale_world(
     n = len(objects)
     free = semantic_map.free_space
     # Fixtures are never moved (a moved door is a different building).
-    movable = [i for i, o in enumerate(objects) if o["class"] not in FIXTURE_CLASSES]
+    movable = [i for i in range(n) if not semantic_map.fixed[i]]
     n_move = min(_count(stale.moved_share, n), len(movable))
     for i in rng.permutation(movable)[:n_move]:
         x0, y0 = float(objects[i]["x"]), float(objects[i]["y"])

@@ -362,7 +362,7 @@ def test_a_fix_known_to_more_than_a_metre_forgives_nothing(monkeypatch: pytest.M
 def test_frames_ten_a_second_are_weighed_five_a_second_and_answered_between(
     paper_office: SemanticMap,
 ) -> None:
-    """At 10 frames/s every other frame is weighed (filter.WEIGH_PERIOD_S): the one
+    """At 10 frames/s every other frame is weighed (pacing.WEIGH_PERIOD_S): the one
     between is the last answer moved on by its odometry, its motion carried into the
     next step; a filter restored between the two goes on exactly the same; at 5
     frames/s every frame is weighed."""
@@ -393,10 +393,18 @@ def test_frames_ten_a_second_are_weighed_five_a_second_and_answered_between(
         paper_office, FilterConfig(particles=3000), rng=np.random.default_rng(9),
         state=pf.checkpoint(max_particles=10**6),
     )  # fmt: skip
+    older = pf.checkpoint(max_particles=10**6)
+    for key in ("paced", "paced_readings"):
+        del older[key]  # a checkpoint from before pacing: nothing waits
     for f in frames[21:25]:
         a = pf.step(f.odometry, f.detections, frame_s=0.1)
         b = again.step(f.odometry, f.detections, frame_s=0.1)
         assert (a.x, a.y, a.theta_rad, a.converged) == (b.x, b.y, b.theta_rad, b.converged)
+    before = ParticleFilter(
+        paper_office, FilterConfig(particles=3000), rng=np.random.default_rng(9), state=older
+    )
+    before.step(frames[21].odometry, frames[21].detections, frame_s=0.1)
+    assert before.steps == 11  # nothing held; paced from its last step's answer
     # Five a second: every frame weighed.
     five = simulate(paper_office, replace(sim, rate_hz=5.0), np.random.default_rng(4))
     pf = ParticleFilter(paper_office, FilterConfig(particles=3000), rng=np.random.default_rng(5))
@@ -418,9 +426,9 @@ def test_a_compass_or_barometer_reading_on_a_frame_not_weighed_goes_to_the_next(
     seen: list[tuple[object, object]] = []
     real = pf._step
 
-    def spy(odometry, detections, heading, altitude=None, frame_s=None):  # type: ignore[no-untyped-def]
+    def spy(odometry, detections, heading, altitude=None, frame_s=None, steps=1):  # type: ignore[no-untyped-def]
         seen.append((heading, altitude))
-        return real(odometry, detections, heading, altitude, frame_s)
+        return real(odometry, detections, heading, altitude, frame_s, steps)
 
     monkeypatch.setattr(pf, "_step", spy)
     walk = Odometry(0.05, 0.0, 0.1)

@@ -940,7 +940,7 @@ def test_the_stairs_are_told_at_the_same_moment_at_5_and_at_10_frames_a_second()
 
 
 def test_ten_frames_a_second_all_weighed_in_a_connector_paced_ones_confirm_nothing() -> None:
-    """At 10 frames/s every other frame is weighed (filter.WEIGH_PERIOD_S), but not in a
+    """At 10 frames/s every other frame is weighed (pacing.WEIGH_PERIOD_S), but not in a
     lift car, on stairs or an escalator's stop: there a door opening on another floor is
     news. A frame answered between steps changes and confirms no level, whatever the
     step before did (the narrator would say the floor again)."""
