@@ -83,7 +83,7 @@ from app.localization.compass import CompassReading, compass_log_likelihood
 from app.localization.fastmath import hypot
 from app.localization.models import MotionModel, SensorModel
 from app.localization.resampling import systematic_resample
-from app.localization.search import PlaceSearch
+from app.localization.search import PlaceSearch, explaining
 from app.localization.sensor import Observation, observation_columns
 from app.localization.types import Hypothesis, InitialPose, Odometry
 from app.maps.geometry import wrap_angle, wrap_rad
@@ -408,6 +408,17 @@ class EvidenceTracker:
             return 0.0
         ax, ay, _ = self.clouds()
         return float(np.hypot(ax - x, ay - y).max())
+
+    def separation_m(self, x: float, y: float, theta: float) -> tuple[float, int]:
+        """How far one movable object (not :attr:`SemanticMap.fixed`) that a class in
+        the history window could stand for pulls the place that best explains the
+        window seen from (x, y, theta) (:func:`~app.localization.search.explaining`), the most
+        over them (m), and which (-1: none)
+        (:meth:`~app.localization.search.PlaceSearch.separation`)."""
+        window = self.window()
+        seen = explaining((x, y, theta), window, self.map.object_xy.reshape(-1, 2))
+        movable = seen[~self.map.fixed[seen]].tolist()
+        return self.finder.separation((x, y, theta), window, movable)
 
     # ------------------------------------------------------------ one frame
     def update(

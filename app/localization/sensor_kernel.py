@@ -26,7 +26,7 @@ waits.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -295,6 +295,17 @@ class ObservationWindow:
     @property
     def frames(self) -> int:
         return int(self.rel.shape[0])
+
+    def without(self, obj: int) -> ObservationWindow:
+        """The same frames with the map's object ``obj`` explaining no detection (taken
+        out of every class's candidates)."""
+        drop = self.members == obj
+        before = np.concatenate([[0], np.cumsum(drop)])
+        return replace(
+            self,
+            members=self.members[~drop],
+            member_start=self.member_start - before[self.member_start],
+        )
 
     @property
     def arrays(self) -> WindowArrays:

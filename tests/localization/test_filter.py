@@ -171,6 +171,34 @@ def test_a_tight_known_start_is_a_prior_standing_still(paper_office: SemanticMap
             assert all(np.hypot(h.x - x, h.y - y) < 0.5 for h in e.hypotheses), e.hypotheses
 
 
+def test_a_tight_known_start_is_located_within_5_frames_at_ten_a_second(
+    paper_office: SemanticMap,
+) -> None:
+    """At 10 frames/s every frame is weighed until a confining known start is told
+    (the gate's steady frames are frames), then one in two again (pacing)."""
+    x, y, theta = 6.0, 3.5, 0.0
+    objects = [("door", (10.0, 5.5)), ("window", (8.0, 7.0)), ("table", (7.5, 2.0))]
+    bearings = [np.arctan2(oy - y, ox - x) - theta for _, (ox, oy) in objects]
+    rng = np.random.default_rng(0)
+    pf = ParticleFilter(
+        paper_office,
+        FilterConfig(particles=4000),
+        rng=np.random.default_rng(10),
+        initial_pose=InitialPose(x, y, theta, 0.05, np.radians(1.0)),
+    )
+    told, steps = [], []
+    for k in range(30):
+        noisy = rng.normal(bearings, np.radians(2.0))
+        dets = [Detection(c, float(b), 0.9) for (c, _), b in zip(objects, noisy, strict=True)]
+        told.append(pf.step(Odometry(0.0, 0.0, 0.0), dets, frame_s=None if k == 0 else 0.1))
+        steps.append(pf.steps)
+    first = next(i for i, e in enumerate(told) if e.converged)
+    assert first < 5, f"located at frame {first + 1}"
+    assert steps[first] == first + 1  # every frame weighed until then
+    assert steps[-1] - steps[first] < (len(told) - 1 - first) * 0.6  # paced since
+    assert all(e.converged for e in told[first:])
+
+
 def test_a_likelihood_bias_leaves_the_alternatives_evidence_as_tempered() -> None:
     """The alternatives' log-ratios are made of the likelihood's shares
     (FilterConfig.likelihood_bias_deg): their weight makes up for it, so distinct places

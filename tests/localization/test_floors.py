@@ -946,7 +946,9 @@ def test_ten_frames_a_second_all_weighed_in_a_connector_paced_ones_confirm_nothi
     step before did (the narrator would say the floor again)."""
 
     def steps(x: float, y: float) -> tuple[ParticleFilter, list[int]]:
-        start = InitialPose(x, y, 0.0, 0.05, 0.02)
+        # (A start loose enough not to confine the place: until a confining one is
+        # told, every frame is weighed wherever it is.)
+        start = InitialPose(x, y, 0.0, 0.4, 0.02)
         pf = ParticleFilter(
             VENUE, FilterConfig(particles=1000), rng=np.random.default_rng(0), initial_pose=start
         )

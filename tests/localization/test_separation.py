@@ -1,0 +1,158 @@
+"""Solution separation: a first fix is not told while one movable object pulls it."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+import app.localization.evidence as evidence_module
+from app.localization import sensor_kernel
+from app.localization.config import FilterConfig
+from app.localization.convergence import GAIN_PROTECTION_M
+from app.localization.evidence import EvidenceTracker
+from app.localization.filter import GAIN_SEPARATION_M, ParticleFilter
+from app.localization.models import BearingSensorModel, OdometryMotionModel
+from app.localization.search import explaining
+from app.localization.types import Odometry, Pose
+from app.maps.model import SemanticMap, parse_map
+from app.simulation.camera import CameraModel, visible_objects
+from tests.helpers import ensure_prepared, paper_office, seen_from
+
+#: A corridor 20 m x 3 m: three doors in one wall, a window at its end, and two pieces
+#: of furniture (index 4, the plant, is the one a test moves).
+OBJECTS = [
+    {"class": "door", "x": 2.0, "y": 3.0},
+    {"class": "door", "x": 10.0, "y": 3.0},
+    {"class": "door", "x": 18.0, "y": 3.0},
+    {"class": "window", "x": 20.0, "y": 1.5},
+    {"class": "plant", "x": 14.0, "y": 0.3},
+    {"class": "table", "x": 6.0, "y": 0.5},
+]
+PLANT = 4
+STEP_M = 0.1
+
+
+def corridor(objects: list[dict]) -> SemanticMap:
+    outline = [
+        {"x1": 0, "y1": 0, "x2": 20, "y2": 0},
+        {"x1": 20, "y1": 0, "x2": 20, "y2": 3},
+        {"x1": 20, "y1": 3, "x2": 0, "y2": 3},
+        {"x1": 0, "y1": 3, "x2": 0, "y2": 0},
+    ]
+    return ensure_prepared(parse_map({"name": "corridor", "walls": outline, "objects": objects}))
+
+
+def _tracker(
+    drawn: SemanticMap, world: SemanticMap, frames: int = 25
+) -> tuple[EvidenceTracker, Pose]:
+    """A tracker on the map ``drawn`` whose history is a walk along the corridor's
+    middle seen, noise-free, in ``world``; and the walk's last pose."""
+    cfg = FilterConfig()
+    sensor = BearingSensorModel(drawn, cfg, drawn.visibility)
+    tracker = EvidenceTracker(sensor, OdometryMotionModel(drawn, cfg), np.random.default_rng(0))
+    pose = Pose(3.0, 1.5, 0.0)
+    for k in range(frames):
+        pose = Pose(3.0 + STEP_M * k, 1.5, 0.0)
+        odometry = Odometry(STEP_M, 0.0, 0.0) if k else None
+        tracker._history.append((odometry, sensor.observe(seen_from(world, pose)), None))
+    return tracker, pose
+
+
+def _moved(dy: float) -> SemanticMap:
+    """The corridor today: the plant moved ``dy`` across it."""
+    objects = [dict(o) for o in OBJECTS]
+    objects[PLANT]["y"] = float(objects[PLANT]["y"]) + dy
+    return corridor(objects)
+
+
+def test_leaving_an_object_out_is_excluding_it_from_the_sensor_model() -> None:
+    m = corridor(OBJECTS)
+    tracker, pose = _tracker(m, m)
+    window = tracker.window()
+    assert window.members.size
+    cfg = FilterConfig()
+    for obj in range(m.object_count):
+        excluded = BearingSensorModel(m, cfg, m.visibility)
+        excluded.exclude([obj])
+        again = sensor_kernel.pack_window(
+            [(rel, excluded.observe(seen_from(m, pose)), None) for rel in window.rel[:1]]
+        )
+        mine = window.without(obj)
+        # The newest frame's classes: the same candidates, in the same order.
+        n = again.member_start.size
+        assert np.array_equal(mine.member_start[:n], again.member_start)
+        assert np.array_equal(mine.members[: again.members.size], again.members)
+        assert obj not in mine.members
+        # Every other object keeps all of its places among the candidates.
+        kept = window.members[window.members != obj]
+        assert np.array_equal(mine.members, kept)
+
+
+def test_the_objects_that_explain_a_noise_free_view_are_the_ones_in_it() -> None:
+    m = corridor(OBJECTS)
+    tracker, pose = _tracker(m, m, frames=1)
+    seen = explaining(
+        (pose.x, pose.y, pose.theta_rad), tracker.window(), m.object_xy.reshape(-1, 2)
+    )
+    in_view, _ = visible_objects(m, pose, CameraModel(360.0, 15.0))  # (seen_from's camera)
+    assert 0 < len(in_view) < m.object_count
+    assert seen.tolist() == sorted(int(j) for j in in_view)
+    # From a pose turned half round, no detection points at any object of its class.
+    turned = explaining((pose.x, pose.y, math.pi), tracker.window(), m.object_xy.reshape(-1, 2))
+    assert turned.size < m.object_count
+
+
+def test_a_moved_object_pulls_the_fix_by_more_than_the_gain_allows() -> None:
+    drawn = corridor(OBJECTS)
+    tracker, pose = _tracker(drawn, drawn)
+    still, _ = tracker.separation_m(pose.x, pose.y, pose.theta_rad)
+    assert still < 0.2 * GAIN_SEPARATION_M
+    tracker, pose = _tracker(drawn, _moved(1.0))
+    pulled, which = tracker.separation_m(pose.x, pose.y, pose.theta_rad)
+    assert pulled > GAIN_SEPARATION_M
+    assert not drawn.fixed[which]  # a piece of furniture, never a door or a window
+
+
+def test_fixtures_are_never_left_out() -> None:
+    """Only objects that can have moved since the map was drawn are tested: with the
+    furniture's classes never detected, nothing is left out at all."""
+    m = corridor(OBJECTS)
+    cfg = FilterConfig()
+    sensor = BearingSensorModel(m, cfg, m.visibility)
+    tracker = EvidenceTracker(sensor, OdometryMotionModel(m, cfg), np.random.default_rng(0))
+    pose = Pose(2.0, 2.0, 0.0)
+    fixtures = [d for d in seen_from(m, pose) if d.cls in ("door", "window")]
+    tracker._history.append((None, sensor.observe(fixtures), None))
+    assert tracker.separation_m(pose.x, pose.y, pose.theta_rad) == (0.0, -1)
+
+
+@pytest.mark.parametrize("pull_m", [0.0, GAIN_PROTECTION_M + 0.1])
+def test_a_first_fix_waits_while_one_object_pulls_it_beyond_its_radius(
+    monkeypatch: pytest.MonkeyPatch, pull_m: float
+) -> None:
+    office = paper_office()
+    pose = Pose(3.0, 2.0, math.pi / 2)
+    monkeypatch.setattr(
+        evidence_module.EvidenceTracker, "separation_m", lambda self, x, y, t: (pull_m, 6)
+    )
+
+    def first_fix() -> int | None:
+        pf = ParticleFilter(office, FilterConfig(particles=3000), rng=np.random.default_rng(1))
+        seen = seen_from(office, pose)
+        for k in range(60):
+            est = pf.step(Odometry(0.0, 0.0, 0.0), seen)
+            if est.converged:
+                assert est.protection_m is not None
+                # Told only where the pull is within its radius (or half a metre).
+                assert pull_m <= max(GAIN_SEPARATION_M, est.protection_m)
+                return k
+        return None
+
+    told = first_fix()
+    if pull_m == 0.0:
+        assert told is not None
+    else:
+        # A first fix's radius is at most GAIN_PROTECTION_M, under the pull: never told.
+        assert told is None
