@@ -118,7 +118,15 @@ class ConvergenceGate:
     hold_mass: float = 0.6
     hold_std_xy_m: float = 0.5
     hold_std_theta_rad: float = float(np.radians(20.0))
-    hold_jump_m: float = 0.5
+    #: A held fix is let go when the estimate jumps more than this (m) beyond the
+    #: motion in one step: it was off by about that much, or is now. Measured on the
+    #: phone suite at 10 frames/s (a step every 0.2 s): a fix on the office suite's
+    #: stale map pulled 0.4 m back in one step by a moved table, then held 0.8-1.5 m
+    #: behind for 11 s; 0.5 -> 0.3 m: confidently wrong 190 -> 151 of 463,552 frames,
+    #: availability at most 0.005 lower, flips at most 0.60 a minute as before; at 5
+    #: frames/s nothing confidently wrong moved, availability at most 0.01 lower, flips
+    #: at most 0.76 a minute (0.69). 0.2 m let a new 1.5 m drag through.
+    hold_jump_m: float = 0.3
     #: The radius systematic bearing errors can reach (:mod:`~app.localization.dilution`)
     #: at most this to gain, and this to hold (m): a fix that geometry pins no closer is no
     #: location to tell a person, however tight the cloud.
