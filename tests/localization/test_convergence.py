@@ -219,3 +219,22 @@ def test_the_order_statistics_are_a_partitions_to_the_bit() -> None:
         hi = min(lo + 1, n - 1)
         got, want = np.array(by_run(sq, lo, hi)), np.array(by_partition(sq, lo, hi))
         assert np.array_equal(got, want, equal_nan=True), (n, lo, got, want)
+
+
+def test_a_held_fix_is_let_go_when_it_jumps_beyond_the_motion() -> None:
+    """A step more than ``hold_jump_m`` beyond the motion means the fix was off by about
+    that much, or is now (a moved table pulled one 0.4 m back in a step, and it was held
+    up to 1.5 m behind); a step within it is tracking."""
+    jump = ConvergenceGate.hold_jump_m
+    assert jump < 0.4  # (the traced pull of 0.4 m in one step is a jump)
+    for extra, kept in ((0.8 * jump, True), (1.2 * jump, False)):
+        gate = _held_gate()
+        # Walked 0.2 m along x; the estimate moved that much plus ``extra``.
+        step = Estimate(
+            2.2 + extra, 3.0, 0.0, 0.05, 0.05, 0.02, True,
+            (Hypothesis(2.2 + extra, 3.0, 0.0, 1.0, 0.05),),
+        )  # fmt: skip
+        out = gate.confirm(step, moved_m=0.2, quality=GOOD, searched_ago=0)
+        assert out.converged is kept
+        if not kept:
+            assert gate.lost_because == ("jump",)
