@@ -410,11 +410,12 @@ class EvidenceTracker:
         return float(np.hypot(ax - x, ay - y).max())
 
     def separation_m(self, x: float, y: float, theta: float) -> tuple[float, int]:
-        """How far one movable object (not :attr:`SemanticMap.fixed`) that a class in
-        the history window could stand for pulls the place that best explains the
-        window seen from (x, y, theta) (:func:`~app.localization.search.explaining`), the most
-        over them (m), and which (-1: none)
-        (:meth:`~app.localization.search.PlaceSearch.separation`)."""
+        """The solution separation of the pose (x, y, theta) over the history window
+        (:meth:`~app.localization.search.PlaceSearch.separation`): how far, at most, the
+        place that best explains the window moves when one movable object (not
+        :attr:`~app.maps.model.SemanticMap.fixed`) that explains a detection there
+        (:func:`~app.localization.search.explaining`) is left out (m), and which object
+        that is (-1: none)."""
         window = self.window()
         seen = explaining((x, y, theta), window, self.map.object_xy.reshape(-1, 2))
         movable = seen[~self.map.fixed[seen]].tolist()

@@ -177,10 +177,13 @@ def explaining(
     every match without a clutter floor). Visibility is not checked: an object out of
     sight explains nothing in the kernel, and leaving it out moves nothing."""
     x, y, t = pose
+    cos_t, sin_t = np.cos(t), np.sin(t)
+    # Per class, how far from its bearing (1 - cos of the error) a match still beats the
+    # clutter floor: kappa (cos - 1) + log_keep = log_floor at the crossover.
+    reach = (window.group_log_keep - window.group_log_floor) / window.group_kappa
     found: set[int] = set()
     for f in range(window.frames):
         a, b, c = window.rel[f]
-        cos_t, sin_t = np.cos(t), np.sin(t)
         fx, fy, ft = x + cos_t * a - sin_t * b, y + sin_t * a + cos_t * b, t + c
         g0 = int(window.group_start[f])
         starts = window.member_start[int(window.start_of_frame[f]) :]
@@ -193,11 +196,7 @@ def explaining(
             bearing = np.arctan2(dy, dx) - ft
             cos_err = np.cos(bearing) * window.det_cos[k] + np.sin(bearing) * window.det_sin[k]
             best = int(np.argmax(cos_err))
-            gg = g0 + g
-            reach = (window.group_log_keep[gg] - window.group_log_floor[gg]) / window.group_kappa[
-                gg
-            ]
-            if 1.0 - cos_err[best] <= reach:
+            if 1.0 - cos_err[best] <= reach[g0 + g]:
                 found.add(int(cand[best]))
     return np.array(sorted(found), dtype=np.int64)
 
