@@ -528,7 +528,7 @@ def markdown(
     particles: int,
     seeds: int,
     command: str,
-    rate_hz: float = 5.0,
+    rate_hz: float = RATE_HZ,
 ) -> str:
     total = summary["total"]
     assert isinstance(total, dict)

@@ -124,7 +124,7 @@ class ConvergenceGate:
     #: stale map pulled 0.4 m back in one step by a moved table, then held 0.8-1.5 m
     #: behind for 11 s; 0.5 -> 0.3 m: confidently wrong 190 -> 151 of 463,552 frames,
     #: availability at most 0.005 lower, flips at most 0.60 a minute as before; at 5
-    #: frames/s nothing confidently wrong moved, availability at most 0.01 lower, flips
+    #: frames/s nothing confidently wrong moved, availability at most 0.011 lower, flips
     #: at most 0.76 a minute (0.69). 0.2 m let a new 1.5 m drag through.
     hold_jump_m: float = 0.3
     #: The radius systematic bearing errors can reach (:mod:`~app.localization.dilution`)
