@@ -61,6 +61,7 @@ prior counted equal to each alternative's), gates ``converged`` (see
 
 from __future__ import annotations
 
+import math
 from collections import deque
 from collections.abc import Callable, Mapping
 from typing import Any
@@ -150,15 +151,31 @@ class EvidenceTracker:
         #: it (carried along when another place becomes the main mode); None without one.
         self._prior: InitialPose | None = None
         self._start: tuple[float, float, float] | None = None
+        #: The share of the distance walked since the prior was set that the odometry
+        #: may be off by (0: the walk since is taken as exact), and that distance (m).
+        self._prior_drift = 0.0
+        self._prior_walked_m = 0.0
 
-    def set_prior(self, prior: InitialPose | None) -> None:
+    def set_prior(
+        self,
+        prior: InitialPose | None,
+        start: tuple[float, float, float] | None = None,
+        drift: float = 0.0,
+    ) -> None:
         """A known start: places it excludes are no alternatives (docs/API.md,
         ``initial_pose``). An alternative is a rigid motion of the main mode, so where
-        it started is that motion applied to where the main mode started: its prior
-        odds against the main mode are the ratio of the start's prior densities there,
-        and they enter its evidence when it is found."""
+        it started is that motion applied to where the main mode started (``start``,
+        the prior's own pose when not given): its prior odds against the main mode are
+        the ratio of the start's prior densities there, and they enter its evidence
+        when it is found. With ``drift``, the start's position std grows by that share
+        of the distance walked since: the walk is no rigid motion when the odometry
+        drifts, and a small turn of a long trail moves its start by metres."""
         self._prior = prior
-        self._start = None if prior is None else (prior.x, prior.y, prior.theta_rad)
+        self._prior_drift = drift
+        self._prior_walked_m = 0.0
+        if prior is not None and start is None:
+            start = (prior.x, prior.y, prior.theta_rad)
+        self._start = None if prior is None else start
 
     @property
     def prior_confines(self) -> bool:
@@ -181,9 +198,11 @@ class EvidenceTracker:
         sx, sy, st = (np.array([v]) for v in start)
         cx, cy, ct = carry(moves, sx, sy, st)
 
+        var_xy = p.std_xy_m**2 + (self._prior_drift * self._prior_walked_m) ** 2
+
         def d2(x: NDArray[np.float64], y: NDArray[np.float64], t: NDArray[np.float64]) -> Any:
             turn = wrap_angle(t - p.theta_rad)
-            return ((x - p.x) ** 2 + (y - p.y) ** 2) / p.std_xy_m**2 + (turn / p.std_theta_rad) ** 2
+            return ((x - p.x) ** 2 + (y - p.y) ** 2) / var_xy + (turn / p.std_theta_rad) ** 2
 
         return -0.5 * (d2(cx[:, 0], cy[:, 0], ct[:, 0]) - d2(sx, sy, st))
 
@@ -216,6 +235,8 @@ class EvidenceTracker:
             "last_main": self._last_main,
             "prior": self._prior,
             "start": self._start,
+            "prior_drift": self._prior_drift,
+            "prior_walked_m": self._prior_walked_m,
         }
 
     def restore(self, state: Mapping[str, Any]) -> None:
@@ -243,6 +264,9 @@ class EvidenceTracker:
         self._prior = from_plain(InitialPose | None, state.get("prior"))
         start = state.get("start")
         self._start = None if start is None else tuple(float(v) for v in start)  # type: ignore[assignment]
+        # (and before a prior could drift, none did)
+        self._prior_drift = float(state.get("prior_drift", 0.0))
+        self._prior_walked_m = float(state.get("prior_walked_m", 0.0))
 
     def reobserve(self) -> None:
         """Make the window's observations again, as the sensor model would make them now
@@ -454,6 +478,8 @@ class EvidenceTracker:
         """
         # Frames without detections are kept too: their odometry chains the window.
         self._history.append((odometry, obs, heading))
+        if odometry is not None and self._prior is not None:
+            self._prior_walked_m += math.hypot(odometry.forward_m, odometry.left_m)
         if self.searched_ago is not None:
             self.searched_ago += 1
         # Evidence counts while the main belief is one tight cluster that stayed put: in

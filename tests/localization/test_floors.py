@@ -10,7 +10,7 @@ import pytest
 from app.localization.config import FilterConfig
 from app.localization.continuation import STOP_EXIT_FRAMES
 from app.localization.convergence import GAIN_PROTECTION_M
-from app.localization.filter import ParticleFilter
+from app.localization.filter import PINNED_START_STDS, ParticleFilter
 from app.localization.floors import (
     ARRIVAL_SHARE,
     BLIND_RATE,
@@ -502,6 +502,23 @@ def test_a_belief_not_located_but_riding_the_lift_continues_at_its_exit() -> Non
     assert pf.floors is not None and pf.floors.changes == 1 and pf.restarts == 0
     assert pf.continuation.active
     assert pf.geometry.radius_m(1.5 + PITCH, 1.5, 0.0) <= math.hypot(1.1, 1.1) + 1e-9
+    # The evidence tracker takes the stop as a known start too: a place the walk since
+    # would have begun outside the car is no alternative, one within it costs little,
+    # and the walk's drift loosens that as the person walks on.
+    ev = pf.evidence
+    assert ev is not None
+    prior = ev._prior
+    assert prior is not None
+    assert (prior.x, prior.y) == pytest.approx((1.5 + PITCH, 1.5))
+    assert prior.std_xy_m == pytest.approx(math.hypot(1.1, 1.1) * PINNED_START_STDS)
+    shifts = np.array([[0.0, 0.3, 0.0], [0.0, 5.0, 0.0]])
+    near, far = ev._prior_log_ratio(shifts)
+    assert far < -4.0 < near <= 0.5
+    for _ in range(20):  # 20 m walked
+        walk = (Odometry(1.0, 0.0, 0.0), ev.sensor.observe([]), None, False)
+        ev.update(*walk, (pf.x, pf.y, pf.theta, pf.weights))
+    _, far_later = ev._prior_log_ratio(shifts)
+    assert far < far_later < -0.1
 
 
 def test_a_count_of_storeys_the_view_contradicts_is_dropped() -> None:
