@@ -61,7 +61,6 @@ prior counted equal to each alternative's), gates ``converged`` (see
 
 from __future__ import annotations
 
-import math
 from collections import deque
 from collections.abc import Callable, Mapping
 from typing import Any
@@ -170,12 +169,11 @@ class EvidenceTracker:
         when it is found. With ``drift``, the start's position std grows by that share
         of the distance walked since: the walk is no rigid motion when the odometry
         drifts, and a small turn of a long trail moves its start by metres."""
-        self._prior = prior
-        self._prior_drift = drift
-        self._prior_walked_m = 0.0
-        if prior is not None and start is None:
-            start = (prior.x, prior.y, prior.theta_rad)
-        self._start = None if prior is None else start
+        self._prior, self._prior_drift, self._prior_walked_m = prior, drift, 0.0
+        if prior is None:
+            self._start = None
+        else:
+            self._start = start if start is not None else (prior.x, prior.y, prior.theta_rad)
 
     @property
     def prior_confines(self) -> bool:
@@ -479,7 +477,7 @@ class EvidenceTracker:
         # Frames without detections are kept too: their odometry chains the window.
         self._history.append((odometry, obs, heading))
         if odometry is not None and self._prior is not None:
-            self._prior_walked_m += math.hypot(odometry.forward_m, odometry.left_m)
+            self._prior_walked_m += hypot(odometry.forward_m, odometry.left_m)
         if self.searched_ago is not None:
             self.searched_ago += 1
         # Evidence counts while the main belief is one tight cluster that stayed put: in

@@ -46,7 +46,7 @@ import secrets
 import socket
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any, TypeVar
 
@@ -74,6 +74,20 @@ CHECKPOINT_EARLY_S = 0.05
 #: in flight at a time, each session packed between filter steps, so that a thousand
 #: sessions coming back at once do not stampede the store or stall the event loop.
 RECOVERY_CHUNK = 32
+
+
+def rebuild(host: SessionHost, state: Mapping[str, Any], session_id: str | None = None) -> Session:
+    """The session an unpacked checkpoint (:func:`~app.service.checkpoint.unpack`) holds,
+    built by ``host`` from its spec, id (``session_id`` when given), creation time and
+    filter state, then restored; not yet served."""
+    session = host.build(
+        checkpoint.spec_of(state),
+        session_id=state["id"] if session_id is None else session_id,
+        created_at=checkpoint.created_at_of(state),
+        filter_state=state["filter"],
+    )
+    session.restore(state)
+    return session
 
 
 class SessionSharing:
@@ -367,14 +381,7 @@ class SessionSharing:
 
     def _restore(self, sid: str, data: bytes, journal: list[bytes]) -> tuple[Session, int]:
         """Build the session from its checkpoint, then replay the frames after it."""
-        state = checkpoint.unpack(data)
-        session = self.host.build(
-            checkpoint.spec_of(state),
-            session_id=sid,
-            created_at=checkpoint.created_at_of(state),
-            filter_state=state["filter"],
-        )
-        session.restore(state)
+        session = rebuild(self.host, checkpoint.unpack(data), sid)
         replayed = 0
         for entry in journal:
             seq, frame, merged = checkpoint.decode_frame(entry)

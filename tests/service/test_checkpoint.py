@@ -36,6 +36,7 @@ from app.service import checkpoint
 from app.service.errors import SessionNotFound, SessionUnavailable
 from app.service.metrics import Metrics
 from app.service.sessions import SessionManager
+from app.service.sharing import rebuild
 from app.service.store import MemoryStore
 from app.service.types import FrameInput, FrameOutcome, SensorSpec, SessionSpec
 from app.simulation.scenarios import paper_config
@@ -325,13 +326,7 @@ def test_a_restored_session_steps_exactly_as_the_original() -> None:
         a.process_sync(frame(i))
     assert a.filter.estimate.converged and a.filter.n <= CHECKPOINT_PARTICLES
     state = checkpoint.unpack(checkpoint.pack(a.capture()))
-    b = m.build(
-        checkpoint.spec_of(state),
-        session_id=state["id"],
-        created_at=checkpoint.created_at_of(state),
-        filter_state=state["filter"],
-    )
-    b.restore(state)
+    b = rebuild(m, state)
     for name in ("x", "y", "theta", "log_w"):
         assert np.array_equal(getattr(a.filter, name), getattr(b.filter, name))
     for i in range(40, 60):
