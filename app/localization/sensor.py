@@ -24,6 +24,14 @@ Bearings' additions, each switchable in :class:`FilterConfig`:
 * ``clutter``: each detection's likelihood is a mixture (1 - eps) vonMises + eps
   uniform, eps = ``clutter_prob``; a detection that nothing explains (a false
   positive) then costs a bounded amount instead of killing the right particle.
+* ``object_spread_m``: a movable object (not :attr:`~app.maps.model.SemanticMap.fixed`)
+  stands within about that std of where the map drew it (furniture is pushed about).
+  A place error s seen from d metres turns the bearing by about s / d, so the object's
+  bearing error has variance 1 / kappa + s^2 / d^2: a von Mises of concentration
+  kappa * r, r = d^2 / (d^2 + kappa s^2), with its own normalisation. Far away this is
+  the class's kappa; up close a moved chair no longer pins the pose, where at the bare
+  kappa a pose a metre off that puts the chair where it is seen would win
+  (:func:`spread_match`).
 
 All likelihoods are relative to the von Mises peak, so a perfect match scores 0 in
 log space; only differences between particles matter to the filter.
@@ -53,6 +61,48 @@ def scaled_bessel_i0(kappa: float) -> float:
     return float(
         (1.0 + 1.0 / (8.0 * kappa) + 9.0 / (128.0 * kappa**2)) / np.sqrt(2 * np.pi * kappa)
     )
+
+
+#: A spread object's r (:func:`spread_match`) is at least this (a particle on the object),
+#: and its normalisation term at least SPREAD_MIN_NORM (in cosine units): whatever the
+#: class's kappa, a visible object's match stays above -1.5, where "no candidate" begins
+#: (sensor_kernel.NO_MATCH); for kappa of a few degrees' std the bound never binds.
+SPREAD_MIN_R = 1e-12
+SPREAD_MIN_NORM = -0.25
+
+
+def object_spread_sq(semantic_map: SemanticMap, config: FilterConfig) -> NDArray[np.float64]:
+    """Each object's squared place std (m^2) as :func:`spread_match` takes it:
+    ``config.object_spread_m`` squared for a movable object, 0 for a fixed one (a door,
+    a window), shape (objects,). Times the class's likelihood share
+    (:meth:`FilterConfig.likelihood_share`): where a steady bias already widens the
+    class's bearing variance to 1 / (share kappa), the place's s^2 / d^2 adds to that
+    variance, not to the bare noise's."""
+    s = config.object_spread_m
+    if s <= 0.0:
+        return np.zeros(semantic_map.object_count)
+    share = np.array([config.likelihood_share(c) for c in semantic_map.classes])
+    spread = s * s * share[semantic_map.object_class]
+    return np.where(semantic_map.fixed, 0.0, spread).astype(np.float64)
+
+
+def spread_match(
+    cos_err: NDArray[np.float64],
+    d2: NDArray[np.float64],
+    kappa: NDArray[np.float64],
+    spread_sq: NDArray[np.float64],
+) -> NDArray[np.float64]:
+    """The match (eq. 3's cosine) of an object whose place has std s (``spread_sq`` =
+    s^2), seen at squared distance ``d2``, for a class of concentration ``kappa``: with r
+    = d2 / (d2 + kappa s^2), 1 + r (cos - 1) + log(r) / (2 kappa), so that kappa (match -
+    1) is the log-density of a von Mises of concentration kappa r relative to the peak
+    of the class's own (for large kappa, I0e(kappa r) / I0e(kappa) = r^-1/2). The cosine
+    itself where s = 0. Arrays broadcast; r and the normalisation are bounded below
+    (SPREAD_MIN_R, SPREAD_MIN_NORM)."""
+    ks = kappa * spread_sq
+    r = np.maximum(d2 / np.maximum(d2 + ks, 1e-300), SPREAD_MIN_R)
+    norm = np.maximum(np.log(r) / (2.0 * kappa), SPREAD_MIN_NORM)
+    return np.where(spread_sq > 0.0, 1.0 + r * (cos_err - 1.0) + norm, cos_err)
 
 
 @dataclass(frozen=True)
@@ -348,7 +398,8 @@ def match_detections(
     The one implementation of the paper's maximum-likelihood correspondence: among the
     objects of the detection's class that the particle could see (:func:`candidate_mask`),
     the one whose direction is closest to the detected bearing (the largest cosine of
-    the bearing error).
+    the bearing error; for a movable object with ``config.object_spread_m``, the
+    widened match of :func:`spread_match`).
 
     Returns:
         (best, index), each shape (K, N), detections in the observation's order: the
@@ -372,11 +423,13 @@ def match_detections(
     by = (-sin_t * dx + cos_t * dy) / dist
     cand = candidate_mask(x, y, theta, objs, semantic_map, config, visible_rows)
     own = member_group[None, None, :] == obs.det_group[:, None, None]
-    cos_err = np.where(
-        own & cand[None, :, :],
-        obs.det_cos[:, None, None] * bx[None] + obs.det_sin[:, None, None] * by[None],
-        -np.inf,
-    )
+    match = obs.det_cos[:, None, None] * bx[None] + obs.det_sin[:, None, None] * by[None]
+    if config.object_spread_m > 0.0:
+        # A movable object's place is uncertain: its match is widened up close.
+        spread = object_spread_sq(semantic_map, config)[objs]
+        kappa = obs.group_kappa[member_group]
+        match = spread_match(match, (dx * dx + dy * dy)[None], kappa[None, None, :], spread)
+    cos_err = np.where(own & cand[None, :, :], match, -np.inf)
     j = np.argmax(cos_err, axis=2)
     best = np.take_along_axis(cos_err, j[:, :, None], axis=2)[:, :, 0]
     index = np.where(np.isfinite(best), objs[j], -1)
@@ -413,7 +466,7 @@ def log_likelihood_reference(
 @njit(cache=True, nogil=True, error_model="numpy")
 def _residuals(
     x, y, theta, visible, check_fov, cos_half_fov, fov_centre, max_range_sq,
-    obj_xy, det_bearing, det_group, group_kappa, member_start, members, out,
+    obj_xy, obj_spread_sq, det_bearing, det_group, group_kappa, member_start, members, out,
 ):  # fmt: skip  # pragma: no cover - compiled
     c = np.cos(theta + fov_centre)
     s = np.sin(theta + fov_centre)
@@ -431,8 +484,13 @@ def _residuals(
             if check_fov and (c * dx + s * dy) / (np.sqrt(d2) + 1e-12) < cos_half_fov:
                 continue
             err = det_bearing[k] - (np.arctan2(dy, dx) - theta)
-            best = min(best, abs(err - two_pi * np.round(err / two_pi)))
-        out[k] = best * np.sqrt(group_kappa[g])
+            # In stds of the object's bearing: kappa, or a movable object's kappa r
+            # (spread_match).
+            kappa = group_kappa[g]
+            if obj_spread_sq[o] > 0.0:
+                kappa = kappa * max(d2 / (d2 + kappa * obj_spread_sq[o]), SPREAD_MIN_R)
+            best = min(best, abs(err - two_pi * np.round(err / two_pi)) * np.sqrt(kappa))
+        out[k] = best
 
 
 def normalized_residuals(
@@ -444,7 +502,8 @@ def normalized_residuals(
     config: FilterConfig,
     visible_row: NDArray[np.bool_] | None = None,
 ) -> NDArray[np.float64]:
-    """Each detection's bearing error at one pose, in units of its class's std, shape (K,).
+    """Each detection's bearing error at one pose, in units of its class's std (a movable
+    object's widened by its place's spread, :func:`spread_match`), shape (K,).
 
     The error is to the best-matching visible object of the detection's class (eq. 3);
     a detection nothing visible explains gets +inf. Used to check that a converged
@@ -469,7 +528,7 @@ def normalized_residuals(
         float(np.cos(np.radians(config.fov_deg) / 2.0)),
         float(np.radians(config.fov_centre_deg)),
         np.inf if max_range is None else float(max_range) ** 2,
-        semantic_map.object_xy.reshape(-1, 2),
+        semantic_map.object_xy.reshape(-1, 2), object_spread_sq(semantic_map, config),
         obs.det_bearing, obs.det_group, obs.group_kappa, obs.member_start, obs.members, out,
     )  # fmt: skip
     return out

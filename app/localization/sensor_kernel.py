@@ -36,7 +36,7 @@ from numpy.typing import NDArray
 from app.localization.compass import CompassReading, compass_terms
 from app.localization.config import FilterConfig
 from app.localization.fastmath import FAST, grid_cell, sincos, softplus
-from app.localization.sensor import Observation
+from app.localization.sensor import SPREAD_MIN_NORM, SPREAD_MIN_R, Observation, object_spread_sq
 from app.maps.geometry import wrap_scalar
 from app.maps.model import SemanticMap
 from app.maps.visibility import VisibilityGrid
@@ -53,7 +53,7 @@ HIDDEN = -4.0
 @njit(cache=True, fastmath=FAST, nogil=True, error_model="numpy")
 def _kernel(
     x, y, theta, use_vis, grid, vis_bits, cos_half_fov, check_fov, fov_cos, fov_sin, max_range_sq,
-    obj_xy, det_cos, det_sin, det_score, det_group,
+    obj_xy, obj_spread_sq, det_cos, det_sin, det_score, det_group,
     group_kappa, group_weight, group_log_floor, group_log_keep, member_start, members, out,
 ):  # fmt: skip  # pragma: no cover - compiled
     f32 = np.float32
@@ -76,6 +76,8 @@ def _kernel(
     fx = np.empty(BLOCK, dtype=f32)
     fy = np.empty(BLOCK, dtype=f32)
     off = np.zeros(BLOCK, dtype=f32)
+    # A movable object's match: its scale (fx, fy scaled in place) and its added part.
+    spread_add = np.zeros(BLOCK, dtype=f32)
     cell = np.empty(BLOCK, dtype=np.int64)
     bits = np.empty((n_words, BLOCK), dtype=np.uint64)
     best = np.empty((k_total, BLOCK), dtype=f32)
@@ -127,14 +129,36 @@ def _kernel(
                             dx = ox - xs[i]
                             dy = oy - ys[i]
                             off[i] = off[i] if dx * dx + dy * dy <= range_sq else f32(HIDDEN)
+                # An object whose drawn place is uncertain (std s): its match is the
+                # cosine of a von Mises of concentration kappa * r, r = d^2 / (d^2 +
+                # kappa s^2), taken back to the class's kappa with its normalisation:
+                # 1 + r (cos - 1) + log(r) / (2 kappa) (sensor.spread_match).
+                sq = obj_spread_sq[o]
+                spread = sq > 0.0
+                if spread:
+                    ks = f32(group_kappa[g] * sq)
+                    half_inv_k = f32(0.5 / group_kappa[g])
+                    for i in range(m):
+                        dx = ox - xs[i]
+                        dy = oy - ys[i]
+                        d2 = dx * dx + dy * dy
+                        r = max(d2 / (d2 + ks), f32(SPREAD_MIN_R))
+                        fx[i] = r * fx[i]
+                        fy[i] = r * fy[i]
+                        norm = max(half_inv_k * np.log(r), f32(SPREAD_MIN_NORM))
+                        spread_add[i] = off[i] + (f32(1.0) - r) + norm
                 for k in range(k_total):
                     if det_group[k] != g:
                         continue
                     ca = f32(det_cos[k])
                     sa = f32(det_sin[k])
                     row = best[k]
-                    for i in range(m):
-                        row[i] = max(row[i], ca * fx[i] + sa * fy[i] + off[i])
+                    if spread:
+                        for i in range(m):
+                            row[i] = max(row[i], ca * fx[i] + sa * fy[i] + spread_add[i])
+                    else:
+                        for i in range(m):
+                            row[i] = max(row[i], ca * fx[i] + sa * fy[i] + off[i])
         for i in range(m):
             o_out[i] = 0.0
         for k in range(k_total):
@@ -159,10 +183,12 @@ def _kernel(
 
 
 #: The kernel's map, visibility and field-of-view arguments: use_vis, grid geometry,
-#: visibility bits, cos(half FOV), check_fov, FOV centre (cos, sin), max range^2, objects.
+#: visibility bits, cos(half FOV), check_fov, FOV centre (cos, sin), max range^2, objects,
+#: and each object's squared position std (m^2; :func:`~app.localization.sensor.
+#: object_spread_sq`).
 SensorSetup = tuple[
     bool, NDArray[np.float64], NDArray[np.uint64], float, bool, float, float, float,
-    NDArray[np.float64],
+    NDArray[np.float64], NDArray[np.float64],
 ]  # fmt: skip
 
 
@@ -170,8 +196,8 @@ def _sensor_setup(
     semantic_map: SemanticMap, config: FilterConfig, grid: VisibilityGrid | None
 ) -> SensorSetup:
     """The kernel's map, visibility and field-of-view arguments (:data:`SensorSetup`):
-    ``_kernel``'s 4th to 12th, ``use_vis`` to ``obj_xy``, between the poses and the
-    observation."""
+    ``_kernel``'s 4th to 13th, ``use_vis`` to ``obj_spread_sq``, between the poses and
+    the observation."""
     if config.visibility and grid is not None:
         vis_bits = grid.bits
         rows, cols = grid.shape
@@ -197,6 +223,7 @@ def _sensor_setup(
         float(np.sin(np.radians(config.fov_centre_deg))),
         float(max_range_sq),
         semantic_map.object_xy.reshape(-1, 2),
+        object_spread_sq(semantic_map, config),
     )
 
 
@@ -369,7 +396,7 @@ def pack_window(
 def _window_kernel(
     x, y, theta, rel, det_start, group_start, start_of_frame, compass,
     use_vis, grid, vis_bits, cos_half_fov, check_fov, fov_cos, fov_sin, max_range_sq, obj_xy,
-    det_cos, det_sin, det_score, det_group,
+    obj_spread_sq, det_cos, det_sin, det_score, det_group,
     group_kappa, group_weight, group_log_floor, group_log_keep, member_start, members, out,
 ):  # fmt: skip  # pragma: no cover - compiled
     n = x.shape[0]
@@ -392,7 +419,8 @@ def _window_kernel(
             m0 = start_of_frame[f]
             _kernel(
                 xs, ys, ts, use_vis, grid, vis_bits, cos_half_fov, check_fov, fov_cos, fov_sin,
-                max_range_sq, obj_xy, det_cos[d0:d1], det_sin[d0:d1], det_score[d0:d1],
+                max_range_sq, obj_xy, obj_spread_sq, det_cos[d0:d1], det_sin[d0:d1],
+                det_score[d0:d1],
                 det_group[d0:d1], group_kappa[g0:g1], group_weight[g0:g1],
                 group_log_floor[g0:g1], group_log_keep[g0:g1],
                 member_start[m0 : m0 + (g1 - g0) + 1], members, one,
@@ -418,11 +446,11 @@ def _score(x, y, theta, window, setup, out):  # fmt: skip  # pragma: no cover - 
     group_kappa, group_weight, group_log_floor, group_log_keep = window[9:13]
     member_start, members = window[13], window[14]
     use_vis, grid, vis_bits, cos_half_fov, check_fov, fov_cos, fov_sin = setup[:7]
-    max_range_sq, obj_xy = setup[7], setup[8]
+    max_range_sq, obj_xy, obj_spread_sq = setup[7], setup[8], setup[9]
     _window_kernel(
         x, y, theta, rel, det_start, group_start, start_of_frame, compass,
         use_vis, grid, vis_bits, cos_half_fov, check_fov, fov_cos, fov_sin, max_range_sq, obj_xy,
-        det_cos, det_sin, det_score, det_group,
+        obj_spread_sq, det_cos, det_sin, det_score, det_group,
         group_kappa, group_weight, group_log_floor, group_log_keep, member_start, members, out,
     )  # fmt: skip
 

@@ -22,7 +22,13 @@ from numpy.typing import ArrayLike, NDArray
 
 from app.localization.config import FilterConfig
 from app.localization.fastmath import SINCOS_MAX_ERROR, SOFTPLUS_MAX_ERROR
-from app.localization.sensor import Observation, candidate_mask
+from app.localization.sensor import (
+    SPREAD_MIN_R,
+    Observation,
+    candidate_mask,
+    object_spread_sq,
+    spread_match,
+)
 from app.maps.model import SemanticMap
 
 #: Unit roundoff of float32 and float64 (round to nearest): |fl(a op b) - a op b| <= u |a op b|.
@@ -84,12 +90,14 @@ def log_likelihood_tolerance(
     softplus's own error). The best match is a maximum over the candidates (eq. 3):
     its error is at most the largest :func:`match_error` among the candidates that
     could win once rounded (those within their own error plus the winner's of the
-    exact best). The float64 sum over detections adds K + 2 roundings of ``value``.
+    exact best); a movable object's with a place spread, :func:`spread_match_error`.
+    The float64 sum over detections adds K + 2 roundings of ``value``.
     """
     px = np.atleast_1d(np.asarray(x, dtype=np.float64))
     py = np.atleast_1d(np.asarray(y, dtype=np.float64))
     th = np.atleast_1d(np.asarray(theta, dtype=np.float64))
     rows = semantic_map.visibility.visible(px, py) if config.visibility else None
+    spread = object_spread_sq(semantic_map, config)
     bound = np.zeros(px.shape)
     cos_t, sin_t = np.cos(th)[:, None], np.sin(th)[:, None]
     for g in range(obs.group_kappa.size):
@@ -97,12 +105,20 @@ def log_likelihood_tolerance(
         ox, oy = semantic_map.object_xy[objs, 0][None, :], semantic_map.object_xy[objs, 1][None, :]
         dx, dy = ox - px[:, None], oy - py[:, None]
         dist = np.maximum(np.hypot(dx, dy), 1e-12)
-        err = match_error(np.hypot(px, py)[:, None] + np.hypot(ox, oy), dist)
+        coordinate = np.hypot(px, py)[:, None] + np.hypot(ox, oy)
+        err = match_error(coordinate, dist)
         bx, by = (cos_t * dx + sin_t * dy) / dist, (cos_t * dy - sin_t * dx) / dist
         cand = candidate_mask(px, py, th, objs, semantic_map, config, rows)
         floor_err = SOFTPLUS_MAX_ERROR if np.isfinite(obs.group_log_floor[g]) else 0.0
+        kappa = float(obs.group_kappa[g])
+        spread_sq = spread[objs][None, :]
+        if (spread_sq > 0.0).any():
+            err = spread_match_error(err, coordinate, dist, kappa, spread_sq)
         for k in np.flatnonzero(obs.det_group == g):
-            match = np.where(cand, obs.det_cos[k] * bx + obs.det_sin[k] * by, -np.inf)
+            cos_err = obs.det_cos[k] * bx + obs.det_sin[k] * by
+            match = np.where(
+                cand, spread_match(cos_err, dist**2, np.array(kappa), spread_sq), -np.inf
+            )
             win = np.argmax(match, axis=1)
             best = match[np.arange(px.size), win]
             could_win = cand & (match + err >= (best - err[np.arange(px.size), win])[:, None])
@@ -110,6 +126,33 @@ def log_likelihood_tolerance(
             scale = obs.group_weight[g] * obs.det_score[k]
             bound += scale * (obs.group_kappa[g] * worst + floor_err)
     return bound + summation_rtol(obs.det_cos.size) * np.abs(np.asarray(value, dtype=np.float64))
+
+
+def spread_match_error(
+    cos_error: NDArray[np.float64],
+    coordinate_m: NDArray[np.float64],
+    distance_m: NDArray[np.float64],
+    kappa: float,
+    spread_sq: NDArray[np.float64],
+) -> NDArray[np.float64]:
+    """Bound on a spread object's match error in the kernel (float32), given the bound
+    ``cos_error`` on its cosine (:func:`match_error`); the cosine's where ``spread_sq``
+    is 0. The match is 1 + r (cos - 1) + log(r) / (2 kappa) (sensor.spread_match), r =
+    d^2 / (d^2 + kappa s^2): r's relative error rho comes from the squared distance (its
+    coordinates rounded: 2 u (coordinate + d) / d, and 3 roundings), kappa s^2 rounded
+    (u) and the sum and quotient (2 u), scaled by 1 - r; it moves r cos and 1 - r by
+    r rho each and log(r) by rho. The log is the C library's (within 2 ulp: 2 u |log r|
+    relative), times 1 / (2 kappa) rounded (2 u); the scaling of the unit vector (2),
+    and the sums of the three parts (3) round once each on values within 2."""
+    u = U32
+    d = np.maximum(distance_m, 1e-9)
+    d2 = d * d
+    r = np.maximum(d2 / (d2 + kappa * spread_sq), SPREAD_MIN_R)
+    rel_d2 = 2 * u * (coordinate_m + d) / d + 3 * u
+    rho = (1.0 - r) * (rel_d2 + u) + 2 * u
+    norm = np.abs(np.log(r)) / (2.0 * kappa)
+    spread_err = r * cos_error + rho * (2.0 * r + 1.0 / (2.0 * kappa)) + 4 * u * norm + 10 * u
+    return np.where(spread_sq > 0.0, spread_err, cos_error)
 
 
 def summation_rtol(terms: int) -> float:

@@ -16,6 +16,8 @@ from app.localization.sensor import (
     log_likelihood_reference,
     normalized_residuals,
     prepare_observation,
+    scaled_bessel_i0,
+    spread_match,
 )
 from app.localization.sensor_kernel import log_likelihood
 from app.localization.tolerances import (
@@ -26,6 +28,7 @@ from app.localization.tolerances import (
 from app.localization.types import Detection, Pose
 from app.maps.geometry import wrap_angle
 from app.maps.model import SemanticMap, parse_map
+from app.maps.prepare import ensure_prepared
 from app.simulation.camera import CameraModel, visible_objects
 from tests.helpers import room
 
@@ -216,6 +219,9 @@ def test_field_of_view_limits_candidates(small_room: SemanticMap) -> None:
         FilterConfig(fov_deg=180),
         FilterConfig(clutter=False),
         FilterConfig(max_range_m=3.0, bearing_std_deg=5.0),
+        FilterConfig(object_spread_m=0.3),
+        FilterConfig(object_spread_m=0.5, fov_deg=66.0, likelihood_bias_deg=3.0),
+        FilterConfig(object_spread_m=0.3, clutter=False, bearing_std_deg=20.0),
     ],
 )
 def test_compiled_kernel_matches_the_numpy_reference(paper_office: SemanticMap, cfg) -> None:
@@ -253,8 +259,13 @@ def assert_kernel_matches_reference(m, cfg, x, y, th, dets) -> None:
 
 @pytest.mark.parametrize(
     "cfg",
-    [FilterConfig(), FilterConfig(fov_deg=200.0, max_range_m=6.0), FilterConfig.paper()],
-    ids=["bearings", "fov-range", "paper"],
+    [
+        FilterConfig(),
+        FilterConfig(fov_deg=200.0, max_range_m=6.0),
+        FilterConfig.paper(),
+        FilterConfig(object_spread_m=0.3),
+    ],
+    ids=["bearings", "fov-range", "paper", "spread"],
 )
 def test_compiled_kernel_matches_the_reference_on_a_map_of_many_objects(cfg) -> None:
     """150 objects: visibility bits span three 64-bit words; particles span many blocks."""
@@ -357,3 +368,50 @@ def test_a_likelihood_bias_shrinks_the_gap_between_nearby_poses_by_the_std_ratio
         )
     assert gaps[0] > 10 * slack  # the bare model tells the two apart
     assert gaps[1] == pytest.approx(gaps[0] * 4.0 / 13.0, rel=0, abs=slack)
+
+
+@pytest.mark.parametrize("std_deg", [2.0, 5.0])
+def test_a_spread_match_is_a_wider_von_mises_relative_to_the_class_peak(std_deg: float) -> None:
+    """kappa (match - 1) is the log-density of a von Mises of concentration kappa r, r =
+    d^2 / (d^2 + kappa s^2), relative to the class's own peak: exact but for the Bessel
+    function's ratio, taken as r^-1/2 (its error about 1 / (8 kappa r) for kappa r of 10
+    and more: bounded by twice that)."""
+    kappa = 1.0 / np.radians(std_deg) ** 2
+    err = np.radians(np.linspace(-40.0, 40.0, 81))
+    for d, s in [(1.0, 0.3), (3.0, 0.3), (8.0, 0.5), (2.0, 0.0)]:
+        match = spread_match(np.cos(err), np.array(d * d), np.array(kappa), np.array(s * s))
+        r = d * d / (d * d + kappa * s * s)
+        exact = kappa * r * (np.cos(err) - 1.0) + np.log(
+            scaled_bessel_i0(kappa) / scaled_bessel_i0(kappa * r)
+        )
+        assert kappa * r >= 10.0
+        assert np.abs(kappa * (match - 1.0) - exact).max() <= 1.0 / (4.0 * kappa * r)
+        if s == 0.0:
+            assert np.array_equal(match, np.cos(err))  # a fixed object: the cosine itself
+
+
+def test_a_moved_table_seen_close_pulls_the_pose_less_with_a_spread() -> None:
+    """A table 0.7 m along from where it was drawn, 1 m from the person, and three fixed
+    objects 5-7 m off: at the bare noise the best pose along the walk follows the table
+    most of the way; with movable objects' places uncertain (0.3 m) it stays near the
+    truth, and a fixed object (a door) is weighed as before."""
+    drawn = [(8.0, 4.0, "door"), (8.0, -2.0, "window"), (-3.0, 4.0, "window"), (3.0, 1.0, "table")]
+    m = ensure_prepared(
+        parse_map({"name": "moved", "objects": [{"class": k, "x": x, "y": y} for x, y, k in drawn]})
+    )
+    truth = (3.0, 0.0, 0.0)
+    seen = [*drawn[:3], (3.7, 1.0, "table")]
+    dets = [Detection(k, float(np.arctan2(y - truth[1], x - truth[0]))) for x, y, k in seen]
+    xs = np.linspace(1.5, 4.5, 301)
+    zeros = np.zeros_like(xs)
+    best = {}
+    for spread in (0.0, 0.3):
+        cfg = FilterConfig(object_spread_m=spread)
+        ll = loglik(m, cfg, xs, zeros, zeros, dets)
+        best[spread] = abs(float(xs[np.argmax(ll)]) - truth[0])
+    assert best[0.0] > 0.5
+    assert best[0.3] < 0.5 * best[0.0]
+    doors = [Detection("door", float(np.arctan2(4.0, 5.0)))]
+    plain = loglik(m, FilterConfig(), xs, zeros, zeros, doors)
+    spread_cfg = FilterConfig(object_spread_m=0.3)
+    assert np.array_equal(plain, loglik(m, spread_cfg, xs, zeros, zeros, doors))
