@@ -79,11 +79,24 @@ def object_spread_sq(semantic_map: SemanticMap, config: FilterConfig) -> NDArray
     class's bearing variance to 1 / (share kappa), the place's s^2 / d^2 adds to that
     variance, not to the bare noise's."""
     s = config.object_spread_m
-    if s <= 0.0:
-        return np.zeros(semantic_map.object_count)
-    share = np.array([config.likelihood_share(c) for c in semantic_map.classes])
-    spread = s * s * share[semantic_map.object_class]
-    return np.where(semantic_map.fixed, 0.0, spread).astype(np.float64)
+
+    def make() -> NDArray[np.float64]:
+        if s <= 0.0:
+            return np.zeros(semantic_map.object_count)
+        share = np.array([config.likelihood_share(c) for c in semantic_map.classes])
+        spread = s * s * share[semantic_map.object_class]
+        return np.where(semantic_map.fixed, 0.0, spread).astype(np.float64)
+
+    # Kept with the map: the fit check asks for it every frame.
+    return semantic_map.derived_value(("object_spread", s, *_share_key(config)), make)
+
+
+def _share_key(config: FilterConfig) -> tuple[object, ...]:
+    """What :meth:`FilterConfig.likelihood_share` and each class's std depend on, as a
+    key of values kept with the map."""
+    per_class = tuple(config.class_bearing_std_deg.items())
+    narrow = config.fov_deg < NARROW_CAMERA_FOV_DEG
+    return config.bearing_std_deg, per_class, config.likelihood_bias_deg, narrow
 
 
 def spread_match(
@@ -199,10 +212,7 @@ def _class_layout(
             np.array(share, dtype=np.float64),
         )
 
-    std_deg = config.bearing_std_deg
-    per_class = tuple(config.class_bearing_std_deg.items())
-    shares = config.likelihood_bias_deg, config.fov_deg < NARROW_CAMERA_FOV_DEG
-    key = ("observation", classes, eps, std_deg, per_class, shares, excluded)
+    key = ("observation", classes, eps, *_share_key(config), excluded)
     return semantic_map.derived_value(key, make)
 
 
