@@ -16,9 +16,10 @@ odometry, so the two can be compared:
 * **Scale**, over stretches of ``SEGMENT_S`` seconds covering at least ``SEGMENT_M``
   metres (each converged run's first stretch excepted, while the fix settles): the
   odometry's own account of the stretch (chained, its turns corrected by the drift
-  estimated) against the estimate's; the estimate's displacement along the odometry's,
-  as a share of it, is one measurement of the scale, weighed against the estimate's
-  spread at both ends.
+  estimated) against the estimate's; the length of the estimate's displacement as a
+  share of the odometry's is one measurement of the scale (lengths, not a projection:
+  a heading a few degrees off turns the odometry's account without changing its
+  length), weighed against the estimate's spread at both ends.
 * **Drift**, over a whole converged run: the turn the odometry counted beyond the turn
   the estimate made, divided by the run's length, plus the drift that was taken out
   meanwhile. The odometry's own turn noise adds up like a random walk
@@ -216,16 +217,17 @@ class OdometryBias:
     def _measure_scale(self, pose: tuple[float, float, float], position_std_m: float) -> None:
         """The stretch's measurement of the scale: one Kalman update."""
         assert self._start is not None
-        x0, y0, t0 = self._start
+        x0, y0, _ = self._start
         x1, y1, _ = pose
-        # The estimate's displacement (in the start's frame) along the odometry's.
-        c, s = math.cos(t0), math.sin(t0)
-        ex, ey = x1 - x0, y1 - y0
-        along_est = (c * ex + s * ey) * self._dx + (-s * ex + c * ey) * self._dy
+        # The lengths of the estimate's displacement and the odometry's: a heading off
+        # by a few degrees at the start turns the odometry's account of the stretch, but
+        # keeps its length (its projection on the estimate's would be short by the
+        # cosine: measured, PDR fixes through a 66-degree camera then learnt a scale a
+        # few percent short and lagged behind the person by up to 1 m).
         norm_sq = self._dx**2 + self._dy**2
-        if norm_sq < SEGMENT_M**2 / 4.0:  # walked back and forth: no direction to compare
+        if norm_sq < SEGMENT_M**2 / 4.0:  # walked back and forth: too short a baseline
             return
-        meas = along_est / norm_sq
+        meas = math.hypot(x1 - x0, y1 - y0) / math.sqrt(norm_sq)
         noise = 2.0 * max(position_std_m, MIN_POSITION_STD_M) ** 2 / norm_sq
         if not math.isfinite(meas) or abs(meas - self.scale) > OUTLIER_STDS * math.sqrt(
             self.scale_var + noise

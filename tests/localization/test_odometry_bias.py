@@ -186,3 +186,19 @@ def test_the_first_stretch_of_a_converged_run_teaches_nothing() -> None:
     assert bias.scale == 1.0
     _feed(bias, settling[first:], raw[first:], rng, pos_noise=0.0)
     assert bias.scale != 1.0 and bias.scale == pytest.approx(1.0, abs=0.02)
+
+
+def test_a_heading_off_by_a_steady_angle_teaches_no_scale() -> None:
+    """A converged estimate whose heading is a steady 12 degrees off (its position right)
+    turns the odometry's account of every stretch by that angle: the stretch's length is
+    still the walk's, so exact odometry keeps a scale of 1 (the stretch's projection on the
+    estimate's displacement was short by cos 12 deg, and taught a scale of 0.98: a PDR fix
+    then lagged behind the person)."""
+    rng = np.random.default_rng(12)
+    poses = _walk(1500, rng)  # 5 minutes
+    turned = poses.copy()
+    turned[:, 2] += math.radians(12.0)
+    bias = OdometryBias(BIAS_PRIORS["pdr"])
+    _feed(bias, turned, _increments(poses), rng)
+    assert bias.updates > 50
+    assert bias.scale == pytest.approx(1.0, abs=0.01)
