@@ -36,6 +36,7 @@ from collections import defaultdict
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -58,6 +59,10 @@ from app.simulation.phone import (
 )
 from app.simulation.simulator import SimulationConfig
 from app.simulation.stale import StaleMap
+
+if TYPE_CHECKING:
+    from app.service.session import Session
+    from app.service.types import FrameOutcome
 
 #: A phone held in the hand: 1920 px wide, 66 deg horizontal field of view.
 PINHOLE_WIDTH_PX = 1920.0
@@ -332,8 +337,11 @@ def run_scenario(
     particles: int,
     max_s: float | None = None,
     rate_hz: float | None = None,
+    on_frame: Callable[[Session, PhoneFrame, FrameOutcome], None] | None = None,
 ) -> PhoneRun:
-    """Simulate one walk and feed it, frame by frame, to a fresh session."""
+    """Simulate one walk and feed it, frame by frame, to a fresh session;
+    ``on_frame(session, frame, outcome)`` after each frame (a tool's look at the
+    session's state, e.g. ``tools/odometry_scale.py``)."""
     from app.service.sessions import SessionManager
     from app.service.types import SensorSpec, SessionSpec
 
@@ -376,6 +384,8 @@ def run_scenario(
         t0 = time.perf_counter()
         out = session.process_sync(frame_input(f, fields))  # type: ignore[arg-type]
         ms[i] = (time.perf_counter() - t0) * 1e3
+        if on_frame is not None:
+            on_frame(session, f, out)
         e = out.estimate
         err[i] = math.hypot(e.x - f.truth.x, e.y - f.truth.y)
         conv[i] = e.converged

@@ -56,6 +56,7 @@ from __future__ import annotations
 import json
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -271,7 +272,15 @@ def step(
     )
 
 
-def run_condition(condition: str, seed: int, particles: int) -> VenueRun:
+def run_condition(
+    condition: str,
+    seed: int,
+    particles: int,
+    on_step: Callable[[ParticleFilter, VenueFrame, Estimate], None] | None = None,
+) -> VenueRun:
+    """One walk of ``condition`` through the venue's filter (and, leg by leg, through
+    each level's own map); ``on_step(filter, frame, estimate)`` after each of the
+    venue filter's frames (a tool's look at its state, e.g. ``tools/odometry_scale.py``)."""
     cond = CONDITIONS[condition]
     m, frames, legs = _walk(seed, cond)
     barometer = cond.barometer
@@ -289,6 +298,8 @@ def run_condition(condition: str, seed: int, particles: int) -> VenueRun:
         started = time.perf_counter()
         est = step(pf, vf, frames[i - 1].frame.t if i else None, barometer=barometer)
         step_ms[i] = (time.perf_counter() - started) * 1e3
+        if on_step is not None:
+            on_step(pf, vf, est)
         est_level[i] = int(m.layout.level_of_plane_x(np.array(est.x)))
         err[i] = float(np.hypot(est.x - f.truth.x, est.y - f.truth.y))
         conv[i] = est.converged
