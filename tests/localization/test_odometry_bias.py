@@ -192,8 +192,7 @@ def test_a_heading_off_by_a_steady_angle_teaches_no_scale() -> None:
     """A converged estimate whose heading is a steady 12 degrees off (its position right)
     turns the odometry's account of every stretch by that angle: the stretch's length is
     still the walk's, so exact odometry keeps a scale of 1 (the stretch's projection on the
-    estimate's displacement was short by cos 12 deg, and taught a scale of 0.98: a PDR fix
-    then lagged behind the person)."""
+    estimate's displacement was short by cos 12 deg, and taught a scale of 0.98)."""
     rng = np.random.default_rng(12)
     poses = _walk(1500, rng)  # 5 minutes
     turned = poses.copy()
