@@ -216,7 +216,9 @@ class ParticleFilter:
         self.geometry = BearingGeometry(semantic_map, self.config)
         #: The odometry's scale and heading drift (:mod:`~app.localization.odometry_bias`).
         source = self.config.odometry_source
-        self.odometry_bias = None if source is None else OdometryBias(BIAS_PRIORS[source])
+        self.odometry_bias = (
+            None if source is None else OdometryBias(BIAS_PRIORS[source], self.config.fov_deg)
+        )
         #: Whether the estimate keeps to the odometry (:mod:`~app.localization.slide`).
         self.odometry_check = OdometryCheck(
             self.config.trans_noise_frac,

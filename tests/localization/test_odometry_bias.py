@@ -14,6 +14,7 @@ from app.localization.filter import ParticleFilter
 from app.localization.odometry_bias import (
     BIAS_PRIORS,
     CLAMP_STDS,
+    NARROW_POSITION_STD_M,
     SEGMENT_S,
     OdometryBias,
 )
@@ -201,3 +202,29 @@ def test_a_heading_off_by_a_steady_angle_teaches_no_scale() -> None:
     _feed(bias, turned, _increments(poses), rng)
     assert bias.updates > 50
     assert bias.scale == pytest.approx(1.0, abs=0.01)
+
+
+def test_a_narrow_cameras_fix_teaches_the_scale_more_cautiously() -> None:
+    """Through a camera narrower than 180 deg a fix's place along the walk is known only
+    to a few decimetres whatever its cloud says, so the same stretches move the scale
+    less and leave it less sure than a 360 deg camera's; the filter hands its camera's
+    field of view to the estimate."""
+    rng = np.random.default_rng(13)
+    poses = _walk(int(4 * SEGMENT_S / DT), rng)
+    raw = _biased(_increments(poses), 1.08, 0.0)
+    learnt = {}
+    for fov in (66.0, 360.0):
+        bias = OdometryBias(BIAS_PRIORS["pdr"], fov)
+        _feed(bias, poses, raw, np.random.default_rng(14))
+        learnt[fov] = bias
+    assert learnt[66.0].updates == learnt[360.0].updates > 0
+    assert learnt[66.0].scale_var > 2.0 * learnt[360.0].scale_var
+    # Both head for 1 / 1.08, the narrow one less far.
+    assert 1.0 > learnt[66.0].scale > learnt[360.0].scale > 1.0 / 1.08 - 0.02
+    narrow = ParticleFilter(
+        generated_map(10),
+        FilterConfig(particles=500, odometry_source="pdr", fov_deg=66.0),
+        rng=np.random.default_rng(1),
+    )
+    assert narrow.odometry_bias is not None
+    assert narrow.odometry_bias.min_position_std_m == NARROW_POSITION_STD_M
