@@ -1,4 +1,4 @@
-"""How well the filter learns a phone's odometry scale from a walk.
+"""How well the filter learns a phone's odometry scale and heading drift from a walk.
 
 The suites count confidently-wrong frames: a rare event that moves from one walk to
 another with any change to the filter, so ten seeds tell two versions of
@@ -16,8 +16,10 @@ frames walked (rides between floors left out).
 
 Prints, per row, the mean absolute error of the learnt scale, its mean signed error
 (negative: the filter takes the odometry's distances for longer than they are, and
-lags behind the person), and the error of not learning at all (a scale of 1). Compare
-versions on one machine: a walk's course depends on the CPU's floating point.
+lags behind the person), and the error of not learning at all (a scale of 1); then the
+same for the heading drift in degrees a minute, the drift a walk asks for being the
+odometry's turn beyond the true turn over the seconds walked. Compare versions on one
+machine: a walk's course depends on the CPU's floating point.
 """
 
 from __future__ import annotations
@@ -34,6 +36,7 @@ from app.experiments import phone, venue
 from app.experiments.runner import map_jobs
 from app.localization.filter import ParticleFilter
 from app.localization.types import Estimate, Odometry, Pose
+from app.maps.geometry import wrap_rad
 from app.service.session import Session
 from app.service.types import FrameOutcome
 from app.simulation.phone import PhoneFrame
@@ -51,44 +54,76 @@ VENUE_ROWS = ("phone-pdr-180", "phone-pdr-66")
 
 @dataclass
 class ScaleTrace:
-    """One walk: the true and odometry forward sums, and the scale learnt per frame."""
+    """One walk: the true and odometry forward sums and turns, and the scale and heading
+    drift learnt per frame."""
 
     true_forward_m: float = 0.0
     odometry_forward_m: float = 0.0
+    #: The odometry's turn beyond the true turn (rad) over the seconds walked.
+    excess_turn_rad: float = 0.0
+    walked_s: float = 0.0
     learnt: list[float] = field(default_factory=list)
+    learnt_drift: list[float] = field(default_factory=list)
     _last: Pose | None = None
+    _last_t: float = 0.0
 
-    def frame(self, truth: Pose, odometry: Odometry | None, walked: bool, scale: float) -> None:
-        """One frame: its true pose, its odometry, whether it was walked (a step to sum),
-        and the filter's scale after it."""
+    def frame(
+        self,
+        t: float,
+        truth: Pose,
+        odometry: Odometry | None,
+        walked: bool,
+        learnt: tuple[float, float],
+    ) -> None:
+        """One frame: its time (s), its true pose, its odometry, whether it was walked (a
+        step to sum), and the filter's scale and drift (rad/s) after it."""
         last, self._last = self._last, truth
-        self.learnt.append(scale)
+        last_t, self._last_t = self._last_t, t
+        self.learnt.append(learnt[0])
+        self.learnt_drift.append(learnt[1])
         if last is None or odometry is None or not walked:
             return
         c, s = math.cos(last.theta_rad), math.sin(last.theta_rad)
         self.true_forward_m += c * (truth.x - last.x) + s * (truth.y - last.y)
         self.odometry_forward_m += odometry.forward_m
+        self.excess_turn_rad += odometry.turn_rad - wrap_rad(truth.theta_rad - last.theta_rad)
+        self.walked_s += t - last_t
 
     def errors(self) -> tuple[float, float, float]:
-        """Mean |learnt - wanted| and mean (learnt - wanted) over the second half, and
-        |1 - wanted|."""
+        """Mean |learnt - wanted| and mean (learnt - wanted) of the scale over the second
+        half, and |1 - wanted|."""
         wanted = self.true_forward_m / self.odometry_forward_m
         half = np.array(self.learnt[len(self.learnt) // 2 :]) - wanted
         return float(np.mean(np.abs(half))), float(np.mean(half)), abs(1.0 - wanted)
 
+    def drift_errors(self) -> tuple[float, float, float]:
+        """:meth:`errors` for the heading drift, in degrees a minute (against no drift)."""
+        wanted = self.excess_turn_rad / self.walked_s
+        half = np.array(self.learnt_drift[len(self.learnt_drift) // 2 :]) - wanted
+        per_min = math.degrees(1.0) * 60.0
+        return (
+            float(np.mean(np.abs(half))) * per_min,
+            float(np.mean(half)) * per_min,
+            abs(wanted) * per_min,
+        )
 
-def _scale_of(pf: ParticleFilter) -> float:
+
+def _learnt(pf: ParticleFilter) -> tuple[float, float]:
+    """The filter's odometry scale and heading drift (rad/s)."""
     assert pf.odometry_bias is not None, "the row's session does not estimate its odometry"
-    return pf.odometry_bias.scale
+    return pf.odometry_bias.scale, pf.odometry_bias.drift_rad_s
 
 
-def _job(args: tuple[str, str, int]) -> tuple[str, tuple[float, float, float]]:
+Errors = tuple[float, float, float]
+
+
+def _job(args: tuple[str, str, int]) -> tuple[str, Errors, Errors]:
     kind, name, seed = args
     trace = ScaleTrace()
     if kind == "phone":
 
         def on_frame(session: Session, frame: PhoneFrame, _outcome: FrameOutcome) -> None:
-            trace.frame(frame.truth, frame.odometry, True, _scale_of(session.filter))
+            trace.frame(frame.t, frame.truth, frame.odometry, True, _learnt(session.filter))
 
         scenario = phone.scenarios(select=name)[0]
         phone.run_scenario(scenario, seed, 10_000, on_frame=on_frame)
@@ -98,10 +133,11 @@ def _job(args: tuple[str, str, int]) -> tuple[str, tuple[float, float, float]]:
         def on_step(pf: ParticleFilter, vf: VenueFrame, _est: Estimate) -> None:
             same_leg = bool(legs) and legs[-1] == vf.leg
             legs.append(vf.leg)
-            trace.frame(vf.file_pose, vf.frame.odometry, same_leg and not vf.riding, _scale_of(pf))
+            walked = same_leg and not vf.riding
+            trace.frame(vf.frame.t, vf.file_pose, vf.frame.odometry, walked, _learnt(pf))
 
         venue.run_condition(name, seed, 10_000, on_step=on_step)
-    return f"{kind}: {name}", trace.errors()
+    return f"{kind}: {name}", trace.errors(), trace.drift_errors()
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -113,17 +149,25 @@ def main(argv: Sequence[str] | None = None) -> int:
     jobs = [("phone", row, s) for row in PHONE_ROWS for s in range(args.seeds)]
     jobs += [("venue", row, s) for row in VENUE_ROWS for s in range(args.venue_seeds)]
     results = map_jobs(_job, jobs, args.workers)
-    print("| row | walks | learnt scale, mean abs error | mean signed error | scale 1's error |")
-    print("|---|---|---|---|---|")
-    every = []
-    for row in dict.fromkeys(name for name, _ in results):
-        mine = np.array([e for name, e in results if name == row])
-        every.append(mine)
-        abs_err, signed, unlearnt = mine.mean(axis=0)
-        print(f"| {row} | {len(mine)} | {abs_err:.4f} | {signed:+.4f} | {unlearnt:.4f} |")
-    walks = sum(len(m) for m in every)
-    abs_err, signed, unlearnt = np.concatenate(every).mean(axis=0)
-    print(f"| all | {walks} | {abs_err:.4f} | {signed:+.4f} | {unlearnt:.4f} |")
+    for title, unit, pick in (
+        ("scale", "", 1),
+        ("heading drift", " (deg/min)", 2),
+    ):
+        print(
+            f"| row | walks | learnt {title}, mean abs error{unit} | mean signed error "
+            f"| no correction's error |"
+        )
+        print("|---|---|---|---|---|")
+        every = []
+        for row in dict.fromkeys(r[0] for r in results):
+            mine = np.array([r[pick] for r in results if r[0] == row])
+            every.append(mine)
+            abs_err, signed, unlearnt = mine.mean(axis=0)
+            print(f"| {row} | {len(mine)} | {abs_err:.4f} | {signed:+.4f} | {unlearnt:.4f} |")
+        walks = sum(len(m) for m in every)
+        abs_err, signed, unlearnt = np.concatenate(every).mean(axis=0)
+        print(f"| all | {walks} | {abs_err:.4f} | {signed:+.4f} | {unlearnt:.4f} |")
+        print()
     return 0
 
 

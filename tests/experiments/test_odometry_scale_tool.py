@@ -13,26 +13,35 @@ from app.localization.types import Odometry, Pose
 from tools.odometry_scale import ScaleTrace
 
 
-def test_the_wanted_scale_is_the_true_forward_steps_over_the_odometrys() -> None:
-    """A walk turning as it goes, its odometry reading 10 % long: the filter should learn
-    1 / 1.1; a filter that learnt 0.95 on the second half is off by 0.95 - 1 / 1.1."""
+def test_the_wanted_scale_and_drift_are_the_walks() -> None:
+    """A walk turning as it goes, its odometry reading 10 % long and turning 0.01 rad a
+    second too far: the filter should learn 1 / 1.1 and 0.01 rad/s; one that learnt 0.95
+    and 0.008 rad/s on the second half is off by 0.95 - 1 / 1.1 and -0.002 rad/s."""
     trace = ScaleTrace()
     x = y = theta = 0.0
+    dt, drift = 0.2, 0.01
     for i in range(40):
         if i:
-            # (carried on an escalator at frame 20: moved, no step counted)
-            step = Odometry(0.1 * 1.1 if i != 20 else 0.0, 0.0, 0.05)
+            # (carried on an escalator at frame 20: moved and turned, no step counted)
+            fwd = 0.1 * 1.1 if i != 20 else 0.0
+            step = Odometry(fwd, 0.0, 0.05 + drift * dt if i != 20 else 0.0)
             x, y = x + 0.1 * math.cos(theta), y + 0.1 * math.sin(theta)
             theta += 0.05
         else:
             step = None
         # An unwalked frame (a ride): its motion is not summed.
-        trace.frame(Pose(x, y, theta), step, i != 20, 1.0 if i < 20 else 0.95)
+        learnt = (1.0, 0.0) if i < 20 else (0.95, 0.008)
+        trace.frame(i * dt, Pose(x, y, theta), step, i != 20, learnt)
     abs_err, signed, unlearnt = trace.errors()
     wanted = 1.0 / 1.1
     assert signed == pytest.approx(0.95 - wanted, rel=1e-9)
     assert abs_err == pytest.approx(abs(0.95 - wanted), rel=1e-9)
     assert unlearnt == pytest.approx(1.0 - wanted, rel=1e-9)
+    per_min = math.degrees(1.0) * 60.0
+    abs_d, signed_d, unlearnt_d = trace.drift_errors()
+    assert signed_d == pytest.approx(-0.002 * per_min, rel=1e-6)
+    assert abs_d == pytest.approx(0.002 * per_min, rel=1e-6)
+    assert unlearnt_d == pytest.approx(drift * per_min, rel=1e-6)
 
 
 def test_the_phone_suite_calls_back_after_every_frame_with_its_session() -> None:
