@@ -53,7 +53,7 @@ VENUE_ROWS = ("phone-pdr-180", "phone-pdr-66")
 
 
 @dataclass
-class ScaleTrace:
+class OdometryTrace:
     """One walk: the true and odometry forward sums and turns, and the scale and heading
     drift learnt per frame."""
 
@@ -89,23 +89,25 @@ class ScaleTrace:
         self.excess_turn_rad += odometry.turn_rad - wrap_rad(truth.theta_rad - last.theta_rad)
         self.walked_s += t - last_t
 
-    def errors(self) -> tuple[float, float, float]:
-        """Mean |learnt - wanted| and mean (learnt - wanted) of the scale over the second
-        half, and |1 - wanted|."""
-        wanted = self.true_forward_m / self.odometry_forward_m
-        half = np.array(self.learnt[len(self.learnt) // 2 :]) - wanted
-        return float(np.mean(np.abs(half))), float(np.mean(half)), abs(1.0 - wanted)
+    def errors(self) -> Errors:
+        """The scale's :func:`_errors` (against a scale of 1)."""
+        return _errors(self.learnt, self.true_forward_m / self.odometry_forward_m, 1.0)
 
-    def drift_errors(self) -> tuple[float, float, float]:
-        """:meth:`errors` for the heading drift, in degrees a minute (against no drift)."""
-        wanted = self.excess_turn_rad / self.walked_s
-        half = np.array(self.learnt_drift[len(self.learnt_drift) // 2 :]) - wanted
+    def drift_errors(self) -> Errors:
+        """The heading drift's :func:`_errors`, in degrees a minute (against no drift)."""
         per_min = math.degrees(1.0) * 60.0
-        return (
-            float(np.mean(np.abs(half))) * per_min,
-            float(np.mean(half)) * per_min,
-            abs(wanted) * per_min,
-        )
+        wanted = self.excess_turn_rad / self.walked_s
+        return _errors([v * per_min for v in self.learnt_drift], wanted * per_min, 0.0)
+
+
+#: Mean |learnt - wanted| and mean (learnt - wanted) over a walk's second half, and
+#: |uncorrected - wanted|.
+Errors = tuple[float, float, float]
+
+
+def _errors(learnt: list[float], wanted: float, uncorrected: float) -> Errors:
+    half = np.array(learnt[len(learnt) // 2 :]) - wanted
+    return float(np.mean(np.abs(half))), float(np.mean(half)), abs(uncorrected - wanted)
 
 
 def _learnt(pf: ParticleFilter) -> tuple[float, float]:
@@ -114,12 +116,9 @@ def _learnt(pf: ParticleFilter) -> tuple[float, float]:
     return pf.odometry_bias.scale, pf.odometry_bias.drift_rad_s
 
 
-Errors = tuple[float, float, float]
-
-
 def _job(args: tuple[str, str, int]) -> tuple[str, Errors, Errors]:
     kind, name, seed = args
-    trace = ScaleTrace()
+    trace = OdometryTrace()
     if kind == "phone":
 
         def on_frame(session: Session, frame: PhoneFrame, _outcome: FrameOutcome) -> None:
@@ -128,12 +127,11 @@ def _job(args: tuple[str, str, int]) -> tuple[str, Errors, Errors]:
         scenario = phone.scenarios(select=name)[0]
         phone.run_scenario(scenario, seed, 10_000, on_frame=on_frame)
     else:
-        legs: list[int] = []
+        last_leg: list[int] = []  # the previous frame's leg (none before the first)
 
         def on_step(pf: ParticleFilter, vf: VenueFrame, _est: Estimate) -> None:
-            same_leg = bool(legs) and legs[-1] == vf.leg
-            legs.append(vf.leg)
-            walked = same_leg and not vf.riding
+            walked = last_leg == [vf.leg] and not vf.riding
+            last_leg[:] = [vf.leg]
             trace.frame(vf.frame.t, vf.file_pose, vf.frame.odometry, walked, _learnt(pf))
 
         venue.run_condition(name, seed, 10_000, on_step=on_step)

@@ -10,14 +10,14 @@ import pytest
 from app.experiments import venue
 from app.experiments.phone import Scenario, run_scenario
 from app.localization.types import Odometry, Pose
-from tools.odometry_scale import ScaleTrace
+from tools.odometry_scale import OdometryTrace
 
 
 def test_the_wanted_scale_and_drift_are_the_walks() -> None:
     """A walk turning as it goes, its odometry reading 10 % long and turning 0.01 rad a
     second too far: the filter should learn 1 / 1.1 and 0.01 rad/s; one that learnt 0.95
     and 0.008 rad/s on the second half is off by 0.95 - 1 / 1.1 and -0.002 rad/s."""
-    trace = ScaleTrace()
+    trace = OdometryTrace()
     x = y = theta = 0.0
     dt, drift = 0.2, 0.01
     for i in range(40):
