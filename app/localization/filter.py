@@ -71,6 +71,7 @@ from app.localization.sensor import (
 from app.localization.slide import SLIP_SCALE_STDS, OdometryCheck
 from app.localization.types import Detection, Estimate, InitialPose, Odometry
 from app.localization.unseen import UnseenObjects
+from app.localization.walked import WANDER_SHARE, WalkedPath
 from app.maps.geometry import wrap_angle
 from app.maps.model import SemanticMap
 from app.maps.prepare import ensure_prepared
@@ -225,6 +226,10 @@ class ParticleFilter:
             self.config.heading_slack_deg,
             None if source is None else SLIP_SCALE_STDS * BIAS_PRIORS[source].scale_std,
         )
+        #: The walk the odometry recorded, to test a place before it is told
+        #: (:mod:`~app.localization.walked`).
+        said = source or "unknown"
+        self.walked = WalkedPath(WANDER_SHARE[said], SLIP_SCALE_STDS * BIAS_PRIORS[said].scale_std)
         #: The fixes a gain would continue, not held to GAIN_PROTECTION_M (_step).
         self.continuation = Continuation()
         if state is None:
@@ -248,6 +253,7 @@ class ParticleFilter:
         self.capture.reset()
         self.geometry.reset()
         self.odometry_check.reset()
+        self.walked.reset()
         if self.odometry_bias is not None:
             self.odometry_bias.reset()
         if initial_pose is not None:
@@ -621,8 +627,10 @@ class ParticleFilter:
         if odometry is not None:
             self.geometry.moved(odometry)
             self.odometry_check.moved(odometry)
+            self.walked.moved(odometry)
         else:  # the person may have been carried anywhere: nothing to compare with
             self.odometry_check.reset()
+            self.walked.reset()
             # ... nor to hold blind: out of the car, the detections are evidence again
             self._blind_hold = False
         if self.floors is not None:
@@ -642,6 +650,7 @@ class ParticleFilter:
                 # The fix the bearings' geometry gave rides along with the person.
                 self.geometry.shift_x(self.floors.shift_x_m)
                 self.odometry_check.reset()  # the ride is no walk the odometry saw
+                self.walked.reset()
                 if self.evidence is not None:
                     # The alternatives were carried by the walk's odometry, not the ride:
                     # none of them rode along. The next search looks afresh, at what
@@ -798,7 +807,10 @@ class ParticleFilter:
             fit = None if self.quality is None else self.quality.fit
             protection = widened_radius(radius, fit, slide_m)
             if gained:
-                narrow = protection <= GAIN_PROTECTION_M
+                # ... and only where the recorded walk could have led (walked.py).
+                narrow = protection <= GAIN_PROTECTION_M and self.walked.fits(
+                    self.map, est.x, est.y, est.theta_rad
+                )
                 if narrow and self.evidence is not None and not self.continuation.active:
                     sep_m, _ = self.evidence.separation_m(est.x, est.y, est.theta_rad)
                     narrow = sep_m <= max(GAIN_SEPARATION_M, protection)
@@ -1005,6 +1017,7 @@ class ParticleFilter:
             "capture": self.capture.checkpoint(),
             "geometry": self.geometry.checkpoint(),
             "odometry_check": self.odometry_check.checkpoint(),
+            "walked": self.walked.checkpoint(),
         }
         if self.odometry_bias is not None:
             state["odometry_bias"] = self.odometry_bias.checkpoint()
@@ -1060,6 +1073,7 @@ class ParticleFilter:
         self.capture.restore(state.get("capture"))
         self.geometry.restore(state.get("geometry"))
         self.odometry_check.restore(state.get("odometry_check"))
+        self.walked.restore(state.get("walked"))
         if self.odometry_bias is not None:
             self.odometry_bias.restore(state.get("odometry_bias"))
         self.last_observation = None
