@@ -809,7 +809,7 @@ class ParticleFilter:
             if gained:
                 # ... and only where the recorded walk could have led (walked.py).
                 narrow = protection <= GAIN_PROTECTION_M and self.walked.fits(
-                    self.map, est.x, est.y, est.theta_rad
+                    self.map.free_space, est.x, est.y, est.theta_rad
                 )
                 if narrow and self.evidence is not None and not self.continuation.active:
                     sep_m, _ = self.evidence.separation_m(est.x, est.y, est.theta_rad)

@@ -17,10 +17,14 @@ chained back, began 5 m outside the building.
 
 :class:`WalkedPath` keeps the dead-reckoned path (a point every ``POINT_SPACING_M`` walked,
 the last ``MAX_WALK_M``), started again whenever the odometry breaks off or the person
-rides between levels. :meth:`WalkedPath.fits` carries it onto a pose and checks every
-point's distance to the free space against ``BASE_TOLERANCE_M`` plus ``share`` of the
-distance walked since that point (the heading's error swings the path sideways, the
-scale's stretches it, both in proportion to the distance).
+rides between levels. :meth:`WalkedPath.fits` carries it onto a pose, turned by every
+heading error up to ``MAX_HEADING_OFF_DEG`` and stretched or shrunk by the odometry's
+scale tolerance (both move the whole path, so they are searched), and asks whether for
+one of them every point lies within ``BASE_TOLERANCE_M`` plus ``share`` of the distance
+walked since it (the heading's wander along the way, :data:`WANDER_SHARE`) of the free
+space (:meth:`~app.maps.freespace.FreeSpaceGrid.distance_outside`). Points, not the
+segments between them: a walk through a thin wall is not caught, one through the outside
+of the building or through rooms a few metres deep is.
 """
 
 from __future__ import annotations
@@ -30,12 +34,10 @@ from array import array
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
-from scipy import ndimage
 
 from app.localization.motion import compose_odometry
 from app.localization.types import Odometry
-from app.maps.model import SemanticMap
+from app.maps.freespace import FreeSpaceGrid
 
 #: A point of the path is kept every this many metres walked.
 POINT_SPACING_M = 0.25
@@ -53,18 +55,6 @@ HEADING_STEP_DEG = 1.0
 #: a point), by odometry source: VIO's gyro drifts about 2 degrees a minute, step
 #: counting's heading about 10 (BIAS_PRIORS); a source not said is taken for the latter.
 WANDER_SHARE = {"vio": 0.03, "pdr": 0.08, "unknown": 0.08}
-
-
-def outside_distance(semantic_map: SemanticMap) -> NDArray[np.float64]:
-    """Per cell of the map's free-space grid, the distance (m) from its centre to the
-    nearest free cell's (0 in the free space), kept with the map."""
-
-    def make() -> NDArray[np.float64]:
-        fs = semantic_map.free_space
-        far = np.asarray(ndimage.distance_transform_edt(~fs.mask), dtype=np.float64)
-        return far * fs.resolution_m
-
-    return semantic_map.derived_value(("outside_distance",), make)
 
 
 class WalkedPath:
@@ -109,9 +99,9 @@ class WalkedPath:
         """Metres walked since the reset."""
         return self._walked
 
-    def fits(self, semantic_map: SemanticMap, x: float, y: float, theta: float) -> bool:
+    def fits(self, free_space: FreeSpaceGrid, x: float, y: float, theta: float) -> bool:
         """Whether the path, carried so that its end is the pose (x, y, theta), keeps
-        within its tolerance of the map's free space at every point."""
+        within its tolerance of ``free_space`` at every point."""
         if not self._xyw:
             return True
         pts = np.frombuffer(self._xyw, dtype=np.float64).reshape(-1, 3)
@@ -130,18 +120,15 @@ class WalkedPath:
         angle = theta + np.tile(off, 3)[:, None]
         c, s = np.cos(angle), np.sin(angle)
         px, py = x + scale * (c * fx - s * fy), y + scale * (s * fx + c * fy)
-        fs = semantic_map.free_space
-        flat, inside = fs.cell_index(px, py)
-        far = outside_distance(semantic_map).reshape(-1)[flat]
-        # Off the grid: the edge cell's distance, plus the way to the edge.
-        rows, cols = fs.mask.shape
-        ex = np.clip(px, fs.origin_x, fs.origin_x + cols * fs.resolution_m)
-        ey = np.clip(py, fs.origin_y, fs.origin_y + rows * fs.resolution_m)
-        far = np.where(inside, far, far + np.hypot(px - ex, py - ey))
+        far = free_space.distance_outside(px, py)
         return bool((far <= allowed).all(axis=1).any())
 
     def checkpoint(self) -> dict[str, Any]:
-        return {"pose": list(self._pose), "walked": self._walked, "points": list(self._xyw)}
+        """The dead reckoning and the points :meth:`fits` reads (the last
+        ``MAX_WALK_M``), as one float32 array: millimetres over a 60 m walk."""
+        pts = np.frombuffer(self._xyw, dtype=np.float64).reshape(-1, 3)
+        pts = pts[pts[:, 2] >= self._walked - MAX_WALK_M]
+        return {"pose": list(self._pose), "walked": self._walked, "points": pts.astype(np.float32)}
 
     def restore(self, state: Any) -> None:
         """From :meth:`checkpoint` (None: a checkpoint from before it existed: the path
@@ -152,4 +139,5 @@ class WalkedPath:
         px, py, pt = (float(v) for v in state["pose"])
         self._pose = (px, py, pt)
         self._walked = float(state["walked"])
-        self._xyw = array("d", [float(v) for v in state["points"]])
+        points = np.asarray(state["points"], dtype=np.float64).reshape(-1)
+        self._xyw = array("d", points.tolist())

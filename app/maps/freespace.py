@@ -7,10 +7,12 @@ other.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+from scipy import ndimage
 
 from app.maps.geometry import grid_cells
 
@@ -54,6 +56,28 @@ class FreeSpaceGrid:
         """Whether each point lies in a free cell (False off the grid)."""
         flat, inside = self.cell_index(x, y)
         return inside & self.mask.reshape(-1)[flat]
+
+    def distance_outside(self, x: ArrayLike, y: ArrayLike) -> NDArray[np.float64]:
+        """How far (m) each point lies from the free space: 0 in a free cell, else from
+        its cell's centre to the nearest free cell's; off the grid, the nearest edge
+        cell's distance plus the way to the grid."""
+        flat, inside = self.cell_index(x, y)
+        far = self._outside_m.reshape(-1)[flat]
+        if inside.all():
+            return far
+        rows, cols = self.mask.shape
+        px, py = np.asarray(x, dtype=np.float64), np.asarray(y, dtype=np.float64)
+        ex = np.clip(px, self.origin_x, self.origin_x + cols * self.resolution_m)
+        ey = np.clip(py, self.origin_y, self.origin_y + rows * self.resolution_m)
+        return np.where(inside, far, far + np.hypot(px - ex, py - ey))
+
+    @functools.cached_property
+    def _outside_m(self) -> NDArray[np.float64]:
+        """Per cell, :meth:`distance_outside` at its centre (scipy's Euclidean distance
+        transform of the cells outside the free space); built when a map's grids are
+        attached (:meth:`~app.maps.model.SemanticMap.attach`), not on a first use."""
+        far = np.asarray(ndimage.distance_transform_edt(~self.mask), dtype=np.float64)
+        return far * self.resolution_m
 
     def sample(self, n: int, rng: np.random.Generator) -> NDArray[np.float64]:
         """``n`` points uniform over the free space, shape (n, 2)."""

@@ -331,6 +331,7 @@ class SemanticMap:
                 f"map {self.name!r}: a visibility grid of {visibility.n_objects} objects "
                 f"does not fit a map of {self.object_count}"
             )
+        free_space.distance_outside(0.0, 0.0)  # its distance field, now rather than mid-walk
         self._free_space = free_space
         self._visibility = visibility
 

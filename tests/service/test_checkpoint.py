@@ -113,6 +113,11 @@ def test_filter_restored_from_its_checkpoint_goes_on_the_same_way() -> None:
     b = ParticleFilter(OFFICE, config, rng=np.random.default_rng(99))
     b.restore(checkpoint.unpack(data)["filter"])
     assert b.estimate == a.estimate and b.n == a.n
+    # The walk a gain is tested against (app.localization.walked) came along, to float32.
+    assert b.walked.walked_m == a.walked.walked_m > 0.0
+    np.testing.assert_allclose(
+        b.walked.checkpoint()["points"], a.walked.checkpoint()["points"], rtol=0, atol=0
+    )
     for i in range(40, 60):
         ea = a.step(WALK[i].odometry, WALK[i].detections)
         eb = b.step(WALK[i].odometry, WALK[i].detections)
