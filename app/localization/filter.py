@@ -46,6 +46,7 @@ from app.localization.floors import (
 from app.localization.kld import kld_sample_size
 from app.localization.latency import DEFAULT_FRAME_S, CaptureClock, moved_forward
 from app.localization.models import (
+    FOV_EDGE_STDS,
     BearingSensorModel,
     MotionModel,
     OdometryMotionModel,
@@ -186,7 +187,17 @@ class ParticleFilter:
         self.config = config or FilterConfig()
         self.rng = rng
         self._vis = semantic_map.visibility if self.config.visibility else None
-        self.sensor = sensor_model or BearingSensorModel(semantic_map, self.config, self._vis)
+        edge = FOV_EDGE_STDS * self.config.bearing_std_deg if self.config.fov_deg < 360.0 else 0.0
+        self.sensor = sensor_model or BearingSensorModel(
+            semantic_map, self.config, self._vis, fov_margin_deg=edge
+        )
+        #: The evidence tracker's sensor model: the filter's, with the field of view's
+        #: hard edge (models.FOV_EDGE_STDS).
+        self._tracker_sensor = (
+            self.sensor
+            if sensor_model is not None or edge == 0.0
+            else BearingSensorModel(semantic_map, self.config, self._vis)
+        )
         self.motion = motion_model or OdometryMotionModel(semantic_map, self.config)
         self._recovery = AugmentedMCL(self.config.alpha_slow, self.config.alpha_fast)
         self._gate = ConvergenceGate()
@@ -198,7 +209,9 @@ class ParticleFilter:
         self._fit_scale = std / float(np.hypot(std, self.config.fit_bias_deg))
         #: Alternative places and their evidence (None with ``config.evidence`` off).
         self.evidence = (
-            EvidenceTracker(self.sensor, self.motion, rng) if self.config.evidence else None
+            EvidenceTracker(self._tracker_sensor, self.motion, rng)
+            if self.config.evidence
+            else None
         )
         #: Objects in clear view that the camera keeps not reporting (gates converged).
         self.unseen = (
@@ -1051,7 +1064,7 @@ class ParticleFilter:
         if self.unseen is not None and state.get("unseen") is not None:
             self.unseen.restore(state["unseen"])
             # (before the evidence tracker makes its window's observations again)
-            self.sensor.exclude(np.flatnonzero(self.unseen.moved).tolist())
+            self._exclude_from_models(np.flatnonzero(self.unseen.moved).tolist())
         if self.evidence is not None and state["evidence"] is not None:
             self.evidence.restore(state["evidence"])
         if self.floors is not None and state.get("floors") is not None:
@@ -1161,12 +1174,18 @@ class ParticleFilter:
         contradicted = self.unseen is not None and self.unseen.contradicted
         self.quality = FitQuality(fit, unexplained, bad, contradicted)
 
+    def _exclude_from_models(self, objects: list[int]) -> None:
+        """Take ``objects`` out of the filter's sensor model and the evidence tracker's."""
+        self.sensor.exclude(objects)
+        if self._tracker_sensor is not self.sensor:
+            self._tracker_sensor.exclude(objects)
+
     def _exclude_moved(self) -> None:
         """Take the objects the unseen-object check forgave as moved out of the sensor
         model, and make the frames it holds again without them (the evidence tracker's
         window and this frame's observation), as a checkpoint's round trip would."""
         assert self.unseen is not None
-        self.sensor.exclude(np.flatnonzero(self.unseen.moved).tolist())
+        self._exclude_from_models(np.flatnonzero(self.unseen.moved).tolist())
         if self.evidence is not None:
             self.evidence.reobserve()
         if self.last_observation is not None:
