@@ -67,6 +67,22 @@ def test_levels_one_per_ordinal_named_and_stacked(riverside: dict) -> None:
         assert {item["level"] for item in riverside[key]} == {"L0", "L1", "L2"}
 
 
+def test_levels_of_two_buildings_on_one_ordinal_make_one_map_level(tmp_path: Path) -> None:
+    """A venue of several buildings has one IMDF level per building and floor, sharing
+    the ordinal: one map level, and the summary says it gathered two."""
+
+    def second_building(data: dict) -> None:
+        ground = next(f for f in data["features"] if f["properties"]["ordinal"] == 0)
+        annex = json.loads(json.dumps(ground))
+        annex["id"] = "7d3c7f0e-2b9a-4c1e-9a51-000000000001"
+        data["features"].append(annex)
+
+    data, summary = import_imdf(_broken(tmp_path, "level.geojson", second_building), "x")
+    assert [lv["id"] for lv in data["levels"]] == ["L0", "L1", "L2"]
+    first = summary.lines()[0]
+    assert "3 levels from 4 IMDF levels" in first and "L0 'Ground Floor' from 2," in first
+
+
 def test_projection_puts_the_building_in_metres_around_its_middle(riverside: dict) -> None:
     xy = np.concatenate([walls_of(riverside, "L0")[:, 0:2], walls_of(riverside, "L0")[:, 2:4]])
     # The layout's 40 m x 24 m; the hand-made file used a spherical metre per degree,
@@ -157,11 +173,13 @@ def test_summary_says_what_was_made_of_what() -> None:
     text = "\n".join(summary.lines())
     assert "3 levels from 3 IMDF levels" in text
     assert "units: 35 ->" in text and "24 regions" in text
-    assert "openings: 25 -> 22 doors (1 in the outer wall" in text
+    assert "openings: 25 -> 22 doors (1 in the outer wall, kept mounted in it), 3 an " in text
     assert "not used: unspecified 1" in text
     assert "as walls: kiosk 1, obstruction 1; not used: furniture 1, vegetation 1" in text
     assert "(2 from 3 relationships, 2 by overlapping units)" in text
     assert "relationship traversal 1" in text
+    # The venue's other files are named as not read (the import has no use for them).
+    assert text.endswith("files not read: address.geojson, building.geojson, footprint.geojson")
 
 
 def test_a_zip_reads_like_the_folder(tmp_path: Path, riverside: dict) -> None:
@@ -172,9 +190,10 @@ def test_a_zip_reads_like_the_folder(tmp_path: Path, riverside: dict) -> None:
             a.write(f, f.name)
             b.write(f, f"export/riverside/{f.name}")
     for archive in (flat, nested):
-        data, _ = import_imdf(archive, "riverside")
+        data, summary = import_imdf(archive, "riverside")
         data["description"] = riverside["description"]
         assert data == riverside
+        assert summary.not_read == ["address.geojson", "building.geojson", "footprint.geojson"]
 
 
 def _broken(tmp_path: Path, name: str, edit) -> Path:

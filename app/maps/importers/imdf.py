@@ -22,6 +22,7 @@ IMDF feature becomes (docs/API.md, "Importing an IMDF venue"):
 
 from __future__ import annotations
 
+from collections import Counter
 from collections.abc import Mapping
 from pathlib import Path
 
@@ -38,7 +39,13 @@ from app.maps.importers.imdf_objects import (
     opening_objects,
     seen_class,
 )
-from app.maps.importers.imdf_read import Feature, level_id, read_archive, text_of
+from app.maps.importers.imdf_read import (
+    Feature,
+    level_id,
+    read_archive,
+    text_of,
+    unread_files,
+)
 from app.maps.importers.imdf_summary import ImdfSummary
 from app.maps.importers.imdf_walls import SIMPLIFY_M, level_walls
 
@@ -141,6 +148,7 @@ def import_imdf(
     summary = ImdfSummary(src.name)
     levels, of_id = _levels(features["level"], language)
     summary.imdf_levels = len(features["level"])
+    summary.not_read = unread_files(src)
     occupants = _occupant_names(features, language)
     places: dict[str, Place] = {}
     unit_level: dict[str, LevelParts] = {}
@@ -218,7 +226,13 @@ def import_imdf(
     )
     summary.relationships = len(features["relationship"])
     summary.connectors.update(str(c["kind"]) for c in made_connectors)
-    summary.levels = [f"{lv.id} {lv.name!r}" for lv in levels]
+    # A venue of several buildings has one IMDF level per building and floor: say which
+    # map levels gathered several (they share an ordinal).
+    sources = Counter(lv.id for lv in of_id.values())
+    summary.levels = [
+        f"{lv.id} {lv.name!r}" + (f" from {sources[lv.id]}" if sources[lv.id] > 1 else "")
+        for lv in levels
+    ]
     data: dict[str, object] = {
         "name": name,
         "description": description or f"imported from the IMDF venue {src.name}",

@@ -90,6 +90,27 @@ def archive_files(path: Path) -> dict[str, bytes]:
     return out
 
 
+def unread_files(path: Path) -> list[str]:
+    """The other ``.geojson`` files beside level.geojson (in a folder, or in the archive's
+    folder holding it), which the import does not read: sorted names."""
+    known = {f"{n}.geojson" for n in FEATURE_FILES}
+    if path.is_dir():
+        names = [f.name for f in path.glob("*.geojson") if f.is_file()]
+    else:
+        with zipfile.ZipFile(path) as zf:
+            infos = [i for i in zf.infolist() if not i.is_dir()]
+        levels = [
+            Path(i.filename).parent for i in infos if Path(i.filename).name == "level.geojson"
+        ]
+        folder = min(levels, key=lambda p: len(str(p)))
+        names = [
+            Path(i.filename).name
+            for i in infos
+            if Path(i.filename).parent == folder and i.filename.endswith(".geojson")
+        ]
+    return sorted(n for n in names if n not in known)
+
+
 #: Which features' geometries are built: (feature type, properties) -> bool.
 Wanted = Callable[[str, dict[str, object]], bool]
 

@@ -34,6 +34,9 @@ class ImdfSummary:
     connectors: Counter[str] = field(default_factory=Counter)
     report: ConnectorReport = field(default_factory=ConnectorReport)
     snapped: int = 0
+    #: Other .geojson files of the venue, not read (feature types the import has no use
+    #: for, or a tool's own files).
+    not_read: list[str] = field(default_factory=list)
 
     def lines(self) -> list[str]:
         def counts(c: Mapping[str, int]) -> str:
@@ -46,7 +49,12 @@ class ImdfSummary:
             f"  units: {self.units} -> {self.walls} walls ({self.gaps} gaps cut at openings), "
             f"{self.regions} regions (named units), objects: {counts(self.unit_objects)}",
             f"  openings: {self.openings} -> {self.doors} doors ({self.outer_doors} in the "
-            "outer wall, kept mounted in it), the rest are the elevators' doors",
+            "outer wall, kept mounted in it)"
+            + (
+                f", {self.openings - self.doors} an elevator's (an elevator object each)"
+                if self.openings > self.doors
+                else ""
+            ),
             f"  amenities: {self.amenities} -> objects: {counts(self.amenity_objects)}; "
             f"not used: {counts(self.amenities_not_used)}",
             f"  fixtures: {self.fixtures} -> as walls: {counts(self.fixture_walls)}; "
@@ -55,4 +63,5 @@ class ImdfSummary:
             f"{self.relationships} relationships, {r.by_overlap} by overlapping units); "
             f"not used: {counts(r.not_used)}",
             f"  {self.snapped} objects moved onto a wall of their level",
+            *([f"  files not read: {', '.join(self.not_read)}"] if self.not_read else []),
         ]
