@@ -168,6 +168,10 @@ class ConvergenceGate:
         #: once one has taken ``converged`` away (None: none has since the last reset).
         self._since_unseen: int | None = None
         self.lost_because: tuple[str, ...] = ()
+        #: Why the last :meth:`confirm` gave no fix while none was held (for diagnostics,
+        #: ``tools/why_not_located.py``): the gain's tests it failed, or the reason the
+        #: filter took the gain back (:meth:`withhold`); () while a fix is held.
+        self.not_gained_because: tuple[str, ...] = ()
 
     def checkpoint(self) -> dict[str, Any]:
         """The gate's memory (its last estimate as it is: frozen)."""
@@ -244,6 +248,7 @@ class ConvergenceGate:
                     self._since_unseen = 0
                 #: Why ``converged`` was last lost (for diagnostics and the suite).
                 self.lost_because = tuple(k for k, v in reasons.items() if v)
+                self.not_gained_because = tuple(f"let go: {k}" for k in self.lost_because)
             return raw.with_converged(self._held)
         fits = (
             quality is not None
@@ -270,13 +275,37 @@ class ConvergenceGate:
             and max(alternatives, gain_alternatives) <= self.gain_alternatives
             and self._unseen_cleared
         )
+        if self._held:
+            self.not_gained_because = ()
+        else:
+            failed = {
+                "cluster": not raw.converged,
+                "misfit": quality is None
+                or quality.fit > self.gain_fit
+                or quality.unexplained > self.gain_unexplained,
+                "bad frame": quality is not None and quality.bad_frame,
+                "unseen object": quality is not None and quality.contradicted,
+                "dead reckoning": frames_without_evidence > self.gain_without_evidence,
+                "weak geometry": geometry_m > self.gain_geometry_m,
+                "slide": slide_m > self.hold_slide_m,
+                "alternative": max(alternatives, gain_alternatives) > self.gain_alternatives,
+                "unseen object lately": not self._unseen_cleared,
+                # (a search since the cluster formed: asked of a streak already begun)
+                "no search yet": searched_ago is None
+                or (self._streak > 0 and searched_ago >= self._streak),
+            }
+            shortfalls = tuple(k for k, v in failed.items() if v)
+            # Every test passed but the fix has not stayed put for ``frames`` frames.
+            self.not_gained_because = shortfalls or ("not steady yet",)
         return raw.with_converged(self._held)
 
-    def withhold(self) -> None:
+    def withhold(self, because: str = "wide radius") -> None:
         """Take back a gain :meth:`confirm` just made, because the fix's protection
-        radius is too wide to tell (:data:`GAIN_PROTECTION_M`). The streak stays: the
-        next frame that passes the gain's tests with a narrower radius is a gain."""
+        radius is too wide to tell (:data:`GAIN_PROTECTION_M`), or for another of the
+        filter's tests (``because`` names it). The streak stays: the next frame that
+        passes the gain's tests with a narrower radius is a gain."""
         self._held = False
+        self.not_gained_because = (because,)
 
     @property
     def streak(self) -> int:

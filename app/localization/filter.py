@@ -819,14 +819,20 @@ class ParticleFilter:
             radius = max(radius, min(max(fix_m, reach), self._map_span_m))
             fit = None if self.quality is None else self.quality.fit
             protection = widened_radius(radius, fit, slide_m)
+            # Why a gain is taken back (ConvergenceGate.not_gained_because).
+            withhold_because = "narrow frames"
             if gained:
                 # ... and only where the recorded walk could have led (walked.py).
-                narrow = protection <= GAIN_PROTECTION_M and self.walked.fits(
-                    self.map.free_space, est.x, est.y, est.theta_rad
-                )
+                narrow = protection <= GAIN_PROTECTION_M
+                if not narrow:
+                    withhold_because = "wide radius"
+                elif not self.walked.fits(self.map.free_space, est.x, est.y, est.theta_rad):
+                    narrow, withhold_because = False, "walk"
                 if narrow and self.evidence is not None and not self.continuation.active:
                     sep_m, _ = self.evidence.separation_m(est.x, est.y, est.theta_rad)
                     narrow = sep_m <= max(GAIN_SEPARATION_M, protection)
+                    if not narrow:
+                        withhold_because = "solution separation"
                 self._narrow_frames = self._narrow_frames + 1 if narrow else 0
             if gained and not self.continuation.active and self._narrow_frames < NARROW_FRAMES:
                 # A fix is gained only once its radius has been narrow (GAIN_PROTECTION_M)
@@ -835,7 +841,7 @@ class ParticleFilter:
                 # again (held through a connector's stop, it is told on leaving it,
                 # however its radius grew on the way), nor one that continues a fix or a
                 # known start (app.localization.continuation).
-                self._gate.withhold()
+                self._gate.withhold(withhold_because)
                 est = est.with_converged(False)
                 withheld = True
         # (A told frame never reads in_stop: the guard only spares the stop lookup.)

@@ -187,6 +187,27 @@ def test_a_gain_taken_back_for_a_wide_radius_is_made_on_the_next_frame_that_pass
     assert gate.held
 
 
+def test_the_gate_says_why_no_fix_is_given() -> None:
+    """``not_gained_because`` names the gain's tests a frame failed, the release's
+    reasons on the frame a fix is let go, the filter's reason for a gain taken back, and
+    nothing while a fix is held."""
+    gate = ConvergenceGate()
+    gate.confirm(_tight(), quality=GOOD, searched_ago=0)
+    assert gate.not_gained_because == ("not steady yet",)
+    loose = Estimate(2.0, 3.0, 0.0, 0.6, 0.6, 0.02, False, ())
+    gate.confirm(loose, quality=MISFIT, geometry_m=gate.gain_geometry_m + 1.0, alternatives=0.2)
+    assert gate.not_gained_because == ("cluster", "misfit", "weak geometry", "alternative")
+    gate.confirm(_tight(), quality=UNSEEN, searched_ago=None)
+    assert gate.not_gained_because == ("unseen object", "unseen object lately", "no search yet")
+    held = _held_gate()
+    assert held.not_gained_because == ()
+    held.withhold("walk")
+    assert held.not_gained_because == ("walk",)
+    held = _held_gate()
+    held.confirm(_tight(), quality=BAD_FRAME, searched_ago=0)
+    assert not held.held and held.not_gained_because == ("let go: bad frame",)
+
+
 def test_the_order_statistics_are_a_partitions_to_the_bit() -> None:
     """The radius's order statistics from the short sorted run are the ones the
     partition before it picked (the reference below), ties and a NaN included."""
