@@ -39,7 +39,7 @@ def _count(pf: ParticleFilter, truth: Pose, est: Estimate, tally: Counter[str]) 
     if est.converged:
         tally["told"] += 1
         return
-    gate = pf._gate  # the filter's own gate: this tool reads its diagnostics
+    gate = pf.gate
     for reason in ("between floors",) if gate.held else gate.not_gained_because:
         tally[reason] += 1
 

@@ -250,17 +250,20 @@ class ConvergenceGate:
                 self.lost_because = tuple(k for k, v in reasons.items() if v)
                 self.not_gained_because = tuple(f"let go: {k}" for k in self.lost_because)
             return raw.with_converged(self._held)
-        fits = (
-            quality is not None
-            and quality.fit <= self.gain_fit
-            and quality.unexplained <= self.gain_unexplained
-            and not quality.bad_frame
-            and not quality.contradicted
-            and frames_without_evidence <= self.gain_without_evidence
-            and geometry_m <= self.gain_geometry_m
-            and slide_m <= self.hold_slide_m
-            and alternatives <= self.hold_alternatives
-        )
+        # The gain's tests on this frame's fit, each True where it fails: one table for
+        # the gain and for the reasons it gives (not_gained_because).
+        failed = {
+            "misfit": quality is None
+            or quality.fit > self.gain_fit
+            or quality.unexplained > self.gain_unexplained,
+            "bad frame": quality is not None and quality.bad_frame,
+            "unseen object": quality is not None and quality.contradicted,
+            "dead reckoning": frames_without_evidence > self.gain_without_evidence,
+            "weak geometry": geometry_m > self.gain_geometry_m,
+            "slide": slide_m > self.hold_slide_m,
+            "alternative": alternatives > self.hold_alternatives,
+        }
+        fits = not any(failed.values())
         steady = (
             raw.converged
             and fits
@@ -268,33 +271,19 @@ class ConvergenceGate:
             and turn <= abs(turned_rad) + self.tolerance_rad
         )
         self._streak = self._streak + 1 if steady else (1 if raw.converged and fits else 0)
-        self._held = (
-            self._streak >= self.frames
-            and searched_ago is not None
-            and searched_ago < self._streak
-            and max(alternatives, gain_alternatives) <= self.gain_alternatives
-            and self._unseen_cleared
-        )
+        # A search since the cluster formed.
+        searched = searched_ago is not None and searched_ago < self._streak
+        rival = max(alternatives, gain_alternatives) > self.gain_alternatives
+        self._held = self._streak >= self.frames and searched and not rival and self._unseen_cleared
         if self._held:
             self.not_gained_because = ()
         else:
-            failed = {
-                "cluster": not raw.converged,
-                "misfit": quality is None
-                or quality.fit > self.gain_fit
-                or quality.unexplained > self.gain_unexplained,
-                "bad frame": quality is not None and quality.bad_frame,
-                "unseen object": quality is not None and quality.contradicted,
-                "dead reckoning": frames_without_evidence > self.gain_without_evidence,
-                "weak geometry": geometry_m > self.gain_geometry_m,
-                "slide": slide_m > self.hold_slide_m,
-                "alternative": max(alternatives, gain_alternatives) > self.gain_alternatives,
-                "unseen object lately": not self._unseen_cleared,
-                # (a search since the cluster formed: asked of a streak already begun)
-                "no search yet": searched_ago is None
-                or (self._streak > 0 and searched_ago >= self._streak),
-            }
-            shortfalls = tuple(k for k, v in failed.items() if v)
+            # The gain's alternatives test is the stricter one (it implies the fit's); a
+            # search is asked of a streak already begun.
+            failed["alternative"] = rival
+            failed["unseen object lately"] = not self._unseen_cleared
+            failed["no search yet"] = not searched and (searched_ago is None or self._streak > 0)
+            shortfalls = tuple(k for k, v in {"cluster": not raw.converged, **failed}.items() if v)
             # Every test passed but the fix has not stayed put for ``frames`` frames.
             self.not_gained_because = shortfalls or ("not steady yet",)
         return raw.with_converged(self._held)

@@ -332,6 +332,12 @@ class ParticleFilter:
         return float(np.hypot(x1 - x0, y1 - y0))
 
     @property
+    def gate(self) -> ConvergenceGate:
+        """The convergence gate, to read why a fix was let go or not given
+        (``lost_because``, ``not_gained_because``); the filter alone drives it."""
+        return self._gate
+
+    @property
     def n(self) -> int:
         """Current number of particles."""
         return int(self.x.shape[0])

@@ -34,6 +34,7 @@ from array import array
 from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from app.localization.motion import compose_odometry
 from app.localization.types import Odometry
@@ -90,9 +91,12 @@ class WalkedPath:
             xyw.extend((pose.forward_m, pose.left_m, self._walked))
             # Drop the oldest now and then, not at every point.
             if xyw[2] < self._walked - 2.0 * MAX_WALK_M:
-                keep = np.frombuffer(xyw, dtype=np.float64).reshape(-1, 3)
-                keep = keep[keep[:, 2] >= self._walked - MAX_WALK_M]
-                self._xyw = array("d", keep.ravel().tolist())
+                self._xyw = array("d", self._recent().ravel().tolist())
+
+    def _recent(self) -> NDArray[np.float64]:
+        """The kept points of the last ``MAX_WALK_M`` walked: x, y, distance walked (N, 3)."""
+        pts = np.frombuffer(self._xyw, dtype=np.float64).reshape(-1, 3)
+        return pts[pts[:, 2] >= self._walked - MAX_WALK_M]
 
     @property
     def walked_m(self) -> float:
@@ -104,8 +108,7 @@ class WalkedPath:
         within its tolerance of ``free_space`` at every point."""
         if not self._xyw:
             return True
-        pts = np.frombuffer(self._xyw, dtype=np.float64).reshape(-1, 3)
-        pts = pts[pts[:, 2] >= self._walked - MAX_WALK_M]
+        pts = self._recent()
         allowed = BASE_TOLERANCE_M + self.share * (self._walked - pts[:, 2])
         # Each point in the dead reckoning's frame at its end ...
         rx, ry, rt = self._pose
@@ -126,8 +129,7 @@ class WalkedPath:
     def checkpoint(self) -> dict[str, Any]:
         """The dead reckoning and the points :meth:`fits` reads (the last
         ``MAX_WALK_M``), as one float32 array: millimetres over a 60 m walk."""
-        pts = np.frombuffer(self._xyw, dtype=np.float64).reshape(-1, 3)
-        pts = pts[pts[:, 2] >= self._walked - MAX_WALK_M]
+        pts = self._recent()
         return {"pose": list(self._pose), "walked": self._walked, "points": pts.astype(np.float32)}
 
     def restore(self, state: Any) -> None:

@@ -19,14 +19,14 @@ def test_a_right_frame_not_told_counts_under_the_gates_reasons() -> None:
         generated_map(10), FilterConfig(particles=500), rng=np.random.default_rng(1)
     )
     est = pf.step(None, [])  # a global start: no fix, and the gate says why
-    assert not est.converged and pf._gate.not_gained_because
+    assert not est.converged and pf.gate.not_gained_because
     tally: Counter[str] = Counter()
     near = Pose(est.x + 0.3, est.y, 0.0)
     far = Pose(est.x + 3.0, est.y, 0.0)
     _count(pf, near, est, tally)
     _count(pf, far, est, tally)
     assert tally["frames"] == 2 and tally["near"] == 1 and tally["told"] == 0
-    for reason in pf._gate.not_gained_because:
+    for reason in pf.gate.not_gained_because:
         assert tally[reason] == 1
     told = Estimate(est.x, est.y, 0.0, 0.1, 0.1, 0.1, True, ())
     _count(pf, near, told, tally)

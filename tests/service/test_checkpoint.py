@@ -523,3 +523,28 @@ def test_an_object_taken_for_moved_stays_out_of_a_session_restored_from_the_stor
         ea, eb = a.step(still, dets), b.step(still, dets)
         assert math.hypot(ea.x - eb.x, ea.y - eb.y) < 1e-3
         assert ea.converged == eb.converged
+
+
+def test_a_narrow_cameras_filter_comes_back_with_both_edges_and_its_exclusions() -> None:
+    """Through a 66-degree camera the filter weighs with the field of view's soft edge
+    and its evidence tracker with the hard one (models.FOV_EDGE_STDS): packed into the
+    store's bytes and unpacked on another worker, both models come back, an object taken
+    for moved is out of both, and the walk goes on the same way."""
+    config = FilterConfig(particles=CHECKPOINT_PARTICLES, fov_deg=66.0)
+    walk = simulate(OFFICE, paper_config("nominal", 66.0), np.random.default_rng(5))
+    a = ParticleFilter(OFFICE, config, rng=np.random.default_rng(3))
+    for f in walk[:40]:
+        a.step(f.odometry, f.detections)
+    assert a.unseen is not None and a.n <= CHECKPOINT_PARTICLES
+    a.unseen.moved[1] = True
+    a._exclude_moved()
+    data = checkpoint.pack({"format": checkpoint.FORMAT_VERSION, "filter": a.checkpoint()})
+    b = ParticleFilter(OFFICE, config, rng=np.random.default_rng(99))
+    b.restore(checkpoint.unpack(data)["filter"])
+    assert b.evidence is not None and b.evidence.sensor is not b.sensor
+    assert b.sensor.fov_margin_deg > 0.0 == b.evidence.sensor.fov_margin_deg  # type: ignore[attr-defined]
+    assert b.sensor.excluded == b.evidence.sensor.excluded == (1,)  # type: ignore[attr-defined]
+    for f in walk[40:60]:
+        ea, eb = a.step(f.odometry, f.detections), b.step(f.odometry, f.detections)
+        assert math.hypot(ea.x - eb.x, ea.y - eb.y) < 1e-3
+        assert ea.converged == eb.converged

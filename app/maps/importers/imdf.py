@@ -39,13 +39,7 @@ from app.maps.importers.imdf_objects import (
     opening_objects,
     seen_class,
 )
-from app.maps.importers.imdf_read import (
-    Feature,
-    level_id,
-    read_archive,
-    text_of,
-    unread_files,
-)
+from app.maps.importers.imdf_read import Feature, level_id, read_archive, text_of
 from app.maps.importers.imdf_summary import ImdfSummary
 from app.maps.importers.imdf_walls import SIMPLIFY_M, level_walls
 
@@ -144,11 +138,11 @@ def import_imdf(
     src = Path(path)
     if not (0.5 <= storey_m <= 20.0):
         raise MapImportError(f"--storey-m: {storey_m} m is not a storey height (0.5 to 20 m)")
-    features, language, project = read_archive(src, _wanted)
+    features, language, project, not_read = read_archive(src, _wanted)
     summary = ImdfSummary(src.name)
     levels, of_id = _levels(features["level"], language)
     summary.imdf_levels = len(features["level"])
-    summary.not_read = unread_files(src)
+    summary.not_read = not_read
     occupants = _occupant_names(features, language)
     places: dict[str, Place] = {}
     unit_level: dict[str, LevelParts] = {}

@@ -51,9 +51,15 @@ class Feature:
 
 
 # ------------------------------------------------------------------ reading
-def archive_files(path: Path) -> dict[str, bytes]:
-    """The raw bytes of each feature file (and manifest.json) in a folder or a .zip."""
+def archive_files(path: Path) -> tuple[dict[str, bytes], list[str]]:
+    """The raw bytes of each feature file (and manifest.json) in a folder or a .zip, and
+    the names of the other ``.geojson`` files beside level.geojson, which the import does
+    not read (sorted)."""
     names = [*(f"{n}.geojson" for n in FEATURE_FILES), "manifest.json"]
+
+    def unread(found: list[str]) -> list[str]:
+        return sorted(n for n in found if n.endswith(".geojson") and n not in names)
+
     out: dict[str, bytes] = {}
     if path.is_dir():
         total = 0
@@ -64,7 +70,7 @@ def archive_files(path: Path) -> dict[str, bytes]:
                 if total > MAX_IMDF_BYTES:
                     raise MapImportError(f"{path}: larger than {MAX_IMDF_BYTES:,} bytes")
                 out[name] = f.read_bytes()
-        return out
+        return out, unread([f.name for f in path.iterdir() if f.is_file()])
     if not path.is_file():
         raise MapImportError(f"{path}: no such folder or .zip file")
     try:
@@ -74,6 +80,11 @@ def archive_files(path: Path) -> dict[str, bytes]:
             if not levels:
                 raise MapImportError(f"{path}: no level.geojson in the archive")
             folder = min((str(Path(i.filename).parent) for i in levels), key=len)
+            beside = [
+                Path(i.filename).name
+                for i in zf.infolist()
+                if not i.is_dir() and str(Path(i.filename).parent) == folder
+            ]
             total = 0
             for name in names:
                 info = zf.NameToInfo.get(name if folder == "." else f"{folder}/{name}")
@@ -87,28 +98,7 @@ def archive_files(path: Path) -> dict[str, bytes]:
                 out[name] = zf.read(info)
     except zipfile.BadZipFile as exc:
         raise MapImportError(f"{path}: not a folder or a readable .zip ({exc})") from None
-    return out
-
-
-def unread_files(path: Path) -> list[str]:
-    """The other ``.geojson`` files beside level.geojson (in a folder, or in the archive's
-    folder holding it), which the import does not read: sorted names."""
-    known = {f"{n}.geojson" for n in FEATURE_FILES}
-    if path.is_dir():
-        names = [f.name for f in path.glob("*.geojson") if f.is_file()]
-    else:
-        with zipfile.ZipFile(path) as zf:
-            infos = [i for i in zf.infolist() if not i.is_dir()]
-        levels = [
-            Path(i.filename).parent for i in infos if Path(i.filename).name == "level.geojson"
-        ]
-        folder = min(levels, key=lambda p: len(str(p)))
-        names = [
-            Path(i.filename).name
-            for i in infos
-            if Path(i.filename).parent == folder and i.filename.endswith(".geojson")
-        ]
-    return sorted(n for n in names if n not in known)
+    return out, unread(beside)
 
 
 #: Which features' geometries are built: (feature type, properties) -> bool.
@@ -238,14 +228,15 @@ def project_all(
 
 def read_archive(
     path: Path, wanted: Wanted = _everything
-) -> tuple[dict[str, list[Feature]], str, Projector]:
+) -> tuple[dict[str, list[Feature]], str, Projector, list[str]]:
     """The features of each type read (missing files give none; geometries only where
-    ``wanted``), the manifest's language, and the projection used.
+    ``wanted``), the manifest's language, the projection used, and the venue's other
+    ``.geojson`` files, not read (:func:`archive_files`).
 
     Raises:
         MapImportError: naming the file, the feature and the reason.
     """
-    files = archive_files(path)
+    files, not_read = archive_files(path)
     for required in ("level.geojson", "unit.geojson"):
         if required not in files:
             raise MapImportError(
@@ -259,4 +250,4 @@ def read_archive(
     }
     language = language_of(files.get("manifest.json"))
     projected, project = project_all(feats)
-    return projected, language, project
+    return projected, language, project, not_read
