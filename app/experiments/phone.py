@@ -338,10 +338,13 @@ def run_scenario(
     max_s: float | None = None,
     rate_hz: float | None = None,
     on_frame: Callable[[Session, PhoneFrame, FrameOutcome], None] | None = None,
+    alter: Callable[[list[PhoneFrame]], list[PhoneFrame]] | None = None,
 ) -> PhoneRun:
     """Simulate one walk and feed it, frame by frame, to a fresh session;
     ``on_frame(session, frame, outcome)`` after each frame (a tool's look at the
-    session's state, e.g. ``tools/odometry_scale.py``)."""
+    session's state, e.g. ``tools/odometry_scale.py``); ``alter`` changes the simulated
+    frames before they are sent (an effect the simulator does not model,
+    ``tools/unmodelled.py``)."""
     from app.service.sessions import SessionManager
     from app.service.types import SensorSpec, SessionSpec
 
@@ -355,6 +358,8 @@ def run_scenario(
         np.random.default_rng(world_seed),
         facing_deg=cond.known_start.theta_deg if cond.known_start else 0.0,
     )
+    if alter is not None:
+        frames = alter(frames)
     initial = None
     if cond.known_start is not None:
         ks = cond.known_start

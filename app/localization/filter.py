@@ -52,6 +52,7 @@ from app.localization.models import (
     OdometryMotionModel,
     SensorModel,
 )
+from app.localization.motion import implausible
 from app.localization.odometry_bias import BIAS_PRIORS, OdometryBias
 from app.localization.pacing import Pacing
 from app.localization.recovery import AugmentedMCL
@@ -290,6 +291,9 @@ class ParticleFilter:
         #: How well the estimate explains the detections (smoothed); None before any.
         self.quality: FitQuality | None = None
         self._had_odometry = False
+        #: Whether the last frame's odometry was refused as faster than a person on foot
+        #: (:func:`~app.localization.motion.implausible`; the frame went on without it).
+        self.odometry_refused = False
         #: Frames with detections in a row that were bad on their own (see _update_fit).
         self._bad_run = 0
         #: The last frame's estimate had nothing in clear view and explained nothing
@@ -556,6 +560,16 @@ class ParticleFilter:
         weighed when that one has none of its own (the compass turned on by the turns
         since): an app that sends a reading only when it changes loses none.
         """
+        # A frame whose odometry outruns a person on foot (a tracker relocalizing, a
+        # stride counted twice) did not move the person that far (motion.implausible):
+        # its translation is refused, its turn kept, so that nothing carries the cloud,
+        # the fix, the walk or the odometry's own estimates by that jump. (Not taken for
+        # a frame without odometry: that lets a held fix go, and the fix is as good as
+        # it was a frame ago.)
+        self.odometry_refused = implausible(odometry, frame_s)
+        if self.odometry_refused:
+            assert odometry is not None
+            odometry = Odometry(0.0, 0.0, odometry.turn_rad)
         answer = self._last_answer()
         if (
             answer is not None

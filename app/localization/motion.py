@@ -28,6 +28,16 @@ NO_ODOMETRY_STD_M = 0.15
 NO_ODOMETRY_STD_RAD = np.radians(10.0)
 #: Twice the free space's clearance from walls (see :meth:`SemanticMap.free_space`).
 LONG_MOVE_M = 2 * WALL_CLEARANCE_M
+#: The fastest a person on foot is taken to move (m/s): a brisk walk is under 2 m/s, a
+#: blind pedestrian with a cane or a guide dog walks about 1 m/s, a moving walkway adds
+#: under 1 m/s. A frame whose odometry covers more in the time since the previous frame
+#: is no step the person took: a visual-inertial tracker relocalizing (ARKit and ARCore
+#: move their world frame when they recognise a place again), a step counter counting a
+#: stride twice, a stalled app's backlog.
+MAX_SPEED_M_S = 3.0
+#: ... and never less than this (m): frame times jitter, and a frame 0.05 s after the
+#: last is no measure of a speed.
+MIN_JUMP_M = 0.5
 
 
 @njit(cache=True, nogil=True, fastmath=FAST, error_model="numpy")
@@ -93,6 +103,17 @@ def sample_motion(
         new_x, new_y, new_theta,
     )  # fmt: skip
     return new_x, new_y, new_theta
+
+
+def implausible(odometry: Odometry | None, frame_s: float | None) -> bool:
+    """Whether ``odometry``, lasting ``frame_s`` seconds (None: not known), moves faster
+    than a person on foot (:data:`MAX_SPEED_M_S`, at least :data:`MIN_JUMP_M`): such a
+    frame's motion is unknown, not that motion. Without the frame's duration nothing is
+    implausible."""
+    if odometry is None or frame_s is None or frame_s <= 0.0:
+        return False
+    reach = max(MAX_SPEED_M_S * frame_s, MIN_JUMP_M)
+    return hypot(odometry.forward_m, odometry.left_m) > reach
 
 
 @njit(cache=True, nogil=True, error_model="numpy", inline="always")

@@ -12,6 +12,7 @@ it into bytes). Creating, finding and expiring sessions is the manager's job
 from __future__ import annotations
 
 import asyncio
+import math
 import threading
 import time
 from collections.abc import Mapping
@@ -28,7 +29,8 @@ from app.feedback.levels import level_sentence
 from app.guidance import Guidance, Plan, Target, Unreachable, guide
 from app.localization.camera import Camera
 from app.localization.filter import ParticleFilter
-from app.localization.types import Detection, Estimate, Pose
+from app.localization.motion import MAX_SPEED_M_S
+from app.localization.types import Detection, Estimate, Odometry, Pose
 from app.maps.model import SemanticMap
 from app.service.errors import session_tag
 from app.service.queueing import FrameQueue, merged_warning
@@ -46,6 +48,17 @@ def unknown_class_warnings(
         f"class {c!r} is not on map {semantic_map.name!r}; its detections were ignored"
         for c in unknown
     ]
+
+
+def refused_odometry_warning(odometry: Odometry | None, frame_s: float | None) -> str:
+    """What the client hears when the filter refused a frame's translation as faster
+    than a person on foot (:func:`~app.localization.motion.implausible`)."""
+    moved = 0.0 if odometry is None else math.hypot(odometry.forward_m, odometry.left_m)
+    return (
+        f"odometry moved {moved:.2f} m in {frame_s or 0.0:.2f} s, faster than "
+        f"{MAX_SPEED_M_S:g} m/s: taken for a tracking jump, its translation ignored "
+        "(its turn kept)"
+    )
 
 
 @dataclass(frozen=True)
@@ -181,6 +194,8 @@ class Session:
                 detections_age_s=frame.detections_age_s,
                 frame_s=frame_s,
             )
+            if self.filter.odometry_refused:
+                warnings.append(refused_odometry_warning(frame.odometry, frame_s))
             feedback = self.narrator.update(
                 estimate,
                 detections,

@@ -103,6 +103,24 @@ def test_unknown_class_is_ignored_and_warned(client: TestClient, session_id: str
     assert any("sofa" in w for w in r.json()["warnings"])
 
 
+def test_odometry_faster_than_a_person_on_foot_is_refused_and_warned(
+    client: TestClient, session_id: str
+) -> None:
+    """1.5 m in 0.2 s is a tracker's jump: the frame is answered, its warning says what
+    was ignored; the next ordinary step is not warned about."""
+    url = f"/sessions/{session_id}/frames"
+    dets = [{"class": "door", "bearing_deg": 0}]
+    assert client.post(url, json={"timestamp": 10.0, "detections": dets}).status_code == 200
+    jump = {"forward_m": 1.5, "left_m": 0.0, "turn_deg": 5.0}
+    r = client.post(url, json={"timestamp": 10.2, "odometry": jump, "detections": dets})
+    assert r.status_code == 200
+    warned = [w for w in r.json()["warnings"] if "odometry moved 1.50 m in 0.20 s" in w]
+    assert len(warned) == 1 and "translation ignored" in warned[0], r.json()["warnings"]
+    step = {"forward_m": 0.1, "left_m": 0.0, "turn_deg": 0.0}
+    r = client.post(url, json={"timestamp": 10.4, "odometry": step, "detections": dets})
+    assert not any("odometry moved" in w for w in r.json()["warnings"])
+
+
 def test_bearings_are_wrapped(client: TestClient, session_id: str) -> None:
     r = client.post(
         f"/sessions/{session_id}/frames",

@@ -472,3 +472,46 @@ def test_a_compass_or_barometer_reading_on_a_frame_not_weighed_goes_to_the_next(
     assert isinstance(heading, CompassReading) and heading.heading_rad == pytest.approx(1.1)
     assert altitude == up
     assert seen[2] == (own, None)
+
+
+def _walk_with_a_jump(m: SemanticMap, timed: bool) -> list[tuple[float, bool, bool, float]]:
+    """The paper office's nominal walk with one frame's odometry 1.5 m longer than the
+    step (a tracker relocalizing); per frame after the first: time, converged, refused,
+    error. ``timed``: the filter is told each frame's duration."""
+    sim = replace(paper_config("nominal", 360), duration_s=16.0)
+    frames = simulate(m, sim, np.random.default_rng(4))
+    pf = ParticleFilter(m, FilterConfig(particles=4000), rng=np.random.default_rng(104))
+    out = []
+    last_t = None
+    for f in frames:
+        odo = f.odometry
+        if odo is not None and last_t is not None and last_t < 8.0 <= f.t:
+            odo = Odometry(odo.forward_m + 1.5, odo.left_m, odo.turn_rad)
+        frame_s = None if last_t is None or not timed else f.t - last_t
+        e = pf.step(odo, f.detections, frame_s=frame_s)
+        out.append(
+            (
+                f.t,
+                e.converged,
+                pf.odometry_refused,
+                float(np.hypot(e.x - f.truth.x, e.y - f.truth.y)),
+            )
+        )
+        last_t = f.t
+    return out
+
+
+def test_a_frame_moving_faster_than_a_person_on_foot_keeps_the_fix_where_it_was(
+    paper_office: SemanticMap,
+) -> None:
+    """A visual-inertial tracker relocalizing jumps 1.5 m in one 0.2 s frame: that frame's
+    translation is refused (motion.implausible), so the converged fix does not jump with
+    it; without the frames' durations the filter cannot tell, and follows the jump."""
+    out = _walk_with_a_jump(paper_office, timed=True)
+    assert [t for t, _, refused, _ in out if refused] == [min(t for t, *_ in out if t >= 8.0)]
+    after = [(conv, err) for t, conv, _, err in out if 8.0 <= t <= 12.0]
+    assert all(err < 0.3 for _, err in after), after
+    assert all(conv for conv, _ in after)
+    untimed = _walk_with_a_jump(paper_office, timed=False)
+    assert not any(refused for _, _, refused, _ in untimed)
+    assert max(err for t, _, _, err in untimed if 8.0 <= t <= 12.0) > 1.0

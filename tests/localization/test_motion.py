@@ -9,7 +9,10 @@ from numpy.random import default_rng
 from app.localization.config import FilterConfig
 from app.localization.fastmath import fill_normal
 from app.localization.motion import (
+    MAX_SPEED_M_S,
+    MIN_JUMP_M,
     NO_ODOMETRY_STD_M,
+    implausible,
     penalized,
     sample_motion,
 )
@@ -139,3 +142,20 @@ def test_an_odometry_adding_up_frames_adds_up_their_noise_floors() -> None:
     assert spread[1][0] == pytest.approx(cfg.trans_noise_floor_m, rel=0.02)
     assert spread[4][0] == pytest.approx(2.0 * spread[1][0], rel=0.02)
     assert spread[4][1] == pytest.approx(2.0 * spread[1][1], rel=0.02)
+
+
+def test_a_frame_is_implausible_only_faster_than_a_person_on_foot() -> None:
+    step = Odometry(0.2, 0.0, 0.3)
+    assert not implausible(step, 0.2)
+    assert not implausible(None, 0.2)
+    jump = Odometry(0.9, 0.2, 0.0)  # 0.92 m in 0.2 s: 4.6 m/s
+    assert implausible(jump, 0.2)
+    assert not implausible(jump, None)  # no duration: no speed to judge by
+    assert not implausible(jump, 0.0)
+    # Three frames dropped: 0.8 s lets that much more through; a short frame is held to
+    # MIN_JUMP_M.
+    reach = MAX_SPEED_M_S * 0.8
+    assert not implausible(Odometry(reach - 0.05, 0.0, 0.0), 0.8)
+    assert implausible(Odometry(reach + 0.05, 0.0, 0.0), 0.8)
+    assert not implausible(Odometry(MIN_JUMP_M - 0.01, 0.0, 0.0), 0.05)
+    assert implausible(Odometry(0.0, -(MIN_JUMP_M + 0.01), 0.0), 0.05)
