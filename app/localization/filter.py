@@ -292,7 +292,8 @@ class ParticleFilter:
         self.quality: FitQuality | None = None
         self._had_odometry = False
         #: Whether the last frame's odometry was refused as faster than a person on foot
-        #: (:func:`~app.localization.motion.implausible`; the frame went on without it).
+        #: (:func:`~app.localization.motion.implausible`: its translation refused, its
+        #: turn kept).
         self.odometry_refused = False
         #: Frames with detections in a row that were bad on their own (see _update_fit).
         self._bad_run = 0
