@@ -18,6 +18,8 @@ scenario (``app.experiments.phone.run_scenario``'s ``alter``):
 * ``occlusion-bursts``: for 5 s of every 20 s, 80 % of the detections lost (a crowd);
 * ``paused-8s``: no frame for 8 s from t = 25 s, then one without odometry (the app
   sent to the background and back);
+* ``tracking-lost-3s``: frames go on, but for 3 s of every 20 s without odometry (a
+  visual-inertial tracker's "limited tracking": a blank wall, a fast turn);
 * ``pace-change``: the odometry's lengths 12 % longer in the walk's second half (a step
   length learnt while walking slowly, then walking briskly).
 
@@ -129,6 +131,12 @@ def _paused(frames: Frames, _rng: np.random.Generator) -> Frames:
     return out
 
 
+def _tracking_lost(frames: Frames, _rng: np.random.Generator) -> Frames:
+    return [
+        replace(f, odometry=None) if f.t >= PERIOD_S and f.t % PERIOD_S < 3.0 else f for f in frames
+    ]
+
+
 def _pace(frames: Frames, _rng: np.random.Generator) -> Frames:
     half = frames[-1].t / 2.0
     return [
@@ -157,6 +165,7 @@ EFFECTS: dict[str, Effect] = {
     "camera-yaw-6deg": _yaw,
     "occlusion-bursts": _occlusion,
     "paused-8s": _paused,
+    "tracking-lost-3s": _tracking_lost,
     "pace-change": _pace,
 }
 ROWS = ("office_suite/vio-360", "office_suite/vio-180", "office_suite/pdr-pinhole66")

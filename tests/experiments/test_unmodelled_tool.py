@@ -59,6 +59,14 @@ def test_a_pause_drops_eight_seconds_and_the_odometry_after(frames: list) -> Non
     assert len(after) == len(frames) - sum(25.0 <= f.t < 33.0 for f in frames)
 
 
+def test_lost_tracking_blanks_the_odometry_three_seconds_a_period(frames: list) -> None:
+    after = EFFECTS["tracking-lost-3s"](frames, np.random.default_rng(0))
+    for a, b in zip(frames, after, strict=True):
+        blank = a.t >= PERIOD_S and a.t % PERIOD_S < 3.0
+        assert (b.odometry is None) if blank else (b == a)
+        assert b.detections == a.detections
+
+
 def test_occlusion_bursts_lose_detections_only_in_the_bursts(frames: list) -> None:
     after = EFFECTS["occlusion-bursts"](frames, np.random.default_rng(0))
     for a, b in zip(frames, after, strict=True):
