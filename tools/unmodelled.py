@@ -168,7 +168,12 @@ EFFECTS: dict[str, Effect] = {
     "tracking-lost-3s": _tracking_lost,
     "pace-change": _pace,
 }
-ROWS = ("office_suite/vio-360", "office_suite/vio-180", "office_suite/pdr-pinhole66")
+ROWS = (
+    "office_suite/vio-360",
+    "office_suite/vio-180",
+    "office_suite/pdr-pinhole66",
+    "office_suite/vio-stale-360",
+)
 
 
 def _job(args: tuple[str, str, int]) -> tuple[str, str, int, int, int, int, int]:
