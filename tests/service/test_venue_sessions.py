@@ -34,16 +34,25 @@ def frames() -> list[VenueFrame]:
     return simulate_venue(VENUE, start, legs[:3], cfg, np.random.default_rng(7))
 
 
-def inputs(vf: VenueFrame) -> FrameInput:
-    f = vf.frame
-    return FrameInput(odometry=f.odometry, detections=tuple(f.detections), altitude=vf.altitude)
-
-
-def phone_inputs(i: int, vf: VenueFrame) -> FrameInput:
-    """Frame ``i`` of a phone's walk as a session takes it: the first without odometry,
-    the detections' age when the phone gives it."""
+def inputs(vf: VenueFrame, timed: bool = False) -> FrameInput:
+    """A frame of the venue walk as a session takes it (``timed``: see phone_inputs)."""
     f = vf.frame
     return FrameInput(
+        timestamp=f.t if timed else None,
+        odometry=f.odometry,
+        detections=tuple(f.detections),
+        altitude=vf.altitude,
+    )
+
+
+def phone_inputs(i: int, vf: VenueFrame, timed: bool = False) -> FrameInput:
+    """Frame ``i`` of a phone's walk as a session takes it: the first without odometry,
+    the detections' age when the phone gives it; ``timed``: with the frame's timestamp
+    (without one, what the narrator says at most every few seconds goes by the wall
+    clock)."""
+    f = vf.frame
+    return FrameInput(
+        timestamp=f.t if timed else None,
         odometry=None if i == 0 else f.odometry,
         detections=tuple(f.detections),
         altitude=vf.altitude,
@@ -59,13 +68,14 @@ def test_a_restored_venue_session_keeps_its_level_and_barometer_and_goes_on_exac
     # Up to the middle of the lift ride: the barometer's anchor and the level matter.
     riding = next(i for i, vf in enumerate(walk) if vf.riding) + 40
     for vf in walk[:riding]:
-        a.process_sync(inputs(vf))
+        a.process_sync(inputs(vf, timed=True))
     assert a.filter.floors is not None and a.filter.floors.changes >= 1
     state = checkpoint.unpack(checkpoint.pack(a.capture()))
     assert state["filter"]["floors"]["anchor_m"] == a.filter.floors.anchor_m
     b = rebuild(m, state)
     for vf in walk[riding : riding + 60]:
-        out_a, out_b = a.process_sync(inputs(vf)), b.process_sync(inputs(vf))
+        frame = inputs(vf, timed=True)  # the narrator's clock is the frames'
+        out_a, out_b = a.process_sync(frame), b.process_sync(frame)
         assert out_a.estimate == out_b.estimate and out_a.level == out_b.level
         assert out_a.feedback == out_b.feedback
     assert out_a.level is not None and out_a.level.id == "L2"
@@ -142,7 +152,7 @@ def test_a_session_restored_after_a_ride_it_was_pinned_to_goes_on_exactly() -> N
 
     cut = None
     for i, vf in enumerate(walk):
-        a.process_sync(phone_inputs(i, vf))
+        a.process_sync(phone_inputs(i, vf, timed=True))
         ev = a.filter.evidence
         assert ev is not None
         if ev._prior_drift > 0.0 and ev._prior_walked_m > 3.0:
@@ -152,6 +162,7 @@ def test_a_session_restored_after_a_ride_it_was_pinned_to_goes_on_exactly() -> N
     state = checkpoint.unpack(checkpoint.pack(a.capture()))
     b = rebuild(m, state)
     for i, vf in enumerate(walk[cut : cut + 300], start=cut):
-        out_a, out_b = a.process_sync(phone_inputs(i, vf)), b.process_sync(phone_inputs(i, vf))
+        frame = phone_inputs(i, vf, timed=True)  # the narrator's clock is the frames'
+        out_a, out_b = a.process_sync(frame), b.process_sync(frame)
         assert out_a.estimate == out_b.estimate and out_a.feedback == out_b.feedback, i
     m.close()
