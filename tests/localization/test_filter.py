@@ -476,7 +476,7 @@ def test_a_compass_or_barometer_reading_on_a_frame_not_weighed_goes_to_the_next(
 
 def _walk_with_a_jump(m: SemanticMap, timed: bool) -> list[tuple[float, bool, bool, float]]:
     """The paper office's nominal walk with one frame's odometry 1.5 m longer than the
-    step (a tracker relocalizing); per frame after the first: time, converged, refused,
+    step (a tracker relocalizing); per frame: time, converged, refused,
     error. ``timed``: the filter is told each frame's duration."""
     sim = replace(paper_config("nominal", 360), duration_s=16.0)
     frames = simulate(m, sim, np.random.default_rng(4))
