@@ -21,7 +21,10 @@ scenario (``app.experiments.phone.run_scenario``'s ``alter``):
 * ``tracking-lost-3s``: frames go on, but for 3 s of every 20 s without odometry (a
   visual-inertial tracker's "limited tracking": a blank wall, a fast turn);
 * ``pace-change``: the odometry's lengths 12 % longer in the walk's second half (a step
-  length learnt while walking slowly, then walking briskly).
+  length learnt while walking slowly, then walking briskly);
+* ``no-timestamps``: the app sends its detections' age but no timestamps (the field is
+  optional);
+* ``timestamps-in-ms``: the app's clock counts milliseconds (JavaScript's Date.now()).
 
 Prints per scenario and effect: frames, confidently wrong (converged and more than 1 m
 off), beyond protection (converged and farther off than ``protection_m``), and
@@ -156,6 +159,10 @@ def _nothing(frames: Frames, _rng: np.random.Generator) -> Frames:
     return frames
 
 
+def _milliseconds(frames: Frames, _rng: np.random.Generator) -> Frames:
+    return [replace(f, t=f.t * 1000.0) for f in frames]
+
+
 EFFECTS: dict[str, Effect] = {
     "none": _nothing,
     "tracking-jump-0.8m": _forward_jump(0.8),
@@ -167,7 +174,11 @@ EFFECTS: dict[str, Effect] = {
     "paused-8s": _paused,
     "tracking-lost-3s": _tracking_lost,
     "pace-change": _pace,
+    "no-timestamps": _nothing,
+    "timestamps-in-ms": _milliseconds,
 }
+#: The effects whose frames go without timestamps.
+UNTIMED = frozenset({"no-timestamps"})
 ROWS = (
     "office_suite/vio-360",
     "office_suite/vio-180",
@@ -183,7 +194,11 @@ def _job(args: tuple[str, str, int]) -> tuple[str, str, int, int, int, int, int]
     scenario = phone.Scenario(*row.split("/"))
     rng = np.random.default_rng([seed, 1027])
     run = phone.run_scenario(
-        scenario, seed, 10_000, alter=lambda frames: EFFECTS[name](frames, rng)
+        scenario,
+        seed,
+        10_000,
+        alter=lambda frames: EFFECTS[name](frames, rng),
+        timestamps=name not in UNTIMED,
     )
     near = run.err_m <= RIGHT_M
     beyond = run.converged & (run.err_m > np.nan_to_num(run.protection_m, nan=np.inf))

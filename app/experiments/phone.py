@@ -298,16 +298,17 @@ def frame_input_fields() -> frozenset[str]:
     return frozenset(f.name for f in dataclasses.fields(FrameInput))
 
 
-def frame_input(frame: PhoneFrame, fields: frozenset[str]) -> object:
+def frame_input(frame: PhoneFrame, fields: frozenset[str], timestamps: bool = True) -> object:
     """``frame`` as the service's ``FrameInput``; ``detections_age_s`` only when the
-    service knows the field and the phone knows the age."""
+    service knows the field and the phone knows the age; ``timestamps`` False: an app that
+    sends none."""
     from app.service.types import FrameInput
 
     extra: dict[str, object] = {}
     if frame.detections_age_s is not None and "detections_age_s" in fields:
         extra["detections_age_s"] = frame.detections_age_s
     return FrameInput(
-        timestamp=frame.t,
+        timestamp=frame.t if timestamps else None,
         odometry=frame.odometry,
         detections=tuple(frame.detections),
         truth=frame.truth,
@@ -339,12 +340,13 @@ def run_scenario(
     rate_hz: float | None = None,
     on_frame: Callable[[Session, PhoneFrame, FrameOutcome], None] | None = None,
     alter: Callable[[list[PhoneFrame]], list[PhoneFrame]] | None = None,
+    timestamps: bool = True,
 ) -> PhoneRun:
     """Simulate one walk and feed it, frame by frame, to a fresh session;
     ``on_frame(session, frame, outcome)`` after each frame (a tool's look at the
     session's state, e.g. ``tools/odometry_scale.py``); ``alter`` changes the simulated
     frames before they are sent (an effect the simulator does not model,
-    ``tools/unmodelled.py``)."""
+    ``tools/unmodelled.py``); ``timestamps`` False sends the frames without them."""
     from app.service.sessions import SessionManager
     from app.service.types import SensorSpec, SessionSpec
 
@@ -387,7 +389,7 @@ def run_scenario(
     ms = np.empty(n)
     for i, f in enumerate(frames):
         t0 = time.perf_counter()
-        out = session.process_sync(frame_input(f, fields))  # type: ignore[arg-type]
+        out = session.process_sync(frame_input(f, fields, timestamps))  # type: ignore[arg-type]
         ms[i] = (time.perf_counter() - t0) * 1e3
         if on_frame is not None:
             on_frame(session, f, out)

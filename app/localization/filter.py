@@ -591,6 +591,14 @@ class ParticleFilter:
         seconds = frame_s if frame_s is not None and frame_s > 0.0 else DEFAULT_FRAME_S
         if self.odometry_bias is not None:
             odometry = self.odometry_bias.correct(odometry, seconds)
+        if frame_s is None or frame_s <= 0.0:
+            # How long the frame lasted is not known, so neither is how much of its
+            # motion came after its detections were captured: an age a frame or more
+            # long would put every capture at the frame's start and the particles would
+            # stand still while the person walks (measured, a phone at 5 frames/s whose
+            # app sent ages but no timestamps: availability 0.957 -> 0.600). The
+            # detections are taken for the frame's end (latency.CaptureClock).
+            detections_age_s = 0.0
         odometry = self.capture.step(odometry, frame_s, detections_age_s)
         known_s = frame_s if frame_s is not None and frame_s > 0.0 else None
         self._step(odometry, detections, heading, altitude, known_s, weighed.steps)

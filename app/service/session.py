@@ -50,6 +50,31 @@ def unknown_class_warnings(
     ]
 
 
+#: Frames further apart than this (s) are slow: a live session sends several a second. A
+#: pause (the app in the background) makes one such gap; several in a row are a clock in
+#: other units (JavaScript's Date.now() and Android's elapsedRealtime() count
+#: milliseconds). A slow frame's duration is not used (docs/API.md, timestamp).
+SLOW_FRAME_S = 10.0
+#: Slow frames in a row that are warned about.
+SLOW_FRAMES_IN_A_ROW = 3
+
+
+def slow_frames_warning(frame_s: float, count: int) -> str:
+    """What the client hears when its frames keep coming ``frame_s`` seconds apart."""
+    return (
+        f"timestamps {frame_s:g} s apart, {count} frames in a row: timestamp is in seconds "
+        f"(milliseconds?); a frame's duration over {SLOW_FRAME_S:g} s is not used"
+    )
+
+
+#: What the client hears when a frame gives its detections' age without the timestamps
+#: that say how long the frame lasted (docs/API.md, detections_age_s).
+AGE_WITHOUT_TIMESTAMPS = (
+    "detections_age_s needs timestamp on this frame and the previous one (how long the "
+    "frame lasted): without, the detections are taken for the frame's end"
+)
+
+
 def refused_odometry_warning(odometry: Odometry | None, frame_s: float | None) -> str:
     """What the client hears when the filter refused a frame's translation as faster
     than a person on foot (:func:`~app.localization.motion.implausible`)."""
@@ -102,6 +127,8 @@ class Session:
     truth: Pose | None = None
     version: int = 0
     last_timestamp: float | None = None
+    #: Frames in a row that came more than SLOW_FRAME_S after the previous one.
+    slow_frames: int = 0
     state_lock: threading.Lock = field(default_factory=threading.Lock)
     camera: Camera | None = None
     #: The destination's plan (None: no destination) and what was said about the way.
@@ -186,6 +213,17 @@ class Session:
                 if frame.timestamp is not None and self.last_timestamp is not None
                 else None
             )
+            if frame.detections_age_s > 0.0 and frame.timestamp is None:
+                warnings.append(AGE_WITHOUT_TIMESTAMPS)
+            if frame_s is not None:
+                self.slow_frames = self.slow_frames + 1 if frame_s > SLOW_FRAME_S else 0
+                if self.slow_frames:
+                    # A pause, or a clock in other units (several in a row): either way the
+                    # duration says nothing of the motion, and taken for it a few frames'
+                    # odometry would teach the filter its heading drift over minutes.
+                    if self.slow_frames >= SLOW_FRAMES_IN_A_ROW:
+                        warnings.append(slow_frames_warning(frame_s, self.slow_frames))
+                    frame_s = None
             estimate = self.filter.step(
                 frame.odometry,
                 detections,
@@ -279,6 +317,7 @@ class Session:
             "speaker": to_plain(self.speaker),
             "destination": None if plan is None else plan.target,
             "last_timestamp": self.last_timestamp,
+            "slow_frames": self.slow_frames,
             "last_outcome": self.last_outcome,
             "last_detections": [[d.cls, d.bearing_rad, d.score] for d in self.last_detections],
             "truth": self.truth,
@@ -299,6 +338,7 @@ class Session:
         if state["destination"] is not None:
             self.destination = Plan(self.map, from_plain(Target, state["destination"]))
         self.last_timestamp = state["last_timestamp"]
+        self.slow_frames = int(state.get("slow_frames", 0))  # (none before it was kept)
         self.last_outcome = from_plain(FrameOutcome | None, state["last_outcome"])
         self.last_detections = [  # rows since format 4, records before
             Detection(*d) if isinstance(d, list) else from_plain(Detection, d)

@@ -121,6 +121,33 @@ def test_odometry_faster_than_a_person_on_foot_is_refused_and_warned(
     assert not any("odometry moved" in w for w in r.json()["warnings"])
 
 
+def test_a_detections_age_without_timestamps_is_warned(client: TestClient, session_id: str) -> None:
+    url = f"/sessions/{session_id}/frames"
+    frame = {"detections": [{"class": "door", "bearing_deg": 0}], "detections_age_s": 0.2}
+    warnings = client.post(url, json=frame).json()["warnings"]
+    assert any(w.startswith("detections_age_s needs timestamp") for w in warnings), warnings
+    timed = client.post(url, json={**frame, "timestamp": 3.0}).json()["warnings"]
+    assert not any("detections_age_s" in w for w in timed)
+
+
+def test_timestamps_in_milliseconds_are_warned_from_the_third_slow_frame(
+    client: TestClient, session_id: str
+) -> None:
+    """Frames 200 "seconds" apart: one such gap is a pause, three in a row a clock in
+    milliseconds; from the third the durations are not used, and a frame on time
+    again ends it."""
+    url = f"/sessions/{session_id}/frames"
+    step = {"forward_m": 0.1, "left_m": 0.0, "turn_deg": 0.0}
+    said = []
+    for ts in (1000.0, 1200.0, 1400.0, 1600.0, 1800.0, 1800.2):
+        body = {"timestamp": ts, "odometry": step, "detections": []}
+        ws = client.post(url, json=body).json()["warnings"]
+        said.append([w for w in ws if w.startswith("timestamps ")])
+    assert [len(w) for w in said] == [0, 0, 0, 1, 1, 0]
+    assert said[3][0].startswith("timestamps 200 s apart, 3 frames in a row")
+    assert "milliseconds?" in said[3][0]
+
+
 def test_bearings_are_wrapped(client: TestClient, session_id: str) -> None:
     r = client.post(
         f"/sessions/{session_id}/frames",

@@ -548,3 +548,23 @@ def test_a_narrow_cameras_filter_comes_back_with_both_edges_and_its_exclusions()
         ea, eb = a.step(f.odometry, f.detections), b.step(f.odometry, f.detections)
         assert math.hypot(ea.x - eb.x, ea.y - eb.y) < 1e-3
         assert ea.converged == eb.converged
+
+
+def test_a_restored_session_keeps_its_count_of_slow_frames() -> None:
+    """Two frames 200 s apart before the capture, one after the restore: the third in a
+    row is warned about on the restored session as on the original."""
+    m = manager(MemoryStore(shared=True))
+    a = m.build(SPEC)
+    for ts in (1000.0, 1200.0, 1400.0):
+        a.process_sync(FrameInput(timestamp=ts, odometry=Odometry(0.1, 0.0, 0.0)))
+    assert a.slow_frames == 2
+    state = checkpoint.unpack(checkpoint.pack(a.capture()))
+    b = rebuild(m, state)
+    assert b.slow_frames == 2
+    nxt = FrameInput(timestamp=1600.0, odometry=Odometry(0.1, 0.0, 0.0))
+    out_a, out_b = a.process_sync(nxt), b.process_sync(nxt)
+    assert out_a.warnings == out_b.warnings
+    assert any(w.startswith("timestamps 200 s apart, 3 frames") for w in out_b.warnings)
+    older = {k: v for k, v in state.items() if k != "slow_frames"}  # before it was kept
+    assert rebuild(m, older).slow_frames == 0
+    m.close()
