@@ -44,7 +44,13 @@ from app.localization.floors import (
     FloorTracker,
 )
 from app.localization.kld import kld_sample_size
-from app.localization.latency import DEFAULT_FRAME_S, CaptureClock, moved_forward
+from app.localization.latency import (
+    DEFAULT_FRAME_S,
+    LAG_MIN_TURN_RAD_S,
+    CaptureClock,
+    LatencyEstimate,
+    moved_forward,
+)
 from app.localization.models import (
     FOV_EDGE_STDS,
     BearingSensorModel,
@@ -66,6 +72,7 @@ from app.localization.resampling import (
 from app.localization.search import PATTERN
 from app.localization.sensor import (
     Observation,
+    match_detections,
     normalized_residuals,
     observation_columns,
     prepare_observation,
@@ -227,6 +234,8 @@ class ParticleFilter:
         self.last_observation: Observation | None = None
         #: Motion between detection captures (:mod:`~app.localization.latency`).
         self.capture = CaptureClock()
+        #: The detections' age of an app that does not say it, learnt from turns.
+        self.latency = LatencyEstimate()
         #: What systematic bearing errors can do to the fix (:mod:`~app.localization.dilution`).
         self.geometry = BearingGeometry(semantic_map, self.config)
         #: The odometry's scale and heading drift (:mod:`~app.localization.odometry_bias`).
@@ -265,6 +274,9 @@ class ParticleFilter:
             )
         self.log_w = np.zeros(n, dtype=np.float64)
         self.capture.reset()
+        self.latency.reset()
+        #: The detections' age the last frame was weighed with (s).
+        self._applied_age_s = 0.0
         self.geometry.reset()
         self.odometry_check.reset()
         self.walked.reset()
@@ -599,11 +611,16 @@ class ParticleFilter:
             # app sent ages but no timestamps: availability 0.957 -> 0.600). The
             # detections are taken for the frame's end (latency.CaptureClock).
             detections_age_s = 0.0
+        elif detections_age_s == 0.0 and (learnt := self.latency.age_s) is not None:
+            detections_age_s = learnt  # an app that does not say its latency still has one
+        self._applied_age_s = detections_age_s
         odometry = self.capture.step(odometry, frame_s, detections_age_s)
         known_s = frame_s if frame_s is not None and frame_s > 0.0 else None
         self._step(odometry, detections, heading, altitude, known_s, weighed.steps)
         est = self._last_answer()
         assert est is not None
+        if raw_odometry is not None and known_s is not None:
+            self._learn_latency(raw_odometry.turn_rad / known_s)
         if self.odometry_bias is not None:
             rode = self.floors is not None and self.floors.changed
             self.odometry_bias.observe(
@@ -615,6 +632,27 @@ class ParticleFilter:
                 est.std_theta_rad,
             )
         return est
+
+    def _learn_latency(self, turn_rad_s: float) -> None:
+        """A converged frame's bearing residuals at the estimate, against its turn rate
+        (:class:`~app.localization.latency.LatencyEstimate`)."""
+        e = self.estimate
+        obs = self.last_observation
+        if not e.converged or obs is None or obs.empty:
+            return
+        if abs(turn_rad_s) < LAG_MIN_TURN_RAD_S:
+            return  # (the estimate's test below would say so too, at a matching's cost)
+        _, index = match_detections(
+            np.array([e.x]), np.array([e.y]), np.array([e.theta_rad]), obs, self.map, self.config
+        )
+        residuals = []
+        for k, o in enumerate(index[:, 0].tolist()):
+            if o < 0:
+                continue
+            ox, oy = self.map.object_xy[o]
+            seen = obs.det_bearing[k] - (math.atan2(oy - e.y, ox - e.x) - e.theta_rad)
+            residuals.append(float(wrap_angle(seen)))
+        self.latency.update(residuals, turn_rad_s, self._applied_age_s)
 
     def _last_answer(self) -> Estimate | None:
         """What the last step answered (None before the first): :attr:`estimate`, at the
@@ -1063,6 +1101,7 @@ class ParticleFilter:
             **self._pacing.checkpoint(),
             "estimate": self.estimate,
             "capture": self.capture.checkpoint(),
+            "latency": self.latency.checkpoint(),
             "geometry": self.geometry.checkpoint(),
             "odometry_check": self.odometry_check.checkpoint(),
             "walked": self.walked.checkpoint(),
@@ -1119,6 +1158,7 @@ class ParticleFilter:
         self.estimate = from_plain(Estimate, state["estimate"])
         self.continuation.restore(state)
         self.capture.restore(state.get("capture"))
+        self.latency.restore(state.get("latency"))
         self.geometry.restore(state.get("geometry"))
         self.odometry_check.restore(state.get("odometry_check"))
         self.walked.restore(state.get("walked"))

@@ -14,11 +14,19 @@ composition), and the pose reported for the frame's end is the capture pose move
 window, the convergence gate) then sees detections and poses of one instant, and no
 kernel changes. The trailing motion assumes constant velocity within a frame; a frame
 without a timestamp is taken to last ``DEFAULT_FRAME_S``.
+
+An app that does not say the age (``detections_age_s`` 0) still has one. It shows in
+turns: a static object's bearing seen ``L`` seconds late is off by the turn rate times
+``L`` (turning left the heading grows, so an older view puts every object further left).
+:class:`LatencyEstimate` fits ``L`` by least squares to the median bearing residual of
+converged frames against the frame's turn rate, adding back the age already applied, and
+the filter applies the learnt age to frames that give none.
 """
 
 from __future__ import annotations
 
 import math
+import statistics
 from collections import deque
 from collections.abc import Mapping
 from typing import Any
@@ -140,3 +148,65 @@ class CaptureClock:
         self.back = Odometry(*(float(v) for v in state["back"]))
         for f, left, turn, d in state["recent"]:
             self._recent.append((Odometry(float(f), float(left), float(turn)), float(d)))
+
+
+#: Frames turning slower than this (rad/s) say little of the latency: walking straight
+#: the residuals are the detector's noise and its boxes' bias.
+LAG_MIN_TURN_RAD_S = 0.3
+#: The sum of squared turn rates (rad^2/s^2) before the latency learnt is applied: about
+#: ten frames of a brisk turn (1 rad/s).
+LAG_MIN_EVIDENCE = 2.0
+#: Residuals wider than this (rad) are another object's, or clutter: not a lag.
+LAG_MAX_RESIDUAL_RAD = math.radians(15.0)
+#: A frame needs this many matched detections to measure a lag (one can be a box's bias).
+LAG_MIN_DETECTIONS = 2
+#: The longest latency learnt (s).
+LAG_MAX_S = 0.5
+#: A learnt latency below this (s) is not applied: a walk's residuals learn 0-0.012 s
+#: with no latency at all (the phone suite's ideal and stale-map walks), and applied, so
+#: small an age changed nothing but which frames of a marginal walk went wrong (the
+#: stale map alone at 10 frames/s: 15 -> 57 confidently-wrong frames). Walks 0.1-0.3 s
+#: late learnt 0.02-0.14 s.
+LAG_MIN_S = 0.02
+
+
+class LatencyEstimate:
+    """The detections' age of an app that does not say it, learnt from turns (module
+    docstring): ``sum(lag * w) / sum(w^2)`` over converged frames turning at ``w``, the
+    lag being the median bearing residual plus the age already applied times ``w``."""
+
+    def __init__(self) -> None:
+        self.reset()
+
+    def reset(self) -> None:
+        self.lag_turn = 0.0  # sum of (residual + applied age * turn rate) * turn rate
+        self.turn_sq = 0.0  # sum of squared turn rates
+
+    def update(self, residuals_rad: list[float], turn_rad_s: float, applied_s: float) -> None:
+        """One converged frame: its matched detections' bearing residuals at the estimate
+        (observed minus predicted), its turn rate, and the age it was weighed with."""
+        if abs(turn_rad_s) < LAG_MIN_TURN_RAD_S:
+            return
+        near = [r for r in residuals_rad if abs(r) <= LAG_MAX_RESIDUAL_RAD]
+        if len(near) < LAG_MIN_DETECTIONS:
+            return
+        lag = float(statistics.median(near)) + applied_s * turn_rad_s
+        self.lag_turn += lag * turn_rad_s
+        self.turn_sq += turn_rad_s * turn_rad_s
+
+    @property
+    def age_s(self) -> float | None:
+        """The learnt age (s), or None before enough turning or below ``LAG_MIN_S``."""
+        if self.turn_sq < LAG_MIN_EVIDENCE:
+            return None
+        age = min(self.lag_turn / self.turn_sq, LAG_MAX_S)
+        return age if age >= LAG_MIN_S else None
+
+    def checkpoint(self) -> dict[str, Any]:
+        return {"lag_turn": self.lag_turn, "turn_sq": self.turn_sq}
+
+    def restore(self, state: Mapping[str, Any] | None) -> None:
+        """From :meth:`checkpoint` (None: a checkpoint from before it was learnt)."""
+        self.reset()
+        if state is not None:
+            self.lag_turn, self.turn_sq = float(state["lag_turn"]), float(state["turn_sq"])
