@@ -48,7 +48,6 @@ import numpy as np
 
 from app.bench import machine_line
 from app.experiments import phone
-from app.experiments.integrity import RIGHT_M, WRONG_M
 from app.experiments.runner import map_jobs
 from app.localization.types import Detection, Odometry
 from app.simulation.phone import PhoneFrame
@@ -187,9 +186,8 @@ ROWS = (
 )
 
 
-def _job(args: tuple[str, str, int]) -> tuple[str, str, int, int, int, int, int]:
-    """One walk: row, effect, frames, confidently wrong, beyond protection, converged
-    within RIGHT_M, within RIGHT_M."""
+def _job(args: tuple[str, str, int]) -> tuple[str, str, phone.PhoneRun]:
+    """One walk of ``row`` with effect ``name``, seed ``seed``."""
     row, name, seed = args
     scenario = phone.Scenario(*row.split("/"))
     rng = np.random.default_rng([seed, 1027])
@@ -200,17 +198,7 @@ def _job(args: tuple[str, str, int]) -> tuple[str, str, int, int, int, int, int]
         alter=lambda frames: EFFECTS[name](frames, rng),
         timestamps=name not in UNTIMED,
     )
-    near = run.err_m <= RIGHT_M
-    beyond = run.converged & (run.err_m > np.nan_to_num(run.protection_m, nan=np.inf))
-    return (
-        row,
-        name,
-        int(run.t.size),
-        int(np.sum(run.converged & (run.err_m > WRONG_M))),
-        int(np.sum(beyond)),
-        int(np.sum(run.converged & near)),
-        int(np.sum(near)),
-    )
+    return row, name, run
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -234,16 +222,20 @@ def main(argv: Sequence[str] | None = None) -> int:
     seeds = range(args.first_seed, args.first_seed + args.seeds)
     started = time.perf_counter()
     jobs = [(r, e, s) for r in rows for e in effects for s in seeds]
-    totals: dict[tuple[str, str], np.ndarray] = {}
-    for row, name, *counts in map_jobs(_job, jobs, args.workers):
-        totals.setdefault((row, name), np.zeros(5, dtype=np.int64))
-        totals[(row, name)] += counts
+    runs: dict[tuple[str, str], list[phone.PhoneRun]] = {}
+    for row, name, run in map_jobs(_job, jobs, args.workers):
+        runs.setdefault((row, name), []).append(run)
     lines = [
         "| scenario | effect | frames | confidently wrong | beyond protection | availability |",
         "|---|---|---|---|---|---|",
     ]
-    for (row, name), (n, wrong, beyond, told, near) in totals.items():
-        lines.append(f"| {row} | {name} | {n} | {wrong} | {beyond} | {told / max(near, 1):.3f} |")
+    for (row, name), walks in runs.items():
+        m = phone.metrics(walks)  # the phone suite's own figures
+        n = int(m["frames"])
+        beyond = round(float(m["beyond_protection_share"]) * n)
+        lines.append(
+            f"| {row} | {name} | {n} | {m['wrong_frames']} | {beyond} | {m['availability']:.3f} |"
+        )
     print(f"seeds {seeds.start}-{seeds.stop - 1}")
     print("\n".join(lines))
     if args.out:

@@ -46,7 +46,6 @@ from app.localization.floors import (
 from app.localization.kld import kld_sample_size
 from app.localization.latency import (
     DEFAULT_FRAME_S,
-    LAG_MIN_TURN_RAD_S,
     CaptureClock,
     LatencyEstimate,
     moved_forward,
@@ -275,8 +274,6 @@ class ParticleFilter:
         self.log_w = np.zeros(n, dtype=np.float64)
         self.capture.reset()
         self.latency.reset()
-        #: The detections' age the last frame was weighed with (s).
-        self._applied_age_s = 0.0
         self.geometry.reset()
         self.odometry_check.reset()
         self.walked.reset()
@@ -600,10 +597,13 @@ class ParticleFilter:
         odometry, frame_s = weighed.odometry, weighed.frame_s
         heading, altitude = weighed.heading, weighed.altitude
         raw_odometry = odometry
-        seconds = frame_s if frame_s is not None and frame_s > 0.0 else DEFAULT_FRAME_S
+        known_s = frame_s if frame_s is not None and frame_s > 0.0 else None
+        seconds = DEFAULT_FRAME_S if known_s is None else known_s
         if self.odometry_bias is not None:
             odometry = self.odometry_bias.correct(odometry, seconds)
-        if frame_s is None or frame_s <= 0.0:
+        # An app that does not say its latency still has one: learnt from turns.
+        unsaid = detections_age_s == 0.0
+        if known_s is None:
             # How long the frame lasted is not known, so neither is how much of its
             # motion came after its detections were captured: an age a frame or more
             # long would put every capture at the frame's start and the particles would
@@ -611,16 +611,15 @@ class ParticleFilter:
             # app sent ages but no timestamps: availability 0.957 -> 0.600). The
             # detections are taken for the frame's end (latency.CaptureClock).
             detections_age_s = 0.0
-        elif detections_age_s == 0.0 and (learnt := self.latency.age_s) is not None:
-            detections_age_s = learnt  # an app that does not say its latency still has one
-        self._applied_age_s = detections_age_s
+        elif unsaid and (learnt := self.latency.age_s) is not None:
+            detections_age_s = learnt
         odometry = self.capture.step(odometry, frame_s, detections_age_s)
-        known_s = frame_s if frame_s is not None and frame_s > 0.0 else None
         self._step(odometry, detections, heading, altitude, known_s, weighed.steps)
         est = self._last_answer()
         assert est is not None
-        if raw_odometry is not None and known_s is not None:
-            self._learn_latency(raw_odometry.turn_rad / known_s)
+        if unsaid and raw_odometry is not None and known_s is not None:
+            # (An app that says its latency has nothing to learn: no matching per frame.)
+            self._learn_latency(raw_odometry.turn_rad / known_s, detections_age_s)
         if self.odometry_bias is not None:
             rode = self.floors is not None and self.floors.changed
             self.odometry_bias.observe(
@@ -633,15 +632,14 @@ class ParticleFilter:
             )
         return est
 
-    def _learn_latency(self, turn_rad_s: float) -> None:
-        """A converged frame's bearing residuals at the estimate, against its turn rate
+    def _learn_latency(self, turn_rad_s: float, applied_s: float) -> None:
+        """A converged frame's bearing residuals at the estimate, against its turn rate,
+        weighed with an age of ``applied_s``
         (:class:`~app.localization.latency.LatencyEstimate`)."""
         e = self.estimate
         obs = self.last_observation
-        if not e.converged or obs is None or obs.empty:
+        if not e.converged or obs is None or obs.empty or not self.latency.turning(turn_rad_s):
             return
-        if abs(turn_rad_s) < LAG_MIN_TURN_RAD_S:
-            return  # (the estimate's test below would say so too, at a matching's cost)
         _, index = match_detections(
             np.array([e.x]), np.array([e.y]), np.array([e.theta_rad]), obs, self.map, self.config
         )
@@ -652,7 +650,7 @@ class ParticleFilter:
             ox, oy = self.map.object_xy[o]
             seen = obs.det_bearing[k] - (math.atan2(oy - e.y, ox - e.x) - e.theta_rad)
             residuals.append(float(wrap_angle(seen)))
-        self.latency.update(residuals, turn_rad_s, self._applied_age_s)
+        self.latency.update(residuals, turn_rad_s, applied_s)
 
     def _last_answer(self) -> Estimate | None:
         """What the last step answered (None before the first): :attr:`estimate`, at the
