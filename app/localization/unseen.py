@@ -269,7 +269,10 @@ class UnseenObjects:
             "seen": self.seen,
             "reported": self.reported,
             "reach": self.reach_m,
-            "rate": self.rate_sums,
+            # The sums over all bands under the key a version before the bands reads
+            # (a rolling upgrade's older worker restores the session), the bands beside.
+            "rate": self.rate_sums.sum(axis=0),
+            "rate_bands": self.rate_sums,
             "absent": self.absent,
             "moved": self.moved,
             "near": self.near,
@@ -284,10 +287,12 @@ class UnseenObjects:
         self.reach_m = np.array(state.get("reach", np.zeros(self.reported.size)), dtype=float)
         # (a checkpoint from before the learnt hit rate starts from its prior; one from
         # before its bands of distance spreads its sums evenly over them)
-        rate = np.array(state.get("rate", np.zeros(2)), dtype=np.float64)
-        if rate.ndim == 1:
-            rate = np.repeat(rate[None, :] / self.bands, self.bands, axis=0)
-        self.rate_sums = rate
+        bands = state.get("rate_bands")
+        if bands is not None:
+            self.rate_sums = np.array(bands, dtype=np.float64)
+        else:
+            rate = np.array(state.get("rate", np.zeros(2)), dtype=np.float64)
+            self.rate_sums = np.repeat(rate[None, :] / self.bands, self.bands, axis=0)
         near = state.get("near")
         self.near = np.zeros(self.expected.size) if near is None else np.array(near, dtype=float)
         miss = state.get("miss")

@@ -337,9 +337,14 @@ def test_a_checkpoint_from_before_the_bands_restores_its_counts_and_flags() -> N
     unseen = UnseenObjects(sm, cfg)
     _walk_past(unseen, sm, 0.9, absent, 12, seed=1)
     state = unseen.checkpoint()
+    # The pooled sums are stored where an older version reads them, the bands beside.
+    assert np.array_equal(state["rate"], unseen.rate_sums.sum(axis=0))
+    again = UnseenObjects(sm, cfg)
+    again.restore(state)
+    assert np.array_equal(again.rate_sums, unseen.rate_sums)
+    assert np.array_equal(again.miss_evidence, unseen.miss_evidence)
     # What an older version stored: one pair of hit-rate sums, no weighed misses.
-    old = {k: v for k, v in state.items() if k != "miss"}
-    old["rate"] = unseen.rate_sums.sum(axis=0)
+    old = {k: v for k, v in state.items() if k not in ("miss", "rate_bands")}
     restored = UnseenObjects(sm, cfg)
     restored.restore(old)
     assert restored.rate_sums.shape == (restored.bands, 2)
