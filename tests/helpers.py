@@ -18,10 +18,13 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import httpx
+import numpy as np
 from fastapi import FastAPI
 
 from app.config import Settings
-from app.localization.types import Detection, Pose
+from app.localization.config import FilterConfig
+from app.localization.filter import ParticleFilter
+from app.localization.types import Detection, Estimate, InitialPose, Odometry, Pose
 from app.maps.check import load_map
 from app.maps.model import SemanticMap, parse_map
 from app.maps.prepare import ensure_prepared
@@ -49,6 +52,26 @@ def seen_from(m: SemanticMap, pose: Pose, camera: CameraModel | None = None) -> 
     ``m``: every visible object at its exact bearing, score 1."""
     idx, bearing = visible_objects(m, pose, camera or CameraModel(360.0, 15.0))
     return [Detection(m.class_of(int(j)), float(b), 1.0) for j, b in zip(idx, bearing, strict=True)]
+
+
+def told_at(
+    m: SemanticMap, pose: Pose, fov_deg: float = 66.0, frames: int = 10
+) -> tuple[ParticleFilter, list[Detection], Estimate]:
+    """A filter (2,000 particles, a ``fov_deg`` camera) started at ``pose`` (0.1 m,
+    0.05 rad) and standing there ``frames`` frames seeing what it sees exactly; the
+    filter, those detections and the last estimate."""
+    pf = ParticleFilter(
+        m,
+        FilterConfig(particles=2000, fov_deg=fov_deg),
+        rng=np.random.default_rng(3),
+        initial_pose=InitialPose(pose.x, pose.y, pose.theta_rad, 0.1, 0.05),
+    )
+    seen = seen_from(m, pose, CameraModel(fov_deg, 15.0))
+    est = None
+    for _ in range(frames):
+        est = pf.step(Odometry(0.0, 0.0, 0.0), seen)
+    assert est is not None
+    return pf, seen, est
 
 
 def paper_office() -> SemanticMap:

@@ -961,6 +961,13 @@ class EvidenceTracker:
         self.age = np.append(self.age, 0)
 
     # ----------------------------------------------------------------- swap
+    def strongest(self) -> tuple[float, float, int]:
+        """The alternative a swap would take: its centre (x, y) and the frames it has
+        been tracked."""
+        best = int(np.argmax(self._agreed))
+        cx, cy, _ = self._centres()
+        return float(cx[best]), float(cy[best]), int(self.age[best])
+
     def swap(self, n: int) -> tuple[NDArray[np.float64], ...]:
         """Make the strongest alternative the main belief; return its cloud (n particles).
 

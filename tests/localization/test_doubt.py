@@ -8,15 +8,13 @@ import numpy as np
 import pytest
 
 import app.localization.filter as filter_module
-from app.localization.config import FilterConfig
 from app.localization.continuation import DOUBT_FRAMES
 from app.localization.evidence import EvidenceTracker
 from app.localization.filter import ParticleFilter
-from app.localization.types import Detection, InitialPose, Odometry, Pose
+from app.localization.types import Detection, Odometry, Pose
 from app.service import checkpoint
-from app.simulation.camera import CameraModel
 from app.simulation.venue import venue_map
-from tests.helpers import seen_from
+from tests.helpers import told_at
 
 VENUE = venue_map()
 POSE = Pose(8.0, 3.0, math.pi / 2)
@@ -42,16 +40,8 @@ def _located_then_let_go(
             name,
             property(lambda self, real=real: 0.5 if state["doubt"] else real.fget(self)),
         )
-    pf = ParticleFilter(
-        VENUE,
-        FilterConfig(particles=2000, fov_deg=66.0),
-        rng=np.random.default_rng(3),
-        initial_pose=InitialPose(POSE.x, POSE.y, POSE.theta_rad, 0.1, 0.05),
-    )
-    seen = seen_from(VENUE, POSE, CameraModel(66.0, 15.0))
+    pf, seen, est = told_at(VENUE, POSE)
     still = Odometry(0.0, 0.0, 0.0)
-    for _ in range(10):
-        est = pf.step(still, seen)
     assert est.converged and est.protection_m is not None and est.protection_m > 0.3
     junk = [Detection("bench", b, 1.0) for b in (-0.4, 0.0, 0.4)]
     for _ in range(3):
