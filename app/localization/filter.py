@@ -1471,10 +1471,12 @@ def warm_up() -> None:
         protection_radius(pf.x, pf.y, pf.weights, est, pf.rng)
         tiny.visibility.row(1.0, 1.0)  # a cell's row unpacked (the fit check's, the narrator's)
         kld_sample_size(pf.x, pf.y, pf.theta, pf.weights, 10, 50)
-    # The unseen-object check's answer from its counts alone (a restored session's), and
-    # its learnt miss rates; not an assert, which python -O would strip with the compile.
+    # The unseen-object check's answer from its counts alone (a restored session's), its
+    # learnt miss rates, and a checkpoint from before the misses were weighed restored;
+    # not an assert, which python -O would strip with the compile.
     unseen = UnseenObjects(tiny, FilterConfig())
     _ = unseen.contradicted, unseen.miss_rates()
+    unseen.restore({k: v for k, v in unseen.checkpoint().items() if k != "miss"})
     # The narrow camera's ridge search of the protection radius (dilution._ridge).
     ridge_points = tuple(np.array([v]) for v in (0.0, 0.0, 2.0, 1.0, 1.0))
     _ = BearingGeometry(tiny, FilterConfig(fov_deg=66.0))._ridge_m(

@@ -297,12 +297,9 @@ class UnseenObjects:
         self.near = np.zeros(self.expected.size) if near is None else np.array(near, dtype=float)
         miss = state.get("miss")
         if miss is None:  # (before the misses were weighed: all at the rate over all bands)
-            pooled = float(self.rate_sums[:, 0].sum()), float(self.rate_sums[:, 1].sum())
             st = self.settings
-            hit = (pooled[1] + st.rate_prior * st.rate_prior_frames) / (
-                pooled[0] + st.rate_prior_frames
-            )
-            miss = (self.expected - self.seen) * -math.log(min(max(1.0 - hit, 1e-6), 1.0 - 1e-9))
+            hit = _pooled_hit_rate(self.rate_sums, st.rate_prior, st.rate_prior_frames)
+            miss = (self.expected - self.seen) * -math.log(_miss_of(hit))
         self.miss_evidence = np.array(miss, dtype=np.float64)
         absent = state.get("absent")
         self.absent = (
@@ -323,14 +320,26 @@ class UnseenObjects:
 
 
 @njit(cache=True)
+def _pooled_hit_rate(rate_sums, prior, prior_frames):  # pragma: no cover - compiled
+    """The hit rate over all bands of distance, from ``prior`` worth ``prior_frames``."""
+    return (rate_sums[:, 1].sum() + prior * prior_frames) / (rate_sums[:, 0].sum() + prior_frames)
+
+
+@njit(cache=True)
+def _miss_of(hit):  # pragma: no cover - compiled
+    """One minus a hit rate, kept off 0 and 1 (its log is a miss's weight)."""
+    return min(max(1.0 - hit, 1e-6), 1.0 - 1e-9)
+
+
+@njit(cache=True)
 def _miss_rates(rate_sums, prior, prior_frames, band_prior_frames):  # pragma: no cover - compiled
     """:meth:`UnseenObjects.miss_rates`: per band, the hit rate from its sums starting from
-    the rate over all bands (itself from ``prior``), and one minus it, kept off 0 and 1."""
-    pooled = (rate_sums[:, 1].sum() + prior * prior_frames) / (rate_sums[:, 0].sum() + prior_frames)
+    the rate over all bands (:func:`_pooled_hit_rate`), and one minus it."""
+    pooled = _pooled_hit_rate(rate_sums, prior, prior_frames)
     out = np.empty(rate_sums.shape[0])
     for b in range(rate_sums.shape[0]):
         hit = (rate_sums[b, 1] + pooled * band_prior_frames) / (rate_sums[b, 0] + band_prior_frames)
-        out[b] = min(max(1.0 - hit, 1e-6), 1.0 - 1e-9)
+        out[b] = _miss_of(hit)
     return out
 
 
