@@ -1032,9 +1032,10 @@ class ParticleFilter:
             # by chance, alternatives.EvidenceSettings.probation): it is swapped in only
             # once it has kept its evidence through probation. Its probability counts
             # against the fix meanwhile. Measured over 410 walks (the phone suite's VIO
-            # and PDR rows, the venue suite's phone conditions): every held fix swapped
-            # onto such a place ended farther from the truth (4 of 4: 0.05 -> 1.13,
-            # 0.18 -> 0.52, 0.18 -> 0.48, 0.31 -> 1.03 m).
+            # and PDR rows, the venue suite's phone conditions): each held fix swapped
+            # onto such a place whose error was measured ended farther from the truth
+            # (4 of 4: 0.05 -> 1.13, 0.18 -> 0.52, 0.18 -> 0.48, 0.31 -> 1.03 m; two
+            # more, in the venue suite's one-level baseline filters, were not measured).
             lx, ly, lr = self._last_fix
             ax, ay, age = self.evidence.strongest()
             if age < self.evidence.settings.probation and hypot(ax - lx, ay - ly) <= lr:
