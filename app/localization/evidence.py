@@ -83,7 +83,7 @@ from app.localization.compass import CompassReading, compass_log_likelihood
 from app.localization.fastmath import hypot
 from app.localization.models import MotionModel, SensorModel
 from app.localization.resampling import systematic_resample
-from app.localization.search import PlaceSearch, explaining
+from app.localization.search import PlaceSearch, Separation, explaining
 from app.localization.sensor import Observation, observation_columns
 from app.localization.types import Hypothesis, InitialPose, Odometry
 from app.maps.geometry import wrap_angle, wrap_rad
@@ -431,17 +431,17 @@ class EvidenceTracker:
         ax, ay, _ = self.clouds()
         return float(np.hypot(ax - x, ay - y).max())
 
-    def separation_m(self, x: float, y: float, theta: float) -> tuple[float, int]:
+    def separation_m(self, x: float, y: float, theta: float, rings: bool = True) -> Separation:
         """The solution separation of the pose (x, y, theta) over the history window
-        (:meth:`~app.localization.search.PlaceSearch.separation`): how far, at most, the
-        place that best explains the window moves when one movable object (not
+        (:meth:`~app.localization.search.PlaceSearch.separation`): how far the place
+        that best explains the window moves when one movable object (not
         :attr:`~app.maps.model.SemanticMap.fixed`) that explains a detection there
-        (:func:`~app.localization.search.explaining`) is left out (m), and which object
-        that is (-1: none)."""
+        (:func:`~app.localization.search.explaining`) is left out; ``rings``: seek
+        its places from around the pose too (``Separation.far_m``)."""
         window = self.window()
         seen = explaining((x, y, theta), window, self.map.object_xy.reshape(-1, 2))
         movable = seen[~self.map.fixed[seen]].tolist()
-        return self.finder.separation((x, y, theta), window, movable)
+        return self.finder.separation((x, y, theta), window, movable, rings)
 
     # ------------------------------------------------------------ one frame
     def update(

@@ -14,6 +14,7 @@ are held to are :func:`pattern_search_reference` and :func:`jitter_search_refere
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -145,27 +146,58 @@ class PlaceSearch:
         return pose, float(ps[b]), (px[2:], py[2:], pt[2:], ps[2:])
 
     def separation(
-        self, pose: tuple[float, float, float], window: ObservationWindow, objects: Sequence[int]
-    ) -> tuple[float, int]:
+        self,
+        pose: tuple[float, float, float],
+        window: ObservationWindow,
+        objects: Sequence[int],
+        rings: bool = True,
+    ) -> Separation:
         """How far the place that best explains ``window`` moves when one of ``objects``
-        explains nothing (m), the most over them, and which object that is (-1: none):
-        solution separation, as GNSS integrity monitoring tests a fix against one faulty
-        satellite (each satellite left out in turn), here against one object moved
-        since the map was drawn. Each place is a pattern search over the window, the
-        full one from ``pose``, each with one object left out from the full one's."""
+        explains nothing, the most over them: solution separation, as GNSS integrity
+        monitoring tests a fix against one faulty satellite (each satellite left out in
+        turn), here against one object moved since the map was drawn.
+
+        The full place is a pattern search over the window from ``pose``. With an object
+        left out, the place is sought twice: by a search from the full place (``near_m``:
+        where the fix slides when the object goes), and as the best of that and of
+        searches started on :data:`SEPARATION_RINGS_M` around it in free space
+        (``far_m``: one search from the full place can stop in its own local optimum
+        while a place a metre away explains the rest of the window better). Without
+        ``rings``, ``far_m`` is ``near_m``."""
         if not objects:
-            return 0.0, -1
+            return Separation(0.0, 0.0, -1)
         x, y, t = (np.array([v]) for v in pose)
         pattern_search = self.sensor.pattern_search
         steps = (SEPARATION_STEP_M, SEPARATION_STEP_RAD, SEPARATION_ROUNDS)
         bx, by, bt, _ = pattern_search(x, y, t, PATTERN, *steps, window)
-        worst, which = 0.0, -1
+        sx, sy = bx, by
+        if rings:
+            sx = np.concatenate([bx, bx[0] + _RING_DX])
+            sy = np.concatenate([by, by[0] + _RING_DY])
+            keep = self.map.free_space.is_free(sx, sy)
+            keep[0] = True  # the full place's own search (the first) always runs
+            sx, sy = sx[keep], sy[keep]
+        st = np.full(sx.shape, bt[0])
+        near_m, far_m, which = 0.0, 0.0, -1
         for obj in objects:
-            qx, qy, _, _ = pattern_search(bx, by, bt, PATTERN, *steps, window.without(obj))
-            d = float(np.hypot(qx[0] - bx[0], qy[0] - by[0]))
-            if d > worst:
-                worst, which = d, int(obj)
-        return worst, which
+            qx, qy, _, qs = pattern_search(sx, sy, st, PATTERN, *steps, window.without(obj))
+            moved = np.hypot(qx - bx[0], qy - by[0])
+            best = int(np.argmax(qs))
+            if moved[0] > near_m:
+                near_m, which = float(moved[0]), int(obj)
+            far_m = max(far_m, float(moved[best]))
+        return Separation(near_m, far_m, which)
+
+
+class Separation(NamedTuple):
+    """:meth:`PlaceSearch.separation`'s answer (metres; ``obj`` -1 when none)."""
+
+    #: The most the fix slides, searched from the full place, when one object goes.
+    near_m: float
+    #: The most the best place found, from the rings too, lies from the full place.
+    far_m: float
+    #: The object whose absence slides the fix farthest (``near_m``).
+    obj: int
 
 
 def explaining(
@@ -207,6 +239,13 @@ def explaining(
 SEPARATION_STEP_M = 0.5
 SEPARATION_STEP_RAD = float(np.radians(6.0))
 SEPARATION_ROUNDS = 10
+#: ... started also from rings of these radii (m) around the full place, eight starts
+#: each (``Separation.far_m``): a moved object pulls a fix 1-1.5 m, and a search reaches
+#: about a metre from where it starts (app.localization.filter.SEPARATION_RINGS_FOV_DEG).
+SEPARATION_RINGS_M = (0.75, 1.5)
+_RING_ANGLES = np.arange(8) * (np.pi / 4.0)
+_RING_DX = np.concatenate([r * np.cos(_RING_ANGLES) for r in SEPARATION_RINGS_M])
+_RING_DY = np.concatenate([r * np.sin(_RING_ANGLES) for r in SEPARATION_RINGS_M])
 
 
 #: The pattern search's 27 steps (x, y, heading; each -1, 0 or +1), shape (3, 27), in

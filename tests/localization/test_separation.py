@@ -12,9 +12,13 @@ from app.localization import sensor_kernel
 from app.localization.config import FilterConfig
 from app.localization.convergence import GAIN_PROTECTION_M
 from app.localization.evidence import EvidenceTracker
-from app.localization.filter import GAIN_SEPARATION_M, ParticleFilter
+from app.localization.filter import (
+    GAIN_SEPARATION_M,
+    SEPARATION_RINGS_FOV_DEG,
+    ParticleFilter,
+)
 from app.localization.models import BearingSensorModel, OdometryMotionModel
-from app.localization.search import explaining
+from app.localization.search import Separation, explaining
 from app.localization.types import Odometry, Pose
 from app.maps.model import SemanticMap, parse_map
 from app.simulation.camera import CameraModel, visible_objects
@@ -107,12 +111,24 @@ def test_the_objects_that_explain_a_noise_free_view_are_the_ones_in_it() -> None
 def test_a_moved_object_pulls_the_fix_by_more_than_the_gain_allows() -> None:
     drawn = corridor(OBJECTS)
     tracker, pose = _tracker(drawn, drawn)
-    still, _ = tracker.separation_m(pose.x, pose.y, pose.theta_rad)
-    assert still < 0.2 * GAIN_SEPARATION_M
+    still = tracker.separation_m(pose.x, pose.y, pose.theta_rad)
+    assert max(still.near_m, still.far_m) < 0.2 * GAIN_SEPARATION_M
     tracker, pose = _tracker(drawn, _moved(1.0))
-    pulled, which = tracker.separation_m(pose.x, pose.y, pose.theta_rad)
-    assert pulled > GAIN_SEPARATION_M
-    assert which >= 0  # the object whose absence moves the fix that far is named
+    pulled = tracker.separation_m(pose.x, pose.y, pose.theta_rad)
+    assert pulled.near_m > GAIN_SEPARATION_M
+    assert pulled.obj >= 0  # the object whose absence moves the fix that far is named
+
+
+def test_the_rings_find_a_better_place_the_search_from_the_fix_stops_short_of() -> None:
+    """The plant moved 2 m across the corridor: with it left out, the search from the fix
+    stays in the fix's local optimum, and only a search started a metre or more away
+    finds where the rest of the window is better explained."""
+    tracker, pose = _tracker(corridor(OBJECTS), _moved(2.0))
+    found = tracker.separation_m(pose.x, pose.y, pose.theta_rad)
+    assert found.near_m < 0.2 * GAIN_SEPARATION_M
+    assert found.far_m > 2 * GAIN_SEPARATION_M
+    alone = tracker.separation_m(pose.x, pose.y, pose.theta_rad, rings=False)
+    assert alone.far_m == alone.near_m == found.near_m
 
 
 def test_only_movable_objects_are_left_out(monkeypatch: pytest.MonkeyPatch) -> None:
@@ -122,11 +138,9 @@ def test_only_movable_objects_are_left_out(monkeypatch: pytest.MonkeyPatch) -> N
     tracker, pose = _tracker(m, m)
     tested: list[list[int]] = []
 
-    def record(
-        pose_: object, window: object, objects: list[int], *args: object
-    ) -> tuple[float, int]:
+    def record(pose_: object, window: object, objects: list[int], *args: object) -> Separation:
         tested.append(list(objects))
-        return 0.0, -1
+        return Separation(0.0, 0.0, -1)
 
     monkeypatch.setattr(tracker.finder, "separation", record)
     tracker.separation_m(pose.x, pose.y, pose.theta_rad)
@@ -137,18 +151,34 @@ def test_only_movable_objects_are_left_out(monkeypatch: pytest.MonkeyPatch) -> N
     assert tested == [[int(o) for o in seen if not m.fixed[o]]]
 
 
-@pytest.mark.parametrize("pull_m", [0.0, GAIN_PROTECTION_M + 0.1])
+@pytest.mark.parametrize(
+    ("near_m", "far_m", "fov_deg", "told"),
+    [
+        (0.0, 0.0, 360.0, True),
+        (GAIN_PROTECTION_M + 0.1, 0.0, 360.0, False),
+        # A better place found only from the rings keeps a wide camera's fix untold ...
+        (0.0, GAIN_PROTECTION_M + 0.1, 360.0, False),
+        # ... and is not sought through a narrower one (SEPARATION_RINGS_FOV_DEG).
+        (0.0, GAIN_PROTECTION_M + 0.1, 180.0, True),
+    ],
+)
 def test_a_first_fix_waits_while_one_object_pulls_it_beyond_its_radius(
-    monkeypatch: pytest.MonkeyPatch, pull_m: float
+    monkeypatch: pytest.MonkeyPatch, near_m: float, far_m: float, fov_deg: float, told: bool
 ) -> None:
     office = paper_office()
     pose = Pose(3.0, 2.0, math.pi / 2)
-    monkeypatch.setattr(
-        evidence_module.EvidenceTracker, "separation_m", lambda self, x, y, t: (pull_m, 6)
-    )
+    asked: list[bool] = []
+
+    def separation(self: object, x: float, y: float, t: float, rings: bool) -> Separation:
+        asked.append(rings)
+        return Separation(near_m, far_m if rings else near_m, 6)
+
+    monkeypatch.setattr(evidence_module.EvidenceTracker, "separation_m", separation)
+    pull_m = max(near_m, far_m if fov_deg >= SEPARATION_RINGS_FOV_DEG else near_m)
 
     def first_fix() -> int | None:
-        pf = ParticleFilter(office, FilterConfig(particles=3000), rng=np.random.default_rng(1))
+        config = FilterConfig(particles=3000, fov_deg=fov_deg)
+        pf = ParticleFilter(office, config, rng=np.random.default_rng(1))
         seen = seen_from(office, pose)
         for k in range(60):
             est = pf.step(Odometry(0.0, 0.0, 0.0), seen)
@@ -159,9 +189,10 @@ def test_a_first_fix_waits_while_one_object_pulls_it_beyond_its_radius(
                 return k
         return None
 
-    told = first_fix()
-    if pull_m == 0.0:
-        assert told is not None
+    first = first_fix()
+    assert asked and set(asked) == {fov_deg >= SEPARATION_RINGS_FOV_DEG}
+    if told:
+        assert first is not None
     else:
         # A first fix's radius is at most GAIN_PROTECTION_M, under the pull: never told.
-        assert told is None
+        assert first is None
