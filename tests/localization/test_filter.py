@@ -309,8 +309,12 @@ def test_an_object_gone_before_the_first_fix_does_not_keep_it_from_being_gained(
     is told: the contradiction keeps the fix from being gained, and only a told fix
     could forgive it. The candidate, alone in explaining what is seen and known within
     a metre, forgives it instead, and the fix is gained at the truth; with the
-    candidate's radius taken as unknown, or once a fix has been told (a checkpoint
-    from before this rule reads so), it never is."""
+    candidate's radius taken as unknown, once a fix has been told (a checkpoint from
+    before this rule reads so), or while the candidate has not stayed put long enough
+    (SETTLED_CANDIDATE_FRAMES beyond the stream), it never is."""
+    from app.localization import filter as filter_module
+
+    settled = filter_module.SETTLED_CANDIDATE_FRAMES
 
     # The gate asks for 25 steady frames instead of 5, so that the contradiction (about
     # 18 frames of the object going unreported) comes before any gain: with 5, the
@@ -329,6 +333,8 @@ def test_an_object_gone_before_the_first_fix_does_not_keep_it_from_being_gained(
             state = pf.checkpoint()
             del state["told_since_start"]
             pf = ParticleFilter(pf.map, pf.config, rng=np.random.default_rng(1), state=state)
+        elif candidates_forgive == "not settled":
+            monkeypatch.setattr(filter_module, "SETTLED_CANDIDATE_FRAMES", 10**6)
         slow_gate(pf)
         told = []
         first_flag.clear()
@@ -347,10 +353,11 @@ def test_an_object_gone_before_the_first_fix_does_not_keep_it_from_being_gained(
     assert first_flag and not any(told[: first_flag[0] + 1])
     assert told[-1] and sum(told) >= 20
     assert pf.checkpoint()["told_since_start"] is True
-    for case in ("radius unknown", "told before"):
+    for case in ("radius unknown", "told before", "not settled"):
         pf, told, changed = located(case)
         assert pf.unseen is not None and not pf.unseen.absent.any(), case
         assert not any(told), case
+    monkeypatch.setattr(filter_module, "SETTLED_CANDIDATE_FRAMES", settled)
     # Restored before its first fix (its checkpoint says none was told), a session still
     # forgives the object and is told at the truth.
     pf, _, stream = _standing_at_a_stale_place(moved=False, frames=80)
@@ -371,6 +378,29 @@ def test_an_object_gone_before_the_first_fix_does_not_keep_it_from_being_gained(
         b = again.step(Odometry(0.0, 0.0, 0.0), dets)
     assert b.converged and np.hypot(b.x - 10.0, b.y - 9.0) < 0.3
     assert again.unseen is not None and again.unseen.absent[changed]
+
+
+def test_a_candidate_counts_its_frames_settled_from_its_last_jump() -> None:
+    """The frames a candidate has stayed put (SETTLED_CANDIDATE_FRAMES) count up while
+    the estimate keeps its place, start again when it lies farther from the last answer
+    than the odometry's move and the gate's ``unseen_place_m``, and survive a checkpoint."""
+    pf, _, stream = _standing_at_a_stale_place(moved=False)
+    pf = ParticleFilter(pf.map, pf.config, rng=np.random.default_rng(1))  # no start
+    counts = []
+    for dets in stream[:12]:
+        pf.step(Odometry(0.0, 0.0, 0.0), dets)
+        counts.append(pf._settled_frames)
+    # Once the cloud has settled at the place, one more frame each.
+    assert counts[-1] >= 5 and counts[-5:] == list(range(counts[-5], counts[-5] + 5))
+    again = ParticleFilter(pf.map, pf.config, rng=np.random.default_rng(9), state=pf.checkpoint())
+    assert again._settled_frames == counts[-1]
+    # The last answer 3 m away (as after a kidnap): this frame's estimate jumped.
+    last = pf.estimate
+    pf.estimate = replace(last, x=last.x + 3.0)
+    pf.step(Odometry(0.0, 0.0, 0.0), stream[12])
+    assert pf._settled_frames == 0
+    pf.step(Odometry(0.0, 0.0, 0.0), stream[13])
+    assert pf._settled_frames == 1
 
 
 def test_a_fix_known_to_more_than_a_metre_forgives_nothing(monkeypatch: pytest.MonkeyPatch) -> None:
