@@ -80,9 +80,10 @@ from app.localization.slide import SLIP_SCALE_STDS, OdometryCheck
 from app.localization.types import Detection, Estimate, InitialPose, Odometry
 from app.localization.unseen import UnseenObjects
 from app.localization.walked import WANDER_SHARE, WalkedPath
-from app.maps.geometry import wrap_angle
+from app.maps.geometry import wrap_angle, wrap_rad
 from app.maps.model import SemanticMap
 from app.maps.prepare import ensure_prepared
+from app.maps.symmetry import rotational_symmetries
 from app.state import from_plain
 
 #: Share of a global start's particles drawn from the first observation.
@@ -154,6 +155,9 @@ FORGIVE_SLIDE_M = 0.25
 #: 15 and 25 frames caught more of seeds 0-29 (15 frames each) but nothing more of
 #: 30-59, and cost the symmetric paper office up to 0.05 of its availability.
 SETTLED_CANDIDATE_FRAMES = 10
+#: A known start tells a map's twins apart (app.maps.symmetry) when each twin lies more
+#: than this many of the start's stds from it, in position or in heading.
+TWIN_START_STDS = 3.0
 #: Frames in a row a first fix's radius must be narrow (GAIN_PROTECTION_M) before it is
 #: told. Through a 66-degree camera the bearings' geometry swings the radius between 1.5
 #: and 6 m from one frame to the next: measured on the phone suite's stale office, fixes
@@ -370,7 +374,33 @@ class ParticleFilter:
         #: the evidence search asks for it at the base interval (see _weigh_alternatives).
         self._after_ride = False
         self.continuation.reset(known_start=initial_pose is not None)
+        #: Whether a twin of the person's place (app.maps.symmetry) is as likely as the
+        #: place itself: from a start that does not tell them apart, until a compass does.
+        self._twins_possible = self._start_has_twins(initial_pose)
         self.estimate: Estimate = estimate_pose(self.x, self.y, self.theta, self.weights)
+
+    @functools.cached_property
+    def _twins(self) -> tuple[tuple[float, float, float], ...]:
+        """The map's rotations onto itself (:func:`~app.maps.symmetry.rotational_symmetries`)."""
+        return rotational_symmetries(self.map)
+
+    def _start_has_twins(self, start: InitialPose | None) -> bool:
+        """Whether a start leaves the map's twins (if any) as likely as the place itself:
+        no start at all, or one whose every twin, turned with the map, lies within
+        ``TWIN_START_STDS`` of its stds in position and heading."""
+        if not self._twins:
+            return False
+        if start is None:
+            return True
+        for cx, cy, angle in self._twins:
+            c, s = math.cos(angle), math.sin(angle)
+            dx, dy = start.x - cx, start.y - cy
+            tx, ty = cx + c * dx - s * dy, cy + s * dx + c * dy
+            far = math.hypot(tx - start.x, ty - start.y) > TWIN_START_STDS * start.std_xy_m
+            turned = abs(wrap_rad(angle)) > TWIN_START_STDS * start.std_theta_rad
+            if not (far or turned):
+                return True
+        return False
 
     @functools.cached_property
     def _map_span_m(self) -> float:
@@ -432,6 +462,7 @@ class ParticleFilter:
         self._after_ride = False
         self._told_since_start = False
         self._settled_frames = 0
+        self._twins_possible = bool(self._twins)
         self.continuation.reset()
         self.geometry.reset()
         self.odometry_check.reset()
@@ -783,6 +814,7 @@ class ParticleFilter:
         # During a blind hold (decided below) the detections weigh nothing.
         mean_ll, w = self._correct(detections, weigh=not self._blind_hold)
         if heading is not None:
+            self._twins_possible = False  # a heading from outside tells the twins apart
             self.log_w = self.log_w + compass_log_likelihood(self.theta, heading)
             w = None  # the correction's weights no longer hold
         if w is None:
@@ -880,6 +912,11 @@ class ParticleFilter:
         jump_m = hypot(raw.x - self.estimate.x, raw.y - self.estimate.y)
         jumped = jump_m > moved + self._gate.unseen_place_m
         self._settled_frames = 0 if jumped else self._settled_frames + 1
+        if self._twins_possible:
+            # A map that turns onto itself: each twin of the place is as likely as the
+            # place, whatever is seen (app.maps.symmetry).
+            twins = len(self._twins) / (len(self._twins) + 1.0)
+            share, confirmed, gain_share = (max(v, twins) for v in (share, confirmed, gain_share))
         self._update_fit(raw)
         turned = np.pi if odometry is None else odometry.turn_rad
         lost = odometry is None and self._had_odometry
@@ -1147,6 +1184,7 @@ class ParticleFilter:
             "narrow_frames": self._narrow_frames,
             "told_since_start": self._told_since_start,
             "settled_frames": self._settled_frames,
+            "twins_possible": self._twins_possible,
             "last_fix": None if self._last_fix is None else list(self._last_fix),
             **self.continuation.checkpoint(levels=self.floors is not None),
             "steps": self.steps,
@@ -1203,6 +1241,8 @@ class ParticleFilter:
         # (An older checkpoint: as if told, so no candidate forgives.)
         self._told_since_start = bool(state.get("told_since_start", True))
         self._settled_frames = int(state.get("settled_frames", 0))
+        # (An older checkpoint: as before twins were known.)
+        self._twins_possible = bool(state.get("twins_possible", False))
         last = state.get("last_fix")
         self._last_fix = None if last is None else (float(last[0]), float(last[1]), float(last[2]))
         self.steps = int(state["steps"])

@@ -1,0 +1,115 @@
+"""Rotations that carry a floor onto itself: twin places no bearing can tell apart.
+
+The filter senses only what each object is and in which direction it lies from the body
+(walls hide objects and bound where a person can be). A rotation of the floor that takes
+every wall onto a wall and every object onto an object of its own class gives every pose
+a twin, the pose rotated with it, that sees exactly what the pose sees, frame after
+frame, whatever the person does: no detection, no walk and no search can ever favour
+one of the two. Only a heading from outside the map (a compass), or a start the app
+gave, tells them apart. The filter asks :func:`rotational_symmetries` once per map.
+
+A map drawn from a real plan is rarely exactly symmetric; one that is (a hall whose
+doors and windows repeat every way round) is handled here, and a map symmetric but for
+one object (the paper office and its door) is not a twin case: that object tells the
+two apart once it is seen, which the evidence tracker weighs.
+
+Only rotations about the objects' centroid are sought (a finite floor's rigid motions
+onto itself are rotations about a fixed point, and an object set's centroid is fixed by
+any of them); mirror images are no twins, since a mirror turns every bearing's sign.
+Walls must match segment for segment: a wall drawn in one piece on one side and in two
+on the other is taken for asymmetric, which leaves the filter as without this check.
+Maps with levels are not checked (each level would need its own).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numpy.typing import NDArray
+
+from app.maps.model import SemanticMap
+
+#: Objects and wall ends this close (m) to their rotated images count as matched: well
+#: under what a bearing with a 2-degree noise tells apart a few metres away.
+SYMMETRY_TOLERANCE_M = 0.05
+
+
+def rotational_symmetries(
+    semantic_map: SemanticMap, tol_m: float = SYMMETRY_TOLERANCE_M
+) -> tuple[tuple[float, float, float], ...]:
+    """The rotations other than the identity that carry the map onto itself, each as
+    (centre x, centre y, angle rad in (0, 2 pi)), smallest angle first; kept per map."""
+    return semantic_map.derived_value(
+        ("rotational_symmetries", float(tol_m)), lambda: _find(semantic_map, tol_m)
+    )
+
+
+def _rotate(
+    xy: NDArray[np.float64], centre: NDArray[np.float64], angle: float
+) -> NDArray[np.float64]:
+    c, s = math.cos(angle), math.sin(angle)
+    rel = xy - centre
+    return np.column_stack((c * rel[:, 0] - s * rel[:, 1], s * rel[:, 0] + c * rel[:, 1])) + centre
+
+
+def _objects_match(
+    xy: NDArray[np.float64], cls: NDArray[np.int64], image: NDArray[np.float64], tol_m: float
+) -> bool:
+    """Whether every object's image lies within ``tol_m`` of an object of its class."""
+    for k in np.unique(cls):
+        mine = xy[cls == k]
+        moved = image[cls == k]
+        d = np.hypot(moved[:, None, 0] - mine[None, :, 0], moved[:, None, 1] - mine[None, :, 1])
+        if not (d.min(axis=1) <= tol_m).all():
+            return False
+    return True
+
+
+def _walls_match(walls: NDArray[np.float64], image: NDArray[np.float64], tol_m: float) -> bool:
+    """Whether every rotated wall (rows x1, y1, x2, y2) lies on a wall, end for end
+    (either way round)."""
+    if walls.shape[0] == 0:
+        return True
+    a, b = walls[:, :2], walls[:, 2:]
+    ia, ib = image[:, :2], image[:, 2:]
+
+    def dist(p: NDArray[np.float64], q: NDArray[np.float64]) -> NDArray[np.float64]:
+        return np.hypot(p[:, None, 0] - q[None, :, 0], p[:, None, 1] - q[None, :, 1])
+
+    same = np.maximum(dist(ia, a), dist(ib, b))
+    swapped = np.maximum(dist(ia, b), dist(ib, a))
+    return bool((np.minimum(same, swapped).min(axis=1) <= tol_m).all())
+
+
+def _find(semantic_map: SemanticMap, tol_m: float) -> tuple[tuple[float, float, float], ...]:
+    if semantic_map.spec.levels is not None:
+        return ()
+    xy = np.asarray(semantic_map.object_xy, dtype=np.float64).reshape(-1, 2)
+    cls = np.asarray(semantic_map.object_class, dtype=np.int64)
+    if xy.shape[0] == 0:
+        return ()
+    centre = xy.mean(axis=0)
+    rel = xy - centre
+    radius = np.hypot(rel[:, 0], rel[:, 1])
+    far = int(np.argmax(radius))
+    if radius[far] <= tol_m:  # every object at one point: nothing to turn
+        return ()
+    # The farthest object goes onto an object of its class as far from the centre: each
+    # such object gives the one angle a symmetry could have.
+    base = math.atan2(rel[far, 1], rel[far, 0])
+    walls = np.asarray(semantic_map.walls, dtype=np.float64).reshape(-1, 4)
+    found = []
+    for j in np.flatnonzero((cls == cls[far]) & (np.abs(radius - radius[far]) <= tol_m)):
+        angle = (math.atan2(rel[j, 1], rel[j, 0]) - base) % (2.0 * math.pi)
+        # (the identity, and the farthest object's own image within the tolerance)
+        if min(angle, 2.0 * math.pi - angle) * radius[far] <= tol_m:
+            continue
+        if not _objects_match(xy, cls, _rotate(xy, centre, angle), tol_m):
+            continue
+        image = np.hstack(
+            (_rotate(walls[:, :2], centre, angle), _rotate(walls[:, 2:], centre, angle))
+        )
+        if _walls_match(walls, image, tol_m):
+            found.append((float(centre[0]), float(centre[1]), angle))
+    return tuple(sorted(found, key=lambda r: r[2]))

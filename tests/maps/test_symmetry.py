@@ -1,0 +1,83 @@
+"""Rotations that carry a map onto itself (app.maps.symmetry)."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from app.experiments.hard_maps import hard_map
+from app.maps.check import load_map
+from app.maps.model import SemanticMap, parse_map
+from app.maps.symmetry import SYMMETRY_TOLERANCE_M, rotational_symmetries
+from app.resources import bundled_maps_dir
+from app.simulation.venue import venue_map
+
+
+def _square(
+    objects: list[dict[str, object]], walls: list[dict[str, float]] | None = None
+) -> SemanticMap:
+    box = [
+        {"x1": 0.0, "y1": 0.0, "x2": 6.0, "y2": 0.0},
+        {"x1": 6.0, "y1": 0.0, "x2": 6.0, "y2": 6.0},
+        {"x1": 6.0, "y1": 6.0, "x2": 0.0, "y2": 6.0},
+        {"x1": 0.0, "y1": 6.0, "x2": 0.0, "y2": 0.0},
+    ]
+    return parse_map({"name": "square", "walls": walls or box, "objects": objects})
+
+
+def _degrees(m: SemanticMap) -> list[float]:
+    return [round(math.degrees(a), 6) for _, _, a in rotational_symmetries(m)]
+
+
+WINDOWS = [
+    {"class": "window", "x": 3.0, "y": 0.0},
+    {"class": "window", "x": 6.0, "y": 3.0},
+    {"class": "window", "x": 3.0, "y": 6.0},
+    {"class": "window", "x": 0.0, "y": 3.0},
+]
+
+
+def test_a_square_with_a_window_in_each_wall_turns_onto_itself_every_quarter() -> None:
+    m = _square(WINDOWS)
+    assert _degrees(m) == [90.0, 180.0, 270.0]
+    assert all((cx, cy) == pytest.approx((3.0, 3.0)) for cx, cy, _ in rotational_symmetries(m))
+
+
+def test_one_object_of_another_class_or_one_wall_breaks_the_turn() -> None:
+    door = [*WINDOWS[:3], {"class": "door", "x": 0.0, "y": 3.0}]
+    assert _degrees(_square(door)) == []
+    # Two tables on the diagonal: only the half turn keeps them.
+    tables = [{"class": "table", "x": 2.0, "y": 2.0}, {"class": "table", "x": 4.0, "y": 4.0}]
+    assert _degrees(_square(WINDOWS + tables)) == [180.0]
+    # An inner wall along one side only breaks the half turn too.
+    inner = {"x1": 1.0, "y1": 1.0, "x2": 1.0, "y2": 3.0}
+    box = [
+        {"x1": 0.0, "y1": 0.0, "x2": 6.0, "y2": 0.0},
+        {"x1": 6.0, "y1": 0.0, "x2": 6.0, "y2": 6.0},
+        {"x1": 6.0, "y1": 6.0, "x2": 0.0, "y2": 6.0},
+        {"x1": 0.0, "y1": 6.0, "x2": 0.0, "y2": 0.0},
+    ]
+    assert _degrees(_square(WINDOWS + tables, [*box, inner])) == []
+    # ... and its twin across the centre, drawn the other way round, restores it.
+    twin = {"x1": 5.0, "y1": 3.0, "x2": 5.0, "y2": 5.0}
+    assert _degrees(_square(WINDOWS + tables, [*box, inner, twin])) == [180.0]
+
+
+def test_objects_are_matched_within_the_tolerance_only() -> None:
+    near = SYMMETRY_TOLERANCE_M * 0.8
+    shifted = [*WINDOWS[:3], {"class": "window", "x": 0.0, "y": 3.0 + near}]
+    assert 180.0 in _degrees(_square(shifted))
+    moved = [*WINDOWS[:3], {"class": "window", "x": 0.0, "y": 3.0 + 3 * SYMMETRY_TOLERANCE_M}]
+    assert _degrees(_square(moved)) == []
+
+
+def test_the_suites_maps_only_the_symmetric_room_turns_onto_itself() -> None:
+    assert _degrees(hard_map("symmetric_room").map) == [180.0]
+    ((cx, cy, _),) = rotational_symmetries(hard_map("symmetric_room").map)
+    assert (cx, cy) == pytest.approx((6.0, 4.0))
+    # The same room with its one door is no twin case: the door tells the ways apart.
+    assert _degrees(hard_map("rotation_room").map) == []
+    for path in sorted(bundled_maps_dir().glob("*.json")):
+        assert _degrees(load_map(path)) == [], path.name
+    assert _degrees(venue_map()) == []  # (maps with levels are not checked)
