@@ -386,8 +386,8 @@ class ParticleFilter:
 
     def _start_has_twins(self, start: InitialPose | None) -> bool:
         """Whether a start leaves the map's twins (if any) as likely as the place itself:
-        no start at all, or one whose every twin, turned with the map, lies within
-        ``TWIN_START_STDS`` of its stds in position and heading."""
+        no start at all, or one with a twin (the start turned with the map) within
+        ``TWIN_START_STDS`` of its stds in position and in heading."""
         if not self._twins:
             return False
         if start is None:

@@ -27,6 +27,7 @@ import math
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.spatial import cKDTree
 
 from app.maps.model import SemanticMap
 
@@ -56,30 +57,26 @@ def _rotate(
 def _objects_match(
     xy: NDArray[np.float64], cls: NDArray[np.int64], image: NDArray[np.float64], tol_m: float
 ) -> bool:
-    """Whether every object's image lies within ``tol_m`` of an object of its class."""
+    """Whether every object's image lies within ``tol_m`` of an object of its class (a
+    k-d tree per class: a floor may have thousands of objects)."""
     for k in np.unique(cls):
-        mine = xy[cls == k]
-        moved = image[cls == k]
-        d = np.hypot(moved[:, None, 0] - mine[None, :, 0], moved[:, None, 1] - mine[None, :, 1])
-        if not (d.min(axis=1) <= tol_m).all():
+        members = cls == k
+        dist, _ = cKDTree(xy[members]).query(image[members], distance_upper_bound=tol_m)
+        if not np.isfinite(dist).all():
             return False
     return True
 
 
 def _walls_match(walls: NDArray[np.float64], image: NDArray[np.float64], tol_m: float) -> bool:
     """Whether every rotated wall (rows x1, y1, x2, y2) lies on a wall, end for end
-    (either way round)."""
+    (either way round): within ``tol_m`` as a point of the four coordinates, which
+    holds each end within it too."""
     if walls.shape[0] == 0:
         return True
-    a, b = walls[:, :2], walls[:, 2:]
-    ia, ib = image[:, :2], image[:, 2:]
-
-    def dist(p: NDArray[np.float64], q: NDArray[np.float64]) -> NDArray[np.float64]:
-        return np.hypot(p[:, None, 0] - q[None, :, 0], p[:, None, 1] - q[None, :, 1])
-
-    same = np.maximum(dist(ia, a), dist(ib, b))
-    swapped = np.maximum(dist(ia, b), dist(ib, a))
-    return bool((np.minimum(same, swapped).min(axis=1) <= tol_m).all())
+    tree = cKDTree(walls)
+    same, _ = tree.query(image, distance_upper_bound=tol_m)
+    swapped, _ = tree.query(image[:, [2, 3, 0, 1]], distance_upper_bound=tol_m)
+    return bool((np.isfinite(same) | np.isfinite(swapped)).all())
 
 
 def _find(semantic_map: SemanticMap, tol_m: float) -> tuple[tuple[float, float, float], ...]:
