@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import json
 import logging
+import math
 import os
 from collections.abc import Iterable
 from dataclasses import dataclass
@@ -34,6 +35,7 @@ from app.maps.model import (
     validate_spec,
 )
 from app.maps.prepare import PreparedMap, build_free_space, prepare
+from app.maps.symmetry import rotational_symmetries
 
 log = logging.getLogger("bearings.maps")
 
@@ -267,6 +269,27 @@ def _region_problems(source: str, m: SemanticMap) -> list[Problem]:
     return out
 
 
+def _symmetry_problems(source: str, m: SemanticMap) -> list[Problem]:
+    """A map a rotation carries onto itself (:mod:`app.maps.symmetry`): each place has a
+    twin that sees the same, and nobody is located there without a compass."""
+    out = []
+    for cx, cy, angle in rotational_symmetries(m):
+        out.append(
+            Problem(
+                source,
+                "objects",
+                f"the map turns onto itself under a rotation of {math.degrees(angle):.0f} "
+                f"deg about ({cx:.2f}, {cy:.2f}): every wall onto a wall and every object "
+                "onto one of its class, so each place has a twin that sees the same and "
+                "no one is located on this map without a compass heading or a known "
+                "start; an object that only one side has (a sign, a door of its own "
+                "class) tells them apart",
+                "warning",
+            )
+        )
+    return out
+
+
 def _object_fixes(source: str, m: SemanticMap) -> tuple[Fixes, list[Problem]]:
     """Objects outside the walls: snapped onto a wall when close, else a warning."""
     walls = m.walls
@@ -424,6 +447,7 @@ def check_data(
     level_errors = _level_problems(source, m, fs)
     if level_errors:
         return CheckResult(source, None, [*problems, *level_errors])
+    problems += _symmetry_problems(source, m)
     return CheckResult(source, m, problems, prepared)
 
 

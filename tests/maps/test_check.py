@@ -166,3 +166,17 @@ def test_map_check_cli_prints_problems_and_exit_code(tmp_path: Path) -> None:
         timeout=120,
     )
     assert good.returncode == 0 and "no problems" in good.stdout
+
+
+def test_a_map_that_turns_onto_itself_is_usable_with_a_warning_that_says_why() -> None:
+    """A floor a half turn carries onto itself loads, with a warning naming the turn and
+    what would tell its twin places apart; the same floor with one door does not warn."""
+    from app.experiments.hard_maps import hard_map
+
+    result = check_data(hard_map("symmetric_room").map.to_json(), source="hall")
+    assert result.map is not None and not result.errors
+    (warning,) = result.problems
+    assert warning.severity == "warning" and warning.field == "objects"
+    assert "rotation of 180 deg about (6.00, 4.00)" in warning.message
+    assert "compass" in warning.message
+    assert check_data(hard_map("rotation_room").map.to_json(), source="room").problems == []
