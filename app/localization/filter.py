@@ -393,10 +393,9 @@ class ParticleFilter:
         if start is None:
             return True
         for cx, cy, angle in self._twins:
-            c, s = math.cos(angle), math.sin(angle)
-            dx, dy = start.x - cx, start.y - cy
-            tx, ty = cx + c * dx - s * dy, cy + s * dx + c * dy
-            far = math.hypot(tx - start.x, ty - start.y) > TWIN_START_STDS * start.std_xy_m
+            # A turn by angle about the centre moves a point r from it by 2 r sin(angle/2).
+            apart_m = 2.0 * math.hypot(start.x - cx, start.y - cy) * abs(math.sin(angle / 2.0))
+            far = apart_m > TWIN_START_STDS * start.std_xy_m
             turned = abs(wrap_rad(angle)) > TWIN_START_STDS * start.std_theta_rad
             if not (far or turned):
                 return True

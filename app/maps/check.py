@@ -271,23 +271,26 @@ def _region_problems(source: str, m: SemanticMap) -> list[Problem]:
 
 def _symmetry_problems(source: str, m: SemanticMap) -> list[Problem]:
     """A map a rotation carries onto itself (:mod:`app.maps.symmetry`): each place has a
-    twin that sees the same, and nobody is located there without a compass."""
-    out = []
-    for cx, cy, angle in rotational_symmetries(m):
-        out.append(
-            Problem(
-                source,
-                "objects",
-                f"the map turns onto itself under a rotation of {math.degrees(angle):.0f} "
-                f"deg about ({cx:.2f}, {cy:.2f}): every wall onto a wall and every object "
-                "onto one of its class, so each place has a twin that sees the same and "
-                "no one is located on this map without a compass heading or a known "
-                "start; an object that only one side has (a sign, a door of its own "
-                "class) tells them apart",
-                "warning",
-            )
+    twin that sees the same, and nobody is located there without a compass (one warning
+    naming every such turn)."""
+    turns = rotational_symmetries(m)
+    if not turns:
+        return []
+    cx, cy, _ = turns[0]
+    angles = [f"{math.degrees(a):.0f}" for _, _, a in turns]
+    degrees = " and ".join([", ".join(angles[:-1]), angles[-1]] if len(angles) > 1 else angles)
+    return [
+        Problem(
+            source,
+            "objects",
+            f"the map turns onto itself under a rotation of {degrees} deg about "
+            f"({cx:.2f}, {cy:.2f}): every wall onto a wall and every object onto one of "
+            "its class, so each place has a twin that sees the same and no one is located "
+            "on this map without a compass heading or a known start; an object that only "
+            "one side has (a sign, a door of its own class) tells them apart",
+            "warning",
         )
-    return out
+    ]
 
 
 def _object_fixes(source: str, m: SemanticMap) -> tuple[Fixes, list[Problem]]:

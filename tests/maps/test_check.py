@@ -180,3 +180,18 @@ def test_a_map_that_turns_onto_itself_is_usable_with_a_warning_that_says_why() -
     assert "rotation of 180 deg about (6.00, 4.00)" in warning.message
     assert "compass" in warning.message
     assert check_data(hard_map("rotation_room").map.to_json(), source="room").problems == []
+    # A square hall with a window in each wall turns onto itself three ways: one warning.
+    hall = {
+        "name": "hall",
+        "walls": [
+            {"x1": 0, "y1": 0, "x2": 6, "y2": 0},
+            {"x1": 6, "y1": 0, "x2": 6, "y2": 6},
+            {"x1": 6, "y1": 6, "x2": 0, "y2": 6},
+            {"x1": 0, "y1": 6, "x2": 0, "y2": 0},
+        ],
+        "objects": [
+            {"class": "window", "x": x, "y": y} for x, y in ((3, 0), (6, 3), (3, 6), (0, 3))
+        ],
+    }
+    (warning,) = check_data(hall, source="hall").problems
+    assert "rotation of 90, 180 and 270 deg about (3.00, 3.00)" in warning.message
