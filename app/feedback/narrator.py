@@ -64,6 +64,12 @@ SUGGESTION_WORDS = {
     "turn": "Turn slowly on the spot to look around.",
     "walk": "Walk a few steps to help me find where you are.",
 }
+#: Said instead of a suggestion where the map turns onto itself and only its twin places
+#: are left to tell apart: neither turning nor walking can.
+TWINS_WORDS = (
+    "This place looks the same turned round, so I cannot tell which way you face "
+    "without a compass heading."
+)
 
 
 def found_sentence(protection_m: float | None, units: Units = "metric") -> str:
@@ -181,6 +187,7 @@ class Narrator:
         observation: Observation | None = None,
         odometry: Odometry | None = None,
         gone: NDArray[np.bool_] | None = None,
+        twins: bool = False,
     ) -> Feedback:
         """Feedback for one frame (see the module docstring for the rules).
 
@@ -191,6 +198,8 @@ class Narrator:
         ``gone``: per map object, whether the filter took it for moved or taken away
         since the map was drawn (:meth:`app.localization.unseen.UnseenObjects.forgive`):
         such an object is not said, since where the map has it is not where it is.
+        ``twins``: only the map's twin places (:mod:`app.maps.symmetry`) keep the fix
+        from being told: nothing is suggested, and the words say why.
         """
         now = time.monotonic() if timestamp_s is None else float(timestamp_s)
         if estimate.converged:
@@ -200,14 +209,15 @@ class Narrator:
             return self._located(estimate, detections, now, describe, fov, observation, gone)
         dets = [d for d in detections if d.score > 0 and d.cls in self.map.class_members]
         feedback = self._uncertain(estimate, dets, now, describe)
-        suggestion = self._suggest(odometry, fov_deg)
+        suggestion: str | None = self._suggest(odometry, fov_deg)
+        words = SUGGESTION_WORDS[suggestion] if suggestion is not None else ""
+        if twins:
+            suggestion, words = None, TWINS_WORDS
         text = feedback.text
         last = self._suggested_at
         # (a time in the future, from another process's clock, counts as long ago)
         if describe or last is None or not 0.0 <= now - last < SUGGEST_EVERY_S:
-            text = (
-                f"{text} {SUGGESTION_WORDS[suggestion]}" if text else SUGGESTION_WORDS[suggestion]
-            )
+            text = f"{text} {words}" if text else words
             self._suggested_at = now
         return Feedback(text, feedback.items, suggestion)
 

@@ -19,6 +19,8 @@ of :mod:`~app.localization.evidence` to the hypotheses.
 
 from __future__ import annotations
 
+import math
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -28,6 +30,7 @@ from numpy.typing import NDArray
 from app.localization.fastmath import FAST, hypot, sincos
 from app.localization.resampling import systematic_indexes
 from app.localization.types import Estimate, Hypothesis
+from app.maps.geometry import wrap_rad
 
 
 @dataclass(frozen=True)
@@ -300,3 +303,71 @@ def with_alternatives(
     own = [replace(h, weight=h.weight * scale) for h in estimate.hypotheses]
     merged = sorted(own + alternatives, key=lambda h: -h.weight)[:3]
     return replace(estimate, hypotheses=tuple(merged))
+
+
+#: Two modes of a belief spread over a map's twin places are one when this close.
+TWIN_MERGE_M = 1.0
+TWIN_MERGE_RAD = float(np.radians(30.0))
+
+
+def _turned(h: Hypothesis, twin: tuple[float, float, float]) -> tuple[float, float, float]:
+    """Pose of ``h`` turned by ``twin`` (cx, cy, angle) about its centre."""
+    cx, cy, angle = twin
+    c, s = math.cos(angle), math.sin(angle)
+    dx, dy = h.x - cx, h.y - cy
+    return cx + c * dx - s * dy, cy + s * dx + c * dy, wrap_rad(h.theta_rad + angle)
+
+
+def _same_mode(a: tuple[float, float, float], b: Hypothesis) -> bool:
+    return (
+        math.hypot(a[0] - b.x, a[1] - b.y) <= TWIN_MERGE_M
+        and abs(wrap_rad(a[2] - b.theta_rad)) <= TWIN_MERGE_RAD
+    )
+
+
+def only_twins(
+    estimate: Estimate, twins: Sequence[tuple[float, float, float]], mass: float = 0.9
+) -> bool:
+    """Whether the belief is the heaviest mode and its twins (``twins`` as in
+    :func:`with_twins`) and nothing else: modes within a metre of one of them, each
+    no wider than a metre, hold at least ``mass`` of the weight. Then only something
+    from outside the view (a compass, a start) can tell the places apart."""
+    if not twins or not estimate.hypotheses:
+        return False
+    top = estimate.hypotheses[0]
+    places = [(top.x, top.y, top.theta_rad)] + [_turned(top, t) for t in twins]
+    held = sum(
+        h.weight
+        for h in estimate.hypotheses
+        if h.std_xy_m <= TWIN_MERGE_M and any(_same_mode(p, h) for p in places)
+    )
+    return held >= mass
+
+
+def with_twins(estimate: Estimate, twins: Sequence[tuple[float, float, float]]) -> Estimate:
+    """The estimate's hypotheses spread over a map's twin places (``twins``: its turns
+    onto itself, ``(cx, cy, angle_rad)``; :func:`app.maps.symmetry.rotational_symmetries`).
+
+    Where nothing tells the twins apart, each mode is as likely at each of its twins:
+    its weight is shared evenly between itself and its images turned about the centre,
+    and modes that then fall together are one (their weights summed, the heavier's pose
+    kept). Heaviest first, at most three."""
+    if not twins or not estimate.hypotheses:
+        return estimate
+    share = 1.0 / (len(twins) + 1)
+    spread: list[Hypothesis] = []
+    for h in estimate.hypotheses:
+        spread.append(replace(h, weight=h.weight * share))
+        for twin in twins:
+            x, y, theta = _turned(h, twin)
+            spread.append(replace(h, x=x, y=y, theta_rad=theta, weight=h.weight * share))
+    merged: list[Hypothesis] = []
+    for h in sorted(spread, key=lambda h: -h.weight):
+        for i, m in enumerate(merged):
+            if _same_mode((h.x, h.y, h.theta_rad), m):
+                merged[i] = replace(m, weight=m.weight + h.weight)
+                break
+        else:
+            merged.append(h)
+    merged.sort(key=lambda h: -h.weight)
+    return replace(estimate, hypotheses=tuple(merged[:3]))

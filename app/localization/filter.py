@@ -34,7 +34,7 @@ from app.localization.convergence import (
 )
 from app.localization.dilution import BearingGeometry
 from app.localization.dilution import warm_up as warm_up_dilution
-from app.localization.estimate import estimate_pose, with_alternatives
+from app.localization.estimate import estimate_pose, only_twins, with_alternatives, with_twins
 from app.localization.evidence import EvidenceTracker
 from app.localization.fastmath import PAIRWISE_BLOCK, hypot, pairwise_sum
 from app.localization.floors import (
@@ -377,6 +377,8 @@ class ParticleFilter:
         #: Whether a twin of the person's place (app.maps.symmetry) is as likely as the
         #: place itself: from a start that does not tell them apart, until a compass does.
         self._twins_possible = self._start_has_twins(initial_pose)
+        #: The last step's fix was kept from being told by the map's twins alone.
+        self.twins_undecided = False
         self.estimate: Estimate = estimate_pose(self.x, self.y, self.theta, self.weights)
 
     @functools.cached_property
@@ -462,6 +464,7 @@ class ParticleFilter:
         self._told_since_start = False
         self._settled_frames = 0
         self._twins_possible = bool(self._twins)
+        self.twins_undecided = False
         self.continuation.reset()
         self.geometry.reset()
         self.odometry_check.reset()
@@ -911,6 +914,7 @@ class ParticleFilter:
         jump_m = hypot(raw.x - self.estimate.x, raw.y - self.estimate.y)
         jumped = jump_m > moved + self._gate.unseen_place_m
         self._settled_frames = 0 if jumped else self._settled_frames + 1
+        evidence_share = share
         if self._twins_possible:
             # A map that turns onto itself: each twin of the place is as likely as the
             # place, whatever is seen (app.maps.symmetry).
@@ -1038,7 +1042,12 @@ class ParticleFilter:
             raw.x, raw.y, raw.theta_rad, est.converged or doubt, candidate and not doubt
         )
         if self.evidence is not None:
-            est = with_alternatives(est, self.evidence.hypotheses(), share)
+            est = with_alternatives(est, self.evidence.hypotheses(), evidence_share)
+        # Only the map's twins are left: neither turning nor walking tells them apart
+        # (a compass heading or a start does).
+        self.twins_undecided = self._twins_possible and only_twins(est, self._twins)
+        if self._twins_possible:
+            est = with_twins(est, self._twins)
         if est.converged:
             assert protection is not None
             est = est.with_protection(protection)

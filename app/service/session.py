@@ -244,6 +244,7 @@ class Session:
                 observation=self.filter.last_observation,
                 odometry=frame.odometry,
                 gone=None if self.filter.unseen is None else self.filter.unseen.absent,
+                twins=self.filter.twins_undecided,
             )
             now = time.monotonic() if frame.timestamp is None else frame.timestamp
             guidance, said = self._guide(estimate, now, warnings)

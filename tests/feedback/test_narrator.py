@@ -259,6 +259,32 @@ def test_while_lost_it_suggests_turning_then_walking_and_says_so_every_10_s() ->
     assert fb.suggestion == "walk" and "Walk a few steps" in fb.text
 
 
+def test_where_only_a_maps_twins_are_left_it_suggests_nothing_and_says_why() -> None:
+    """A map that turns onto itself: neither turning nor walking tells the twin places
+    apart, so no suggestion is made; the words say what would (a compass), as often as
+    a suggestion would be said, and turning or walking is suggested again once other
+    places come back into the belief."""
+    n = Narrator(TWO_OFFICES)
+    said_at = []
+    for k in range(120):
+        fb = n.update(
+            lost((3, 2.5, 0.5), (7, 2.5, 0.5)),
+            [],
+            timestamp_s=0.1 * k,
+            fov_deg=66.0,
+            odometry=Odometry(0.0, 0.0, math.radians(9.0)),
+            twins=True,
+        )
+        assert fb.suggestion is None
+        assert "Turn slowly" not in fb.text and "Walk a few" not in fb.text
+        if "compass" in fb.text:
+            said_at.append(round(0.1 * k, 1))
+    assert said_at == [0.0, 10.0]
+    fb = n.update(lost((3, 2.5, 0.5)), [], timestamp_s=12.0, fov_deg=66.0, describe=True)
+    # (it has turned all the way round meanwhile: walking is what is left)
+    assert fb.suggestion == "walk" and "Walk a few steps" in fb.text
+
+
 def test_an_object_taken_for_moved_or_gone_is_not_said() -> None:
     """Where a stale map has an object the filter took for moved or taken away is not
     where it is: the narrator leaves it out, even when a detection of its class points

@@ -12,8 +12,10 @@ from app.experiments.hard_maps import hard_map
 from app.experiments.integrity import Scenario, run_scenario
 from app.localization.compass import CompassReading
 from app.localization.config import FilterConfig
+from app.localization.estimate import only_twins, with_twins
 from app.localization.filter import ParticleFilter
-from app.localization.types import InitialPose, Odometry
+from app.localization.types import Estimate, Hypothesis, InitialPose, Odometry
+from app.simulation.simulator import simulate
 
 
 @pytest.mark.parametrize("condition", ["clutter-180", "missed-180"])
@@ -56,3 +58,68 @@ def test_a_start_or_a_compass_tells_the_twins_apart() -> None:
     del state["twins_possible"]
     older = ParticleFilter(pf.map, pf.config, rng=np.random.default_rng(4), state=state)
     assert not older._twins_possible
+
+
+HALF_TURN = ((6.0, 4.0, math.pi),)  # the symmetric room's turn onto itself
+
+
+def _estimate(*modes: tuple[float, float, float, float, float]) -> Estimate:
+    hyps = tuple(Hypothesis(x, y, t, w, s) for x, y, t, w, s in modes)
+    return Estimate(hyps[0].x, hyps[0].y, hyps[0].theta_rad, 0.1, 0.1, 0.05, False, hyps)
+
+
+def test_hypotheses_are_spread_over_the_twins_and_merged_where_they_meet() -> None:
+    one = with_twins(_estimate((3.0, 2.0, 0.0, 1.0, 0.1)), HALF_TURN)
+    assert [(round(h.x, 6), round(h.y, 6), round(h.weight, 6)) for h in one.hypotheses] == [
+        (3.0, 2.0, 0.5),
+        (9.0, 6.0, 0.5),
+    ]
+    assert abs(abs(one.hypotheses[1].theta_rad) - math.pi) < 1e-9
+    # A cloud already split over the two: each mode's image falls on the other.
+    split = with_twins(_estimate((3.0, 2.0, 0.0, 0.6, 0.1), (9.1, 6.0, 3.1, 0.4, 0.1)), HALF_TURN)
+    assert [round(h.weight, 6) for h in split.hypotheses] == [0.5, 0.5]
+    assert only_twins(_estimate((3.0, 2.0, 0.0, 0.6, 0.1), (9.1, 6.0, 3.1, 0.4, 0.1)), HALF_TURN)
+    # Another place still in the belief, or a mode a few metres wide: not only the twins.
+    other = _estimate((3.0, 2.0, 0.0, 0.8, 0.1), (5.0, 2.0, 0.0, 0.2, 0.1))
+    assert not only_twins(other, HALF_TURN)
+    assert not only_twins(_estimate((3.0, 2.0, 0.0, 1.0, 3.0)), HALF_TURN)
+    assert not only_twins(_estimate((3.0, 2.0, 0.0, 1.0, 0.1)), ())
+
+
+def test_on_a_walk_the_twin_is_listed_and_only_the_twins_are_said_to_be_left() -> None:
+    """On the symmetric room the belief lists the person's place and its twin at equal
+    weight, and after the first seconds says only the twins are left (the narrator then
+    suggests nothing: tests/feedback); a start that tells them apart lists no twin."""
+    room = hard_map("symmetric_room").map
+    scenario = Scenario("symmetric_room", "nominal-360")
+    world, rng = (np.random.default_rng(s) for s in np.random.SeedSequence([0, 12]).spawn(2))
+    frames = simulate(room, scenario.simulation(), world)[:100]
+    pf = ParticleFilter(room, FilterConfig(particles=5000), rng=rng)
+    undecided = []
+    for f in frames:
+        est = pf.step(f.odometry, f.detections)
+        undecided.append(pf.twins_undecided)
+    assert not est.converged and all(undecided[-50:])
+    top, twin = est.hypotheses[:2]
+    assert abs(top.weight - twin.weight) < 1e-9
+    truth = frames[-1].truth
+    image = (12.0 - truth.x, 8.0 - truth.y)  # the truth turned half round (6, 4)
+    found = sorted(
+        math.hypot(h.x - p[0], h.y - p[1]) for h in (top, twin) for p in ((truth.x, truth.y), image)
+    )
+    assert found[0] < 0.5 and found[1] < 0.5
+    start = frames[0].truth
+    known = ParticleFilter(
+        room,
+        FilterConfig(particles=5000),
+        rng=np.random.default_rng(1),
+        initial_pose=InitialPose(start.x, start.y, start.theta_rad, 0.1, math.radians(3.0)),
+    )
+    for f in frames[:20]:
+        est = known.step(f.odometry, f.detections)
+        assert not known.twins_undecided
+    now = frames[19].truth
+    there = sum(
+        h.weight for h in est.hypotheses if math.hypot(h.x - 12.0 + now.x, h.y - 8.0 + now.y) < 1.0
+    )
+    assert there < 0.01
