@@ -4,6 +4,7 @@ heading is what would tell them apart instead of suggesting a turn or a walk."""
 
 from __future__ import annotations
 
+import itertools
 import json
 from pathlib import Path
 
@@ -38,7 +39,7 @@ def test_twin_places_are_listed_and_the_feedback_asks_for_a_compass(tmp_path: Pa
     last = results[-1]
     assert last["feedback"]["suggestion"] is None
     said = [k for k, res in enumerate(results) if "compass" in res["feedback"]["text"]]
-    assert said and all(b - a >= 50 for a, b in zip(said, said[1:]))  # 10 s at 5 frames/s
+    assert said and all(b - a >= 50 for a, b in itertools.pairwise(said))  # 10 s at 5 frames/s
     assert not any("Turn slowly" in res["feedback"]["text"] for res in results[said[0] :])
     truth = frames[-1].truth
     twin = (12.0 - truth.x, 8.0 - truth.y)  # turned half round about (6, 4)

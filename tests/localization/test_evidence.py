@@ -11,7 +11,7 @@ import pytest
 
 from app.experiments.hard_maps import rotation_room
 from app.localization import sensor_kernel
-from app.localization.alternatives import DEFAULT_EVIDENCE, near, near_pairs
+from app.localization.alternatives import DEFAULT_EVIDENCE, moves_onto, near, near_pairs
 from app.localization.compass import CompassReading, compass_log_likelihood, compass_terms
 from app.localization.config import FilterConfig
 from app.localization.evidence import EvidenceTracker
@@ -377,3 +377,35 @@ def test_a_gain_waiting_for_a_search_gets_it_at_the_base_interval(
 
     assert searched_within(gain_waits=True)
     assert not searched_within(gain_waits=False)
+
+
+def test_only_a_young_alternative_is_moved_onto_a_better_search_finalist(
+    paper_office: SemanticMap,
+) -> None:
+    """A search finalist near a tracked alternative that fits the window better takes
+    its place only while the alternative is young: an older one's place is what its
+    evidence followed, and a few frames' best fit a metre off is often chance."""
+    sim = replace(paper_config("nominal", 360.0), duration_s=8.0)
+    frames = simulate(paper_office, sim, np.random.default_rng(21))
+    pf = ParticleFilter(paper_office, FilterConfig(particles=2000), rng=np.random.default_rng(22))
+    for f in frames:
+        pf.step(f.odometry, f.detections)
+    tracker = pf.evidence
+    assert tracker is not None and tracker._anchor is not None
+    truth = frames[-1].truth
+    # An alternative 0.6 m off the person's place; the finalist on the place itself.
+    off = (np.array([truth.x + 0.6]), np.array([truth.y]), np.array([truth.theta_rad]))
+    there = (np.array([truth.x]), np.array([truth.y]), np.array([truth.theta_rad]))
+    window = tracker.window()
+    assert tracker.window_score(*there, window)[0] > tracker.window_score(*off, window)[0]
+
+    def moved(age: int) -> bool:
+        t = copy.deepcopy(tracker)
+        t.moves = moves_onto(t._anchor_pose(), *off)
+        t.llr = t.seg = np.array([-1.0])
+        t.age = np.array([age])
+        t._replace_places(*there, np.array([0.0]), window)
+        return bool(abs(t._centres()[0][0] - truth.x) < 1e-6)
+
+    assert moved(0) and moved(tracker.settings.young - 1)
+    assert not moved(tracker.settings.young)
