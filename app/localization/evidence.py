@@ -440,8 +440,16 @@ class EvidenceTracker:
         its places from around the pose too (``Separation.far_m``)."""
         window = self.window()
         seen = explaining((x, y, theta), window, self.map.object_xy.reshape(-1, 2))
-        movable = seen[~self.map.fixed[seen]].tolist()
-        return self.finder.separation((x, y, theta), window, movable, rings)
+        movable = seen[~self.map.fixed[seen]]
+        left_out: list[int | tuple[int, ...]] = [int(k) for k in movable]
+        # Furniture is rearranged a class at a time as often as a piece at a time (the
+        # plants carried to the other wall): every movable object of one class together.
+        cls = self.map.object_class[movable]
+        for c in np.unique(cls):
+            group = movable[cls == c]
+            if group.size > 1:
+                left_out.append(tuple(int(k) for k in group))
+        return self.finder.separation((x, y, theta), window, left_out, rings)
 
     # ------------------------------------------------------------ one frame
     def update(

@@ -149,13 +149,15 @@ class PlaceSearch:
         self,
         pose: tuple[float, float, float],
         window: ObservationWindow,
-        objects: Sequence[int],
+        objects: Sequence[int | tuple[int, ...]],
         rings: bool = True,
     ) -> Separation:
         """How far the place that best explains ``window`` moves when one of ``objects``
         explains nothing, the most over them: solution separation, as GNSS integrity
         monitoring tests a fix against one faulty satellite (each satellite left out in
-        turn), here against one object moved since the map was drawn.
+        turn), here against one object moved since the map was drawn. An entry of
+        ``objects`` may be a tuple of objects left out together (``obj`` then names the
+        first).
 
         The full place is a pattern search over the window from ``pose``. With an object
         left out, the place is sought twice: by a search from the full place (``near_m``:
@@ -184,7 +186,7 @@ class PlaceSearch:
             moved = np.hypot(qx - bx[0], qy - by[0])
             best = int(np.argmax(qs))
             if moved[0] > near_m:
-                near_m, which = float(moved[0]), int(obj)
+                near_m, which = float(moved[0]), int(obj if isinstance(obj, int) else obj[0])
             far_m = max(far_m, float(moved[best]))
         return Separation(near_m, far_m, which)
 

@@ -323,10 +323,10 @@ class ObservationWindow:
     def frames(self) -> int:
         return int(self.rel.shape[0])
 
-    def without(self, obj: int) -> ObservationWindow:
-        """The same frames with the map's object ``obj`` explaining no detection (taken
-        out of every class's candidates)."""
-        drop = self.members == obj
+    def without(self, obj: int | Sequence[int]) -> ObservationWindow:
+        """The same frames with the map's object ``obj`` (or each of several) explaining
+        no detection (taken out of every class's candidates)."""
+        drop = np.isin(self.members, obj)
         before = np.concatenate([[0], np.cumsum(drop)])
         return replace(
             self,

@@ -196,3 +196,39 @@ def test_a_first_fix_waits_while_one_object_pulls_it_beyond_its_radius(
     else:
         # A first fix's radius is at most GAIN_PROTECTION_M, under the pull: never told.
         assert first is None
+
+
+def test_several_objects_left_out_together_are_each_left_out() -> None:
+    m = corridor(OBJECTS)
+    tracker, _ = _tracker(m, m)
+    window = tracker.window()
+    both = window.without((PLANT, 5))
+    one_by_one = window.without(PLANT).without(5)
+    assert np.array_equal(both.members, one_by_one.members)
+    assert np.array_equal(both.member_start, one_by_one.member_start)
+    assert both.members.size < window.members.size
+
+
+def test_every_movable_object_of_a_class_is_also_left_out_together(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """Furniture is rearranged a class at a time (the plants carried to the other wall):
+    besides each movable object alone, the movable objects of one class that explain
+    detections are left out together; a class with one such object adds nothing."""
+    objects = [*OBJECTS, {"class": "plant", "x": 11.0, "y": 2.7}]
+    m = corridor(objects)
+    tracker, pose = _tracker(m, m)
+    tested: list[list[int | tuple[int, ...]]] = []
+
+    def record(pose_: object, window: object, objects: list, *args: object) -> Separation:
+        tested.append(list(objects))
+        return Separation(0.0, 0.0, -1)
+
+    monkeypatch.setattr(tracker.finder, "separation", record)
+    tracker.separation_m(pose.x, pose.y, pose.theta_rad)
+    seen = explaining(
+        (pose.x, pose.y, pose.theta_rad), tracker.window(), m.object_xy.reshape(-1, 2)
+    )
+    movable = [int(o) for o in seen if not m.fixed[o]]
+    assert {PLANT, 6} <= set(movable)  # both plants explain detections, and the table
+    assert tested == [[*movable, (PLANT, 6)]]
