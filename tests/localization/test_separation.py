@@ -131,14 +131,15 @@ def test_the_rings_find_a_better_place_the_search_from_the_fix_stops_short_of() 
     assert alone.far_m == alone.near_m == found.near_m
 
 
-def test_only_movable_objects_are_left_out(monkeypatch: pytest.MonkeyPatch) -> None:
-    """The separation tests the movable objects that explain a detection, never a door or
-    a window (SemanticMap.fixed): those are part of the building."""
-    m = corridor(OBJECTS)
+def _left_out(
+    monkeypatch: pytest.MonkeyPatch, m: SemanticMap
+) -> tuple[list[list[int | tuple[int, ...]]], np.ndarray]:
+    """What the separation of a noise-free walk on ``m`` leaves out (each call's list of
+    objects and groups), and the objects that explain its detections."""
     tracker, pose = _tracker(m, m)
-    tested: list[list[int]] = []
+    tested: list[list[int | tuple[int, ...]]] = []
 
-    def record(pose_: object, window: object, objects: list[int], *args: object) -> Separation:
+    def record(pose_: object, window: object, objects: list, *args: object) -> Separation:
         tested.append(list(objects))
         return Separation(0.0, 0.0, -1)
 
@@ -147,6 +148,14 @@ def test_only_movable_objects_are_left_out(monkeypatch: pytest.MonkeyPatch) -> N
     seen = explaining(
         (pose.x, pose.y, pose.theta_rad), tracker.window(), m.object_xy.reshape(-1, 2)
     )
+    return tested, seen
+
+
+def test_only_movable_objects_are_left_out(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The separation tests the movable objects that explain a detection, never a door or
+    a window (SemanticMap.fixed): those are part of the building."""
+    m = corridor(OBJECTS)
+    tested, seen = _left_out(monkeypatch, m)
     assert m.fixed[seen].any() and not m.fixed[seen].all()  # both kinds explain detections
     assert tested == [[int(o) for o in seen if not m.fixed[o]]]
 
@@ -215,20 +224,8 @@ def test_every_movable_object_of_a_class_is_also_left_out_together(
     """Furniture is rearranged a class at a time (the plants carried to the other wall):
     besides each movable object alone, the movable objects of one class that explain
     detections are left out together; a class with one such object adds nothing."""
-    objects = [*OBJECTS, {"class": "plant", "x": 11.0, "y": 2.7}]
-    m = corridor(objects)
-    tracker, pose = _tracker(m, m)
-    tested: list[list[int | tuple[int, ...]]] = []
-
-    def record(pose_: object, window: object, objects: list, *args: object) -> Separation:
-        tested.append(list(objects))
-        return Separation(0.0, 0.0, -1)
-
-    monkeypatch.setattr(tracker.finder, "separation", record)
-    tracker.separation_m(pose.x, pose.y, pose.theta_rad)
-    seen = explaining(
-        (pose.x, pose.y, pose.theta_rad), tracker.window(), m.object_xy.reshape(-1, 2)
-    )
+    m = corridor([*OBJECTS, {"class": "plant", "x": 11.0, "y": 2.7}])
+    tested, seen = _left_out(monkeypatch, m)
     movable = [int(o) for o in seen if not m.fixed[o]]
     assert {PLANT, 6} <= set(movable)  # both plants explain detections, and the table
     assert tested == [[*movable, (PLANT, 6)]]
