@@ -31,6 +31,7 @@ from app.localization.fastmath import FAST, hypot, sincos
 from app.localization.resampling import systematic_indexes
 from app.localization.types import Estimate, Hypothesis
 from app.maps.geometry import wrap_rad
+from app.maps.symmetry import twin_pose
 
 
 @dataclass(frozen=True)
@@ -310,14 +311,6 @@ TWIN_MERGE_M = 1.0
 TWIN_MERGE_RAD = float(np.radians(30.0))
 
 
-def _turned(h: Hypothesis, twin: tuple[float, float, float]) -> tuple[float, float, float]:
-    """Pose of ``h`` turned by ``twin`` (cx, cy, angle) about its centre."""
-    cx, cy, angle = twin
-    c, s = math.cos(angle), math.sin(angle)
-    dx, dy = h.x - cx, h.y - cy
-    return cx + c * dx - s * dy, cy + s * dx + c * dy, wrap_rad(h.theta_rad + angle)
-
-
 def _same_mode(a: tuple[float, float, float], b: Hypothesis) -> bool:
     return (
         math.hypot(a[0] - b.x, a[1] - b.y) <= TWIN_MERGE_M
@@ -335,7 +328,9 @@ def only_twins(
     if not twins or not estimate.hypotheses:
         return False
     top = estimate.hypotheses[0]
-    places = [(top.x, top.y, top.theta_rad)] + [_turned(top, t) for t in twins]
+    places = [(top.x, top.y, top.theta_rad)] + [
+        twin_pose(top.x, top.y, top.theta_rad, t) for t in twins
+    ]
     held = sum(
         h.weight
         for h in estimate.hypotheses
@@ -359,7 +354,7 @@ def with_twins(estimate: Estimate, twins: Sequence[tuple[float, float, float]]) 
     for h in estimate.hypotheses:
         spread.append(replace(h, weight=h.weight * share))
         for twin in twins:
-            x, y, theta = _turned(h, twin)
+            x, y, theta = twin_pose(h.x, h.y, h.theta_rad, twin)
             spread.append(replace(h, x=x, y=y, theta_rad=theta, weight=h.weight * share))
     merged: list[Hypothesis] = []
     for h in sorted(spread, key=lambda h: -h.weight):

@@ -198,9 +198,9 @@ SEPARATION_RINGS_FOV_DEG = 270.0
 #: A camera at least SEPARATION_RINGS_FOV_DEG wide sees objects all around and pins a
 #: right place to well under a metre: its first fix is told only with a radius of at
 #: most this (m), not GAIN_PROTECTION_M. Measured on the phone suite (seeds 0-9, Intel
-#: Xeon): of 183 first fixes through 270 and 360 deg cameras, 5 had a radius over 1 m,
-#: 0.24-0.72 m off where the rest were mostly under 0.1 m; one of them, on the stale
-#: office, drifted on to 1.09 m.
+#: Xeon): of 200 fixes told through 270 and 360 deg cameras, 5 had a radius over 1 m,
+#: 0.05-0.72 m off (the other 195: median 0.09 m, 177 under 0.2 m); one of them, on the
+#: stale office, drifted on to 1.09 m.
 WIDE_VIEW_GAIN_PROTECTION_M = 1.0
 #: How much farther than the odometry's path a person may have walked since the last fix
 #: told (PDR-grade step lengths are off by up to 10 %; dropped frames are carried by the

@@ -29,6 +29,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
+from app.maps.geometry import wrap_rad
 from app.maps.model import SemanticMap
 
 #: Objects and wall ends this close (m) to their rotated images count as matched: well
@@ -52,6 +53,16 @@ def _rotate(
     c, s = math.cos(angle), math.sin(angle)
     rel = xy - centre
     return np.column_stack((c * rel[:, 0] - s * rel[:, 1], s * rel[:, 0] + c * rel[:, 1])) + centre
+
+
+def twin_pose(
+    x: float, y: float, theta: float, twin: tuple[float, float, float]
+) -> tuple[float, float, float]:
+    """The pose (x, y, theta) carried by ``twin``, a turn ``(cx, cy, angle)`` of
+    :func:`rotational_symmetries`: the twin place that sees what the pose sees."""
+    cx, cy, angle = twin
+    ((tx, ty),) = _rotate(np.array([[x, y]]), np.array([cx, cy]), angle)
+    return float(tx), float(ty), wrap_rad(theta + angle)
 
 
 def _objects_match(

@@ -4,12 +4,14 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 import pytest
 
 from app.experiments.hard_maps import hard_map
 from app.maps.check import load_map
+from app.maps.geometry import wrap_rad
 from app.maps.model import SemanticMap, parse_map
-from app.maps.symmetry import SYMMETRY_TOLERANCE_M, rotational_symmetries
+from app.maps.symmetry import SYMMETRY_TOLERANCE_M, rotational_symmetries, twin_pose
 from app.resources import bundled_maps_dir
 from app.simulation.venue import venue_map
 
@@ -81,3 +83,16 @@ def test_the_suites_maps_only_the_symmetric_room_turns_onto_itself() -> None:
     for path in sorted(bundled_maps_dir().glob("*.json")):
         assert _degrees(load_map(path)) == [], path.name
     assert _degrees(venue_map()) == []  # (maps with levels are not checked)
+
+
+def test_a_twin_pose_is_the_pose_turned_about_the_centre() -> None:
+    half = (6.0, 4.0, math.pi)
+    x, y, theta = twin_pose(3.0, 2.0, 0.25, half)
+    eps = 8 * np.finfo(np.float64).eps * 10.0  # a few ulps of coordinates about 10 m
+    assert abs(x - 9.0) < eps and abs(y - 6.0) < eps
+    assert abs(wrap_rad(theta - (0.25 + math.pi))) < eps
+    # A half turn twice is the pose itself; a quarter turn moves (7, 4) to (6, 5).
+    back = twin_pose(x, y, theta, half)
+    assert all(abs(a - b) < eps for a, b in zip(back[:2], (3.0, 2.0), strict=True))
+    qx, qy, _ = twin_pose(7.0, 4.0, 0.0, (6.0, 4.0, math.pi / 2))
+    assert abs(qx - 6.0) < eps and abs(qy - 5.0) < eps
