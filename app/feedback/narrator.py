@@ -72,6 +72,13 @@ TWINS_WORDS = (
 )
 
 
+#: Said instead of a suggestion where the belief is one place on floors that look alike:
+#: neither turning nor walking on this floor can tell which floor it is.
+ALIKE_LEVELS_WORDS = (
+    "These floors look the same, so I cannot tell which floor you are on from what I see."
+)
+
+
 def found_sentence(protection_m: float | None, units: Units = "metric") -> str:
     """What is said as the person is located: with the protection radius when it is wider
     than ``CERTAIN_PROTECTION_M`` ("Location found, to within about 2 metres."), so that
@@ -188,6 +195,7 @@ class Narrator:
         odometry: Odometry | None = None,
         gone: NDArray[np.bool_] | None = None,
         twins: bool = False,
+        levels_alike: bool = False,
     ) -> Feedback:
         """Feedback for one frame (see the module docstring for the rules).
 
@@ -200,6 +208,8 @@ class Narrator:
         such an object is not said, since where the map has it is not where it is.
         ``twins``: only the map's twin places (:mod:`app.maps.symmetry`) keep the fix
         from being told: nothing is suggested, and the words say why.
+        ``levels_alike``: only the same place on floors that look alike keeps it
+        (:func:`app.maps.symmetry.alike_levels`): likewise.
         """
         now = time.monotonic() if timestamp_s is None else float(timestamp_s)
         if estimate.converged:
@@ -213,6 +223,8 @@ class Narrator:
         words = SUGGESTION_WORDS[suggestion] if suggestion is not None else ""
         if twins:
             suggestion, words = None, TWINS_WORDS
+        elif levels_alike:
+            suggestion, words = None, ALIKE_LEVELS_WORDS
         text = feedback.text
         last = self._suggested_at
         # (a time in the future, from another process's clock, counts as long ago)

@@ -20,7 +20,7 @@ of :mod:`~app.localization.evidence` to the hypotheses.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -337,6 +337,36 @@ def only_twins(
         if h.std_xy_m <= TWIN_MERGE_M and any(_same_mode(p, h) for p in places)
     )
     return held >= mass
+
+
+def only_alike_levels(
+    estimate: Estimate,
+    groups: Sequence[Sequence[int]],
+    pitch_m: float,
+    level_of: Callable[[float], int],
+    mass: float = 0.9,
+) -> bool:
+    """Whether the belief is one place of the floor on two or more levels that look the
+    same (``groups``: :func:`app.maps.symmetry.alike_levels`; ``pitch_m``: the plane
+    distance from one level to the next; ``level_of``: a plane x's level) and nothing
+    else: modes at the heaviest one's place on the levels of its group, each no wider
+    than a metre, hold at least ``mass`` of the weight, on at least two levels. Then
+    neither turning nor walking on that floor tells which floor it is."""
+    if not groups or not estimate.hypotheses:
+        return False
+    top = estimate.hypotheses[0]
+    level = level_of(top.x)
+    group = next((g for g in groups if level in g), None)
+    if group is None:
+        return False
+    places = {k: (top.x + (k - level) * pitch_m, top.y, top.theta_rad) for k in group}
+    held, levels = 0.0, set()
+    for h in estimate.hypotheses:
+        k = level_of(h.x)
+        if k in places and h.std_xy_m <= TWIN_MERGE_M and _same_mode(places[k], h):
+            held += h.weight
+            levels.add(k)
+    return held >= mass and len(levels) >= 2
 
 
 def with_twins(estimate: Estimate, twins: Sequence[tuple[float, float, float]]) -> Estimate:

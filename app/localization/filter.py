@@ -34,7 +34,13 @@ from app.localization.convergence import (
 )
 from app.localization.dilution import BearingGeometry
 from app.localization.dilution import warm_up as warm_up_dilution
-from app.localization.estimate import estimate_pose, only_twins, with_alternatives, with_twins
+from app.localization.estimate import (
+    estimate_pose,
+    only_alike_levels,
+    only_twins,
+    with_alternatives,
+    with_twins,
+)
 from app.localization.evidence import EvidenceTracker
 from app.localization.fastmath import PAIRWISE_BLOCK, hypot, pairwise_sum
 from app.localization.floors import (
@@ -83,7 +89,7 @@ from app.localization.walked import WANDER_SHARE, WalkedPath
 from app.maps.geometry import wrap_angle, wrap_rad
 from app.maps.model import SemanticMap
 from app.maps.prepare import ensure_prepared
-from app.maps.symmetry import rotational_symmetries
+from app.maps.symmetry import alike_levels, rotational_symmetries
 from app.state import from_plain
 
 #: Share of a global start's particles drawn from the first observation.
@@ -388,12 +394,23 @@ class ParticleFilter:
         self._twins_possible = self._start_has_twins(initial_pose)
         #: The last step's fix was kept from being told by the map's twins alone.
         self.twins_undecided = False
+        #: The last step's belief was one place on floors that look alike, and nothing
+        #: else (app.maps.symmetry.alike_levels).
+        self.levels_undecided = False
         self.estimate: Estimate = estimate_pose(self.x, self.y, self.theta, self.weights)
 
     @functools.cached_property
     def _twins(self) -> tuple[tuple[float, float, float], ...]:
         """The map's rotations onto itself (:func:`~app.maps.symmetry.rotational_symmetries`)."""
         return rotational_symmetries(self.map)
+
+    @functools.cached_property
+    def _alike_levels(self) -> tuple[tuple[int, ...], ...]:
+        """The map's levels that look the same (:func:`~app.maps.symmetry.alike_levels`)."""
+        return alike_levels(self.map)
+
+    def _level_of_plane_x(self, x: float) -> int:
+        return int(self.map.layout.level_of_plane_x(np.array(x)))
 
     def _start_has_twins(self, start: InitialPose | None) -> bool:
         """Whether a start leaves the map's twins (if any) as likely as the place itself:
@@ -474,6 +491,7 @@ class ParticleFilter:
         self._settled_frames = 0
         self._twins_possible = bool(self._twins)
         self.twins_undecided = False
+        self.levels_undecided = False
         self.continuation.reset()
         self.geometry.reset()
         self.odometry_check.reset()
@@ -1058,6 +1076,15 @@ class ParticleFilter:
         # Only the map's twins are left: neither turning nor walking tells them apart
         # (a compass heading or a start does).
         self.twins_undecided = self._twins_possible and only_twins(est, self._twins)
+        # ... or the same place on floors that look alike (the barometer counts storeys
+        # from a known floor only, and there was none).
+        self.levels_undecided = (
+            not est.converged
+            and bool(self._alike_levels)
+            and only_alike_levels(
+                est, self._alike_levels, self.map.layout.pitch_m, self._level_of_plane_x
+            )
+        )
         if self._twins_possible:
             est = with_twins(est, self._twins)
         if est.converged:

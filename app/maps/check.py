@@ -35,7 +35,7 @@ from app.maps.model import (
     validate_spec,
 )
 from app.maps.prepare import PreparedMap, build_free_space, prepare
-from app.maps.symmetry import rotational_symmetries
+from app.maps.symmetry import alike_levels, rotational_symmetries
 
 log = logging.getLogger("bearings.maps")
 
@@ -269,6 +269,31 @@ def _region_problems(source: str, m: SemanticMap) -> list[Problem]:
     return out
 
 
+def _alike_level_problems(source: str, m: SemanticMap) -> list[Problem]:
+    """Levels drawn the same (:func:`app.maps.symmetry.alike_levels`): the same place on
+    each sees the same, so a person is located on one of them only from a known floor
+    (a start the app gives, or the barometer's count of storeys from one); one warning
+    per group."""
+    names = [lv.id for lv in m.layout.levels]
+    out = []
+    for group in alike_levels(m):
+        ids = ", ".join(repr(names[k]) for k in group)
+        out.append(
+            Problem(
+                source,
+                "levels",
+                f"levels {ids} look the same: every wall and object of each lies where the "
+                "others have one of its kind, so from what the camera sees nobody can tell "
+                "which of these floors they are on; a person is located on one only after "
+                "starting at a known floor (initial_pose.level) or riding from one with a "
+                "barometer; an object that only one floor has (a sign, a named desk) tells "
+                "them apart",
+                "warning",
+            )
+        )
+    return out
+
+
 def _symmetry_problems(source: str, m: SemanticMap) -> list[Problem]:
     """A map a rotation carries onto itself (:mod:`app.maps.symmetry`): each place has a
     twin that sees the same, and nobody is located there without a compass (one warning
@@ -451,6 +476,7 @@ def check_data(
     if level_errors:
         return CheckResult(source, None, [*problems, *level_errors])
     problems += _symmetry_problems(source, m)
+    problems += _alike_level_problems(source, m)
     return CheckResult(source, m, problems, prepared)
 
 

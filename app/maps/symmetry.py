@@ -18,7 +18,12 @@ onto itself are rotations about a fixed point, and an object set's centroid is f
 any of them); mirror images are no twins, since a mirror turns every bearing's sign.
 Walls must match segment for segment: a wall drawn in one piece on one side and in two
 on the other is taken for asymmetric, which leaves the filter as without this check.
-Maps with levels are not checked (each level would need its own).
+Maps with levels are not checked for turns (each level would need its own). They are
+checked for levels that look alike (:func:`alike_levels`): floors drawn the same, wall
+for wall and object for object at the same places, as an office tower's often are. A
+place on one of them and the same place on the others see the same; only the
+barometer's count of storeys from a known floor, or a start the app gave, tells them
+apart.
 """
 
 from __future__ import annotations
@@ -121,3 +126,70 @@ def _find(semantic_map: SemanticMap, tol_m: float) -> tuple[tuple[float, float, 
         if _walls_match(walls, image, tol_m):
             found.append((float(centre[0]), float(centre[1]), angle))
     return tuple(sorted(found, key=lambda r: r[2]))
+
+
+def alike_levels(
+    semantic_map: SemanticMap, tol_m: float = SYMMETRY_TOLERANCE_M
+) -> tuple[tuple[int, ...], ...]:
+    """Groups of two or more levels (indexes, ascending) that look the same: each one's
+    walls lie on the others' walls and its objects on objects of their class, at the same
+    places of the floor (within ``tol_m``), both ways. () for a map with one level or
+    none; kept per map."""
+    return semantic_map.derived_value(
+        ("alike_levels", float(tol_m)), lambda: _alike(semantic_map, tol_m)
+    )
+
+
+def _onto(
+    xy: NDArray[np.float64], cls: NDArray[np.int64], other_xy: NDArray[np.float64],
+    other_cls: NDArray[np.int64], tol_m: float,
+) -> bool:  # fmt: skip
+    """Whether every object (``xy``, ``cls``) lies within ``tol_m`` of one of the others of
+    its class."""
+    for k in np.unique(cls):
+        targets = other_xy[other_cls == k]
+        if targets.shape[0] == 0:
+            return False
+        dist, _ = cKDTree(targets).query(xy[cls == k], distance_upper_bound=tol_m)
+        if not np.isfinite(dist).all():
+            return False
+    return True
+
+
+def _alike(semantic_map: SemanticMap, tol_m: float) -> tuple[tuple[int, ...], ...]:
+    layout = semantic_map.layout
+    if layout.count < 2:
+        return ()
+    spec = semantic_map.spec
+    # Each level's walls and objects in the file's frame (every level's own).
+    walls = np.array([[w.x1, w.y1, w.x2, w.y2] for w in spec.walls], dtype=np.float64)
+    walls = walls.reshape(-1, 4)
+    obj_xy = np.array([[o.x, o.y] for o in spec.objects], dtype=np.float64).reshape(-1, 2)
+    obj_cls = np.asarray(semantic_map.object_class, dtype=np.int64)
+    per_level = [
+        (walls[layout.wall_level == k], obj_xy[layout.object_level == k],
+         obj_cls[layout.object_level == k])
+        for k in range(layout.count)
+    ]  # fmt: skip
+
+    def same(a: int, b: int) -> bool:
+        wa, xa, ca = per_level[a]
+        wb, xb, cb = per_level[b]
+        if wa.shape[0] != wb.shape[0] or xa.shape[0] != xb.shape[0] or xa.shape[0] == 0:
+            return False
+        return (
+            _onto(xa, ca, xb, cb, tol_m)
+            and _onto(xb, cb, xa, ca, tol_m)
+            and _walls_match(wb, wa, tol_m)
+            and _walls_match(wa, wb, tol_m)
+        )
+
+    groups: list[list[int]] = []
+    for k in range(layout.count):
+        for group in groups:
+            if same(group[0], k):
+                group.append(k)
+                break
+        else:
+            groups.append([k])
+    return tuple(tuple(g) for g in groups if len(g) > 1)

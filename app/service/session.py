@@ -245,6 +245,7 @@ class Session:
                 odometry=frame.odometry,
                 gone=None if self.filter.unseen is None else self.filter.unseen.absent,
                 twins=self.filter.twins_undecided,
+                levels_alike=self.filter.levels_undecided,
             )
             now = time.monotonic() if frame.timestamp is None else frame.timestamp
             guidance, said = self._guide(estimate, now, warnings)
