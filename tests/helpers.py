@@ -253,3 +253,14 @@ def redis_server(*config: str) -> Iterator[str]:
     finally:
         proc.terminate()
         proc.wait(timeout=10)
+
+
+def venue_frame_json(vf: object) -> dict[str, object]:
+    """A simulated venue frame (app.simulation.venue_walk.VenueFrame) as a service frame:
+    its contract form without the truth (which is in the filter's plane), with the
+    barometer's altitude."""
+    out = vf.frame.to_contract()  # type: ignore[attr-defined]
+    out.pop("truth")
+    alt = vf.altitude  # type: ignore[attr-defined]
+    out["altitude"] = {"relative_m": round(alt.relative_m, 3), "std_m": alt.std_m}
+    return out

@@ -300,7 +300,7 @@ def run_condition(
         step_ms[i] = (time.perf_counter() - started) * 1e3
         if on_step is not None:
             on_step(pf, vf, est)
-        est_level[i] = int(m.layout.level_of_plane_x(np.array(est.x)))
+        est_level[i] = m.layout.level_of(est.x)
         err[i] = float(np.hypot(est.x - f.truth.x, est.y - f.truth.y))
         conv[i] = est.converged
         floors = pf.floors

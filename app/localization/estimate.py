@@ -20,7 +20,7 @@ of :mod:`~app.localization.evidence` to the hypotheses.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -31,6 +31,7 @@ from app.localization.fastmath import FAST, hypot, sincos
 from app.localization.resampling import systematic_indexes
 from app.localization.types import Estimate, Hypothesis
 from app.maps.geometry import wrap_rad
+from app.maps.levels import LevelLayout
 from app.maps.symmetry import twin_pose
 
 
@@ -342,27 +343,27 @@ def only_twins(
 def only_alike_levels(
     estimate: Estimate,
     groups: Sequence[Sequence[int]],
-    pitch_m: float,
-    level_of: Callable[[float], int],
+    layout: LevelLayout,
     mass: float = 0.9,
 ) -> bool:
     """Whether the belief is one place of the floor on two or more levels that look the
-    same (``groups``: :func:`app.maps.symmetry.alike_levels`; ``pitch_m``: the plane
-    distance from one level to the next; ``level_of``: a plane x's level) and nothing
-    else: modes at the heaviest one's place on the levels of its group, each no wider
-    than a metre, hold at least ``mass`` of the weight, on at least two levels. Then
-    neither turning nor walking on that floor tells which floor it is."""
+    same (``groups``: :func:`app.maps.symmetry.alike_levels` of the map whose ``layout``
+    places its levels in the plane) and nothing else: modes at the heaviest one's place
+    on the levels of its group, each no wider than a metre, hold at least ``mass`` of
+    the weight, on at least two levels. Then neither turning nor walking on that floor
+    tells which floor it is."""
     if not groups or not estimate.hypotheses:
         return False
     top = estimate.hypotheses[0]
-    level = level_of(top.x)
+    level = layout.level_of(top.x)
     group = next((g for g in groups if level in g), None)
     if group is None:
         return False
-    places = {k: (top.x + (k - level) * pitch_m, top.y, top.theta_rad) for k in group}
+    pitch = layout.pitch_m
+    places = {k: (top.x + (k - level) * pitch, top.y, top.theta_rad) for k in group}
     held, levels = 0.0, set()
     for h in estimate.hypotheses:
-        k = level_of(h.x)
+        k = layout.level_of(h.x)
         if k in places and h.std_xy_m <= TWIN_MERGE_M and _same_mode(places[k], h):
             held += h.weight
             levels.add(k)

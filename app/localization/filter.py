@@ -409,9 +409,6 @@ class ParticleFilter:
         """The map's levels that look the same (:func:`~app.maps.symmetry.alike_levels`)."""
         return alike_levels(self.map)
 
-    def _level_of_plane_x(self, x: float) -> int:
-        return int(self.map.layout.level_of_plane_x(np.array(x)))
-
     def _start_has_twins(self, start: InitialPose | None) -> bool:
         """Whether a start leaves the map's twins (if any) as likely as the place itself:
         no start at all, or one with a twin (the start turned with the map) within
@@ -1081,9 +1078,7 @@ class ParticleFilter:
         self.levels_undecided = (
             not est.converged
             and bool(self._alike_levels)
-            and only_alike_levels(
-                est, self._alike_levels, self.map.layout.pitch_m, self._level_of_plane_x
-            )
+            and only_alike_levels(est, self._alike_levels, self.map.layout)
         )
         if self._twins_possible:
             est = with_twins(est, self._twins)

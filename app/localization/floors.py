@@ -708,7 +708,7 @@ class FloorTracker:
         suite's 66-degree camera: about 4 % of the Ground Floor's walking frames).
         Anywhere while no level is carried (no fix yet, a broken chain, no barometer:
         then only what is seen tells the floors apart)."""
-        return bool(self._place_levels()[int(self.layout.level_of_plane_x(np.array(x)))])
+        return bool(self._place_levels()[self.layout.level_of(x)])
 
     def _place_levels(self) -> NDArray[np.bool_]:
         """Per level, whether a place may be on it (:meth:`place_allowed`)."""
@@ -768,7 +768,7 @@ class FloorTracker:
     ) -> float:
         """The share of the (normalized) weights ``w`` on the level of plane x
         ``estimate_x``."""
-        mine = int(self.layout.level_of_plane_x(np.array(estimate_x)))
+        mine = self.layout.level_of(estimate_x)
         return float(np.sum(w[self.layout.level_of_plane_x(x) == mine]))
 
     def after_estimate(
@@ -787,7 +787,7 @@ class FloorTracker:
         yet located, a frame without altitude) nothing is counted, and a look-alike
         floor the belief merely drifted to is never confirmed this way."""
         self.level_probability = self.share_on_level(x, w, estimate_x)
-        mine = int(self.layout.level_of_plane_x(np.array(estimate_x)))
+        mine = self.layout.level_of(estimate_x)
         counted = (
             not converged
             and not self.blind

@@ -417,6 +417,10 @@ class LevelLayout:
         pts[:, 0] += self.offsets(np.broadcast_to(np.asarray(level), pts.shape[:1]))
         return pts
 
+    def level_of(self, x: float) -> int:
+        """:meth:`level_of_plane_x` of one plane x."""
+        return int(self.level_of_plane_x(np.array(x)))
+
     def level_of_plane_x(self, x: ArrayLike) -> NDArray[np.int64]:
         """The level index a plane x lies on (the nearest level's extent), shape of x."""
         xa = np.asarray(x, dtype=np.float64)

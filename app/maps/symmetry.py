@@ -70,14 +70,17 @@ def twin_pose(
     return float(tx), float(ty), wrap_rad(theta + angle)
 
 
-def _objects_match(
-    xy: NDArray[np.float64], cls: NDArray[np.int64], image: NDArray[np.float64], tol_m: float
-) -> bool:
-    """Whether every object's image lies within ``tol_m`` of an object of its class (a
-    k-d tree per class: a floor may have thousands of objects)."""
+def _onto(
+    xy: NDArray[np.float64], cls: NDArray[np.int64], other_xy: NDArray[np.float64],
+    other_cls: NDArray[np.int64], tol_m: float,
+) -> bool:  # fmt: skip
+    """Whether every object (``xy``, ``cls``) lies within ``tol_m`` of one of the others of
+    its class (a k-d tree per class: a floor may have thousands of objects)."""
     for k in np.unique(cls):
-        members = cls == k
-        dist, _ = cKDTree(xy[members]).query(image[members], distance_upper_bound=tol_m)
+        targets = other_xy[other_cls == k]
+        if targets.shape[0] == 0:
+            return False
+        dist, _ = cKDTree(targets).query(xy[cls == k], distance_upper_bound=tol_m)
         if not np.isfinite(dist).all():
             return False
     return True
@@ -118,7 +121,8 @@ def _find(semantic_map: SemanticMap, tol_m: float) -> tuple[tuple[float, float, 
         # (the identity, and the farthest object's own image within the tolerance)
         if min(angle, 2.0 * math.pi - angle) * radius[far] <= tol_m:
             continue
-        if not _objects_match(xy, cls, _rotate(xy, centre, angle), tol_m):
+        # Every object's image on an object of its class.
+        if not _onto(_rotate(xy, centre, angle), cls, xy, cls, tol_m):
             continue
         image = np.hstack(
             (_rotate(walls[:, :2], centre, angle), _rotate(walls[:, 2:], centre, angle))
@@ -138,22 +142,6 @@ def alike_levels(
     return semantic_map.derived_value(
         ("alike_levels", float(tol_m)), lambda: _alike(semantic_map, tol_m)
     )
-
-
-def _onto(
-    xy: NDArray[np.float64], cls: NDArray[np.int64], other_xy: NDArray[np.float64],
-    other_cls: NDArray[np.int64], tol_m: float,
-) -> bool:  # fmt: skip
-    """Whether every object (``xy``, ``cls``) lies within ``tol_m`` of one of the others of
-    its class."""
-    for k in np.unique(cls):
-        targets = other_xy[other_cls == k]
-        if targets.shape[0] == 0:
-            return False
-        dist, _ = cKDTree(targets).query(xy[cls == k], distance_upper_bound=tol_m)
-        if not np.isfinite(dist).all():
-            return False
-    return True
 
 
 def _alike(semantic_map: SemanticMap, tol_m: float) -> tuple[tuple[int, ...], ...]:

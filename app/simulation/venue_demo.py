@@ -36,7 +36,7 @@ def _path(
     off = float(layout.offsets(level))
     for _ in range(TRIES):
         p = fs.sample(1, rng)[0]
-        if int(layout.level_of_plane_x(np.array(p[0]))) != level:
+        if layout.level_of(p[0]) != level:
             continue
         if float(np.hypot(*(p - end))) < 4.0:
             continue

@@ -133,7 +133,7 @@ class LiveView:
             return names.index(self.level_choice)
         if snap.estimate is None:
             return None if self.map_scene is None else self.map_scene.level_shown
-        return int(layout.level_of_plane_x(np.array(snap.estimate.x)))
+        return layout.level_of(snap.estimate.x)
 
     def watch(self, session_id: str | None) -> None:
         self.watched = session_id

@@ -12,15 +12,7 @@ from app.main import create_app
 from app.simulation.simulator import SimulationConfig
 from app.simulation.venue import VENUE_NAME, venue_legs, venue_map, venue_spec
 from app.simulation.venue_walk import simulate_venue
-from tests.helpers import free_port, make_settings, serving
-
-
-def frame_json(vf: object) -> dict[str, object]:
-    out = vf.frame.to_contract()  # type: ignore[attr-defined]
-    out.pop("truth")  # the simulator's truth is in the filter's plane
-    alt = vf.altitude  # type: ignore[attr-defined]
-    out["altitude"] = {"relative_m": round(alt.relative_m, 3), "std_m": alt.std_m}
-    return out
+from tests.helpers import free_port, make_settings, serving, venue_frame_json
 
 
 def test_a_venue_is_served_and_a_lift_ride_is_followed_to_the_second_floor(
@@ -81,7 +73,7 @@ def test_a_venue_is_served_and_a_lift_ride_is_followed_to_the_second_floor(
         said: list[str] = []
         results = []
         for vf in frames:
-            res = http.post(f"/sessions/{sid}/frames", json=frame_json(vf)).json()
+            res = http.post(f"/sessions/{sid}/frames", json=venue_frame_json(vf)).json()
             results.append((vf, res))
             said.append(res["feedback"]["text"])
         located = [(vf, res) for vf, res in results if res["converged"]]

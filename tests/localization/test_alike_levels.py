@@ -25,8 +25,7 @@ from app.maps.symmetry import alike_levels
 from app.simulation.simulator import SimulationConfig
 from app.simulation.venue import venue_legs, venue_map, venue_spec
 from app.simulation.venue_walk import simulate_venue
-from tests.api.test_venue import frame_json
-from tests.helpers import free_port, make_settings, serving
+from tests.helpers import free_port, make_settings, serving, venue_frame_json
 
 NAME = "alike_floors"
 
@@ -66,19 +65,19 @@ def _est(*modes: tuple[float, float, float, float, float]) -> Estimate:
 
 
 def test_the_belief_is_undecided_only_when_it_is_one_place_on_alike_floors() -> None:
-    pitch = 30.0
-    level_of = lambda x: int(x // pitch)  # noqa: E731
+    layout = parse_map(alike_spec()).layout
+    pitch = layout.pitch_m
     groups = ((0, 1, 2),)
-    same = _est((5.0, 4.0, 0.3, 0.5, 0.2), (35.2, 4.1, 0.35, 0.45, 0.2))
-    assert only_alike_levels(same, groups, pitch, level_of)
-    assert not only_alike_levels(same, ((1, 2),), pitch, level_of)  # level 0 not alike
-    assert not only_alike_levels(same, (), pitch, level_of)
-    elsewhere = _est((5.0, 4.0, 0.3, 0.5, 0.2), (38.0, 4.0, 0.3, 0.45, 0.2))
-    assert not only_alike_levels(elsewhere, groups, pitch, level_of)
+    same = _est((5.0, 4.0, 0.3, 0.5, 0.2), (pitch + 5.2, 4.1, 0.35, 0.45, 0.2))
+    assert only_alike_levels(same, groups, layout)
+    assert not only_alike_levels(same, ((1, 2),), layout)  # level 0 not alike
+    assert not only_alike_levels(same, (), layout)
+    elsewhere = _est((5.0, 4.0, 0.3, 0.5, 0.2), (pitch + 8.0, 4.0, 0.3, 0.45, 0.2))
+    assert not only_alike_levels(elsewhere, groups, layout)
     one_floor = _est((5.0, 4.0, 0.3, 1.0, 0.2))
-    assert not only_alike_levels(one_floor, groups, pitch, level_of)
-    wide = _est((5.0, 4.0, 0.3, 0.5, 2.0), (35.0, 4.0, 0.3, 0.45, 2.0))
-    assert not only_alike_levels(wide, groups, pitch, level_of)
+    assert not only_alike_levels(one_floor, groups, layout)
+    wide = _est((5.0, 4.0, 0.3, 0.5, 2.0), (pitch + 5.0, 4.0, 0.3, 0.45, 2.0))
+    assert not only_alike_levels(wide, groups, layout)
 
 
 def _walk(m, seed: int, frames: int):
@@ -130,7 +129,7 @@ def test_the_service_says_the_floors_look_the_same_instead_of_a_suggestion(
         sid = http.post("/sessions", json={"map": NAME, "seed": 2}).json()["id"]
         results = []
         for vf in frames:
-            r = http.post(f"/sessions/{sid}/frames", json=frame_json(vf))
+            r = http.post(f"/sessions/{sid}/frames", json=venue_frame_json(vf))
             assert r.status_code == 200, r.text
             results.append(r.json())
     assert not any(res["converged"] for res in results)
