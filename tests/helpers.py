@@ -264,3 +264,42 @@ def venue_frame_json(vf: object) -> dict[str, object]:
     alt = vf.altitude  # type: ignore[attr-defined]
     out["altitude"] = {"relative_m": round(alt.relative_m, 3), "std_m": alt.std_m}
     return out
+
+
+def symmetric_venue_spec(first_floor_extra: list[dict] | None = None) -> dict[str, object]:
+    """Two floors, each a 12 x 8 m room that a half turn about (6, 4) carries onto itself
+    (the symmetric room's windows and tables on the Ground Floor, its windows and two
+    plants on the First Floor: the floors differ), joined by two stairs whose landings
+    are each other's images: a venue with twins (app.maps.symmetry). Extra objects on
+    the First Floor with ``first_floor_extra``."""
+    from app.experiments.hard_maps import hard_map
+
+    room = hard_map("symmetric_room").map.to_json()
+    walls = room["walls"]
+    objects = room["objects"]
+    windows = [o for o in objects if o["class"] == "window"]
+    plants = [{"class": "plant", "x": 2.5, "y": 4.5}, {"class": "plant", "x": 9.5, "y": 3.5}]
+    upstairs = windows + plants + list(first_floor_extra or [])
+
+    def landing(x: float, y: float, level: str) -> dict[str, object]:
+        square = [[x - 0.5, y - 0.5], [x + 0.5, y - 0.5], [x + 0.5, y + 0.5], [x - 0.5, y + 0.5]]
+        return {"level": level, "polygon": square}
+
+    return {
+        "name": "symmetric_venue",
+        "levels": [
+            {"id": "L0", "name": "Ground Floor", "ordinal": 0},
+            {"id": "L1", "name": "First Floor", "ordinal": 1},
+        ],
+        "walls": [{**w, "level": lv} for lv in ("L0", "L1") for w in walls],
+        "objects": [{**o, "level": "L0"} for o in objects]
+        + [{**o, "level": "L1"} for o in upstairs],
+        "connectors": [
+            {
+                "id": f"stairs-{n}",
+                "kind": "stairs",
+                "stops": [landing(x, y, "L0"), landing(x, y, "L1")],
+            }
+            for n, (x, y) in (("west", (1.5, 1.5)), ("east", (10.5, 6.5)))
+        ],
+    }

@@ -320,17 +320,20 @@ def _same_mode(a: tuple[float, float, float], b: Hypothesis) -> bool:
 
 
 def only_twins(
-    estimate: Estimate, twins: Sequence[tuple[float, float, float]], mass: float = 0.9
+    estimate: Estimate,
+    twins: Sequence[tuple[float, float, float]],
+    layout: LevelLayout | None = None,
+    mass: float = 0.9,
 ) -> bool:
-    """Whether the belief is the heaviest mode and its twins (``twins`` as in
-    :func:`with_twins`) and nothing else: modes within a metre of one of them, each
+    """Whether the belief is the heaviest mode and its twins (``twins`` and ``layout`` as
+    in :func:`with_twins`) and nothing else: modes within a metre of one of them, each
     no wider than a metre, hold at least ``mass`` of the weight. Then only something
     from outside the view (a compass, a start) can tell the places apart."""
     if not twins or not estimate.hypotheses:
         return False
     top = estimate.hypotheses[0]
     places = [(top.x, top.y, top.theta_rad)] + [
-        twin_pose(top.x, top.y, top.theta_rad, t) for t in twins
+        twin_pose(top.x, top.y, top.theta_rad, t, layout) for t in twins
     ]
     held = sum(
         h.weight
@@ -370,9 +373,14 @@ def only_alike_levels(
     return held >= mass and len(levels) >= 2
 
 
-def with_twins(estimate: Estimate, twins: Sequence[tuple[float, float, float]]) -> Estimate:
+def with_twins(
+    estimate: Estimate,
+    twins: Sequence[tuple[float, float, float]],
+    layout: LevelLayout | None = None,
+) -> Estimate:
     """The estimate's hypotheses spread over a map's twin places (``twins``: its turns
-    onto itself, ``(cx, cy, angle_rad)``; :func:`app.maps.symmetry.rotational_symmetries`).
+    onto itself, ``(cx, cy, angle_rad)``; :func:`app.maps.symmetry.rotational_symmetries`;
+    ``layout``: the map's, when it has levels: each twin on its mode's level).
 
     Where nothing tells the twins apart, each mode is as likely at each of its twins:
     its weight is shared evenly between itself and its images turned about the centre,
@@ -385,7 +393,7 @@ def with_twins(estimate: Estimate, twins: Sequence[tuple[float, float, float]]) 
     for h in estimate.hypotheses:
         spread.append(replace(h, weight=h.weight * share))
         for twin in twins:
-            x, y, theta = twin_pose(h.x, h.y, h.theta_rad, twin)
+            x, y, theta = twin_pose(h.x, h.y, h.theta_rad, twin, layout)
             spread.append(replace(h, x=x, y=y, theta_rad=theta, weight=h.weight * share))
     merged: list[Hypothesis] = []
     for h in sorted(spread, key=lambda h: -h.weight):

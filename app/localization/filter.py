@@ -89,7 +89,7 @@ from app.localization.walked import WANDER_SHARE, WalkedPath
 from app.maps.geometry import wrap_angle, wrap_rad
 from app.maps.model import SemanticMap
 from app.maps.prepare import ensure_prepared
-from app.maps.symmetry import alike_levels, rotational_symmetries
+from app.maps.symmetry import alike_levels, rotational_symmetries, twin_pose
 from app.state import from_plain
 
 #: Share of a global start's particles drawn from the first observation.
@@ -417,10 +417,10 @@ class ParticleFilter:
             return False
         if start is None:
             return True
-        for cx, cy, angle in self._twins:
-            # A turn by angle about the centre moves a point r from it by 2 r sin(angle/2).
-            apart_m = 2.0 * math.hypot(start.x - cx, start.y - cy) * abs(math.sin(angle / 2.0))
-            far = apart_m > TWIN_START_STDS * start.std_xy_m
+        for twin in self._twins:
+            tx, ty, _ = twin_pose(start.x, start.y, start.theta_rad, twin, self.map.layout)
+            angle = twin[2]
+            far = math.hypot(tx - start.x, ty - start.y) > TWIN_START_STDS * start.std_xy_m
             turned = abs(wrap_rad(angle)) > TWIN_START_STDS * start.std_theta_rad
             if not (far or turned):
                 return True
@@ -1072,7 +1072,9 @@ class ParticleFilter:
             est = with_alternatives(est, self.evidence.hypotheses(), evidence_share)
         # Only the map's twins are left: neither turning nor walking tells them apart
         # (a compass heading or a start does).
-        self.twins_undecided = self._twins_possible and only_twins(est, self._twins)
+        self.twins_undecided = self._twins_possible and only_twins(
+            est, self._twins, self.map.layout
+        )
         # ... or the same place on floors that look alike (the barometer counts storeys
         # from a known floor only, and there was none).
         self.levels_undecided = (
@@ -1081,7 +1083,7 @@ class ParticleFilter:
             and only_alike_levels(est, self._alike_levels, self.map.layout)
         )
         if self._twins_possible:
-            est = with_twins(est, self._twins)
+            est = with_twins(est, self._twins, self.map.layout)
         if est.converged:
             assert protection is not None
             est = est.with_protection(protection)

@@ -304,12 +304,14 @@ def _symmetry_problems(source: str, m: SemanticMap) -> list[Problem]:
     cx, cy, _ = turns[0]
     angles = [f"{math.degrees(a):.0f}" for _, _, a in turns]
     degrees = " and ".join([", ".join(angles[:-1]), angles[-1]] if len(angles) > 1 else angles)
+    every = " on every level (stairs, lifts and escalators onto their like)"
+    every = every if m.layout.levels else ""
     return [
         Problem(
             source,
             "objects",
             f"the map turns onto itself under a rotation of {degrees} deg about "
-            f"({cx:.2f}, {cy:.2f}): every wall onto a wall and every object onto one of "
+            f"({cx:.2f}, {cy:.2f}){every}: every wall onto a wall and every object onto one of "
             "its class, so each place has a twin that sees the same and no one is located "
             "on this map without a compass heading or a known start; an object that only "
             "one side has (a sign, a door of its own class) tells them apart",

@@ -18,12 +18,19 @@ onto itself are rotations about a fixed point, and an object set's centroid is f
 any of them); mirror images are no twins, since a mirror turns every bearing's sign.
 Walls must match segment for segment: a wall drawn in one piece on one side and in two
 on the other is taken for asymmetric, which leaves the filter as without this check.
-Maps with levels are not checked for turns (each level would need its own). They are
-checked for levels that look alike (:func:`alike_levels`): floors drawn the same, wall
-for wall and object for object at the same places, as an office tower's often are. A
-place on one of them and the same place on the others see the same; only the
-barometer's count of storeys from a known floor, or a start the app gave, tells them
-apart.
+On a map with levels a turn is a twin only when it carries every level onto itself, the
+same turn about the same point of the file's frame (each level's walls onto its walls,
+its objects onto its objects of their class), and every connector's stop onto a stop
+on its level of a connector of the same kind, way and levels served: then a pose and
+its twin ride the same connectors to twin places, and no floor tells them apart either.
+A venue only one of whose floors turns onto itself has no twins: a ride to another
+floor tells them apart. In the plane the filter works in (each level shifted along x,
+:class:`app.maps.levels.LevelLayout`) the turn is applied in the pose's own level's
+frame (:func:`twin_pose` with the map's layout). Maps with levels are also checked for
+levels that look alike (:func:`alike_levels`): floors drawn the same, wall for wall and
+object for object at the same places, as an office tower's often are. A place on one
+of them and the same place on the others see the same; only the barometer's count of
+storeys from a known floor, or a start the app gave, tells them apart.
 """
 
 from __future__ import annotations
@@ -35,6 +42,7 @@ from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
 from app.maps.geometry import wrap_rad
+from app.maps.levels import LevelLayout
 from app.maps.model import SemanticMap
 
 #: Objects and wall ends this close (m) to their rotated images count as matched: well
@@ -61,13 +69,22 @@ def _rotate(
 
 
 def twin_pose(
-    x: float, y: float, theta: float, twin: tuple[float, float, float]
+    x: float,
+    y: float,
+    theta: float,
+    twin: tuple[float, float, float],
+    layout: LevelLayout | None = None,
 ) -> tuple[float, float, float]:
     """The pose (x, y, theta) carried by ``twin``, a turn ``(cx, cy, angle)`` of
-    :func:`rotational_symmetries`: the twin place that sees what the pose sees."""
+    :func:`rotational_symmetries`: the twin place that sees what the pose sees. With the
+    ``layout`` of a map with levels, (x, y) is a plane point and the turn is made in its
+    level's frame (the twin is on the same level)."""
     cx, cy, angle = twin
-    ((tx, ty),) = _rotate(np.array([[x, y]]), np.array([cx, cy]), angle)
-    return float(tx), float(ty), wrap_rad(theta + angle)
+    shift = (
+        0.0 if layout is None or not layout.levels else layout.levels[layout.level_of(x)].offset_x
+    )
+    ((tx, ty),) = _rotate(np.array([[x - shift, y]]), np.array([cx, cy]), angle)
+    return float(tx) + shift, float(ty), wrap_rad(theta + angle)
 
 
 def _onto(
@@ -98,13 +115,32 @@ def _walls_match(walls: NDArray[np.float64], image: NDArray[np.float64], tol_m: 
     return bool((np.isfinite(same) | np.isfinite(swapped)).all())
 
 
+def _stop_points(layout: LevelLayout) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+    """Each connector stop's centroid (file frame) and a class per connector kind, way,
+    levels served and the stop's own level: a stop must turn onto a stop of that class."""
+    keys: dict[tuple[object, ...], int] = {}
+    xy, cls = [], []
+    for conn in layout.connectors:
+        for stop in conn.stops:
+            key = (conn.kind, conn.direction, conn.levels, stop.level)
+            cls.append(keys.setdefault(key, len(keys)))
+            xy.append(stop.polygon.mean(axis=0))
+    return np.array(xy, dtype=np.float64).reshape(-1, 2), np.array(cls, dtype=np.int64)
+
+
 def _find(semantic_map: SemanticMap, tol_m: float) -> tuple[tuple[float, float, float], ...]:
-    if semantic_map.spec.levels is not None:
-        return ()
-    xy = np.asarray(semantic_map.object_xy, dtype=np.float64).reshape(-1, 2)
+    layout = semantic_map.layout
+    spec = semantic_map.spec
+    # In the file's frame: on a map with levels every level turns about the same point.
+    xy = np.array([[o.x, o.y] for o in spec.objects], dtype=np.float64).reshape(-1, 2)
     cls = np.asarray(semantic_map.object_class, dtype=np.int64)
     if xy.shape[0] == 0:
         return ()
+    # An object turns onto an object of its class on its own level.
+    n_cls = int(cls.max()) + 1
+    cls = cls + n_cls * np.asarray(layout.object_level, dtype=np.int64)
+    wall_level = np.asarray(layout.wall_level, dtype=np.int64)
+    stops_xy, stops_cls = _stop_points(layout)
     centre = xy.mean(axis=0)
     rel = xy - centre
     radius = np.hypot(rel[:, 0], rel[:, 1])
@@ -114,7 +150,8 @@ def _find(semantic_map: SemanticMap, tol_m: float) -> tuple[tuple[float, float, 
     # The farthest object goes onto an object of its class as far from the centre: each
     # such object gives the one angle a symmetry could have.
     base = math.atan2(rel[far, 1], rel[far, 0])
-    walls = np.asarray(semantic_map.walls, dtype=np.float64).reshape(-1, 4)
+    walls = np.array([[w.x1, w.y1, w.x2, w.y2] for w in spec.walls], dtype=np.float64)
+    walls = walls.reshape(-1, 4)
     found = []
     for j in np.flatnonzero((cls == cls[far]) & (np.abs(radius - radius[far]) <= tol_m)):
         angle = (math.atan2(rel[j, 1], rel[j, 0]) - base) % (2.0 * math.pi)
@@ -124,10 +161,17 @@ def _find(semantic_map: SemanticMap, tol_m: float) -> tuple[tuple[float, float, 
         # Every object's image on an object of its class.
         if not _onto(_rotate(xy, centre, angle), cls, xy, cls, tol_m):
             continue
+        if stops_xy.shape[0] and not _onto(
+            _rotate(stops_xy, centre, angle), stops_cls, stops_xy, stops_cls, tol_m
+        ):
+            continue
         image = np.hstack(
             (_rotate(walls[:, :2], centre, angle), _rotate(walls[:, 2:], centre, angle))
         )
-        if _walls_match(walls, image, tol_m):
+        if all(
+            _walls_match(walls[wall_level == k], image[wall_level == k], tol_m)
+            for k in np.unique(wall_level)
+        ):
             found.append((float(centre[0]), float(centre[1]), angle))
     return tuple(sorted(found, key=lambda r: r[2]))
 

@@ -15,7 +15,10 @@ from app.localization.config import FilterConfig
 from app.localization.estimate import only_twins, with_twins
 from app.localization.filter import ParticleFilter
 from app.localization.types import Estimate, Hypothesis, InitialPose, Odometry
+from app.maps.model import parse_map
+from app.maps.prepare import ensure_prepared
 from app.simulation.simulator import simulate
+from tests.helpers import symmetric_venue_spec
 
 
 @pytest.mark.parametrize("condition", ["clutter-180", "missed-180"])
@@ -121,3 +124,53 @@ def test_on_a_walk_the_twin_is_listed_and_only_the_twins_are_said_to_be_left() -
         h.weight for h in est.hypotheses if math.hypot(h.x - 12.0 + now.x, h.y - 8.0 + now.y) < 1.0
     )
     assert there < 0.01
+
+
+def test_on_a_venue_that_turns_onto_itself_the_twin_is_on_the_persons_floor() -> None:
+    """A venue every floor of which the same half turn carries onto itself (stairs
+    included): walking on its First Floor from a global start, the belief is the place
+    and its twin on that floor, nothing is told, and the filter says only the twins are
+    left; a start on that floor that rules the twin out lists none."""
+    venue = ensure_prepared(parse_map(symmetric_venue_spec()))
+    offset = venue.layout.levels[1].offset_x
+    spec = symmetric_venue_spec()
+
+    def upstairs(items: object) -> list[dict[str, object]]:
+        return [{k: v for k, v in i.items() if k != "level"} for i in items if i["level"] == "L1"]  # type: ignore[attr-defined]
+
+    first_floor = parse_map(
+        {
+            "name": "first_floor",
+            "walls": upstairs(spec["walls"]),
+            "objects": upstairs(spec["objects"]),
+        }
+    )
+    scenario = Scenario("symmetric_room", "nominal-360")
+    world, rng = (np.random.default_rng(s) for s in np.random.SeedSequence([0, 12]).spawn(2))
+    frames = simulate(first_floor, scenario.simulation(), world)[:100]
+    pf = ParticleFilter(venue, FilterConfig(particles=5000), rng=rng)
+    undecided = []
+    for f in frames:
+        est = pf.step(f.odometry, f.detections)
+        undecided.append(pf.twins_undecided)
+        assert not est.converged
+    assert np.mean(undecided[-50:]) >= 0.9
+    top, twin = est.hypotheses[:2]
+    assert abs(top.weight - twin.weight) < 1e-9
+    truth = frames[-1].truth
+    for px, py in ((truth.x + offset, truth.y), (12.0 - truth.x + offset, 8.0 - truth.y)):
+        assert min(math.hypot(h.x - px, h.y - py) for h in (top, twin)) < 0.5
+    assert {venue.layout.level_of(h.x) for h in (top, twin)} == {1}
+    start = frames[0].truth
+    known = ParticleFilter(
+        venue,
+        FilterConfig(particles=5000),
+        rng=np.random.default_rng(1),
+        initial_pose=InitialPose(start.x + offset, start.y, start.theta_rad, 0.1, 0.05),
+    )
+    assert not known._twins_possible
+    wide = InitialPose(start.x + offset, start.y, start.theta_rad, 4.0, math.radians(180.0))
+    again = ParticleFilter(
+        venue, FilterConfig(particles=500), rng=np.random.default_rng(2), initial_pose=wide
+    )
+    assert again._twins_possible
