@@ -15,6 +15,7 @@ from app.localization.odometry_bias import (
     BIAS_PRIORS,
     CLAMP_STDS,
     NARROW_POSITION_STD_M,
+    NARROW_SHORTFALL,
     SEGMENT_S,
     OdometryBias,
 )
@@ -228,3 +229,21 @@ def test_a_narrow_cameras_fix_teaches_the_scale_more_cautiously() -> None:
     )
     assert narrow.odometry_bias is not None
     assert narrow.odometry_bias.min_position_std_m == NARROW_POSITION_STD_M
+
+
+def test_a_narrow_cameras_shortfall_is_made_up() -> None:
+    """Through a narrow camera the fix's displacement falls short of the person's by
+    about ``NARROW_SHORTFALL`` (measured, module docstring): exact odometry and a fix
+    whose every displacement is that much short leave the narrow camera's scale at 1,
+    while a 360 deg camera's fix, which does not fall short, would be taken at its word."""
+    rng = np.random.default_rng(21)
+    poses = _walk(1500, rng)
+    short = poses.copy()
+    short[:, :2] *= 1.0 - NARROW_SHORTFALL  # every displacement that share short
+    learnt = {}
+    for fov in (66.0, 360.0):
+        bias = OdometryBias(BIAS_PRIORS["pdr"], fov)
+        _feed(bias, short, _increments(poses), np.random.default_rng(22), pos_noise=0.02)
+        learnt[fov] = bias.scale
+    assert learnt[66.0] == pytest.approx(1.0, abs=0.004)
+    assert learnt[360.0] == pytest.approx(1.0 - NARROW_SHORTFALL, abs=0.004)
