@@ -18,8 +18,8 @@ knows, each from the moment it starts to the next fix or its deadline:
   rode, the belief says which connector), for ``STOP_EXIT_FRAMES`` frames out of the
   stop, whose car or flight the bearings' geometry carries as a fix;
 * a fix let go for doubt alone (an alternative gained probability, then was refuted;
-  or the evidence swapped the belief onto a place within the told radius), for
-  ``DOUBT_FRAMES`` frames.
+  its estimate jumped further in one step than the motion allows; or the evidence
+  swapped the belief onto a place within the told radius), for ``DOUBT_FRAMES`` frames.
 
 The gain's other tests still apply (the slide check among them), and a gain the gate
 holds is never tested again for its radius.

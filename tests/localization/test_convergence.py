@@ -259,3 +259,23 @@ def test_a_held_fix_is_let_go_when_it_jumps_beyond_the_motion() -> None:
         assert out.converged is kept
         if not kept:
             assert gate.lost_because == ("jump",)
+            # A jump alone questions the place, as an alternative does: the regain
+            # continues the told fix (app.localization.continuation).
+            assert gate.let_go_for_doubt
+
+
+def test_only_doubt_alone_lets_the_regain_continue_the_fix() -> None:
+    """A fix let go for a jump or an alternative alone may be taken up again without a
+    first fix's narrow radius; one let go for anything else, or for a jump with a
+    misfit besides, may not."""
+    gate = _held_gate()
+    assert not gate.let_go_for_doubt  # (held)
+    for _ in range(gate.hold_misfit_frames):
+        gate.confirm(_tight(), quality=MISFIT, searched_ago=0)
+    assert not gate.held and "misfit" in gate.lost_because and not gate.let_go_for_doubt
+    gate = _held_gate()
+    gate.confirm(_tight(), quality=GOOD, searched_ago=0, alternatives=0.9)
+    assert gate.lost_because == ("alternative",) and gate.let_go_for_doubt
+    gate = _held_gate()
+    gate.confirm(_tight(), quality=BAD_FRAME, searched_ago=0, moved_m=-1.0)
+    assert set(gate.lost_because) == {"jump", "bad frame"} and not gate.let_go_for_doubt
