@@ -82,10 +82,10 @@ NARROW_POSITION_STD_M = 0.3
 #: displacement falls short of the person's, and each stretch's measurement is raised by
 #: this share of the odometry's length. Measured (the scale in use logged frame by frame
 #: against the truth, converged frames 3 m of odometry apart, PDR grade): the estimate's
-#: displacement over the odometry's, minus the person's over the odometry's, is about
-#: 0.56 (truth - scale in use) - 0.019 on the venue suite through a 66-degree camera
-#: (225 pairs, 12 walks), -0.028 and -0.036 on the office suite (with and without 30 %
-#: missed), -0.044 on the two-wing floor, -0.002 in the door corridor, and -0.002 on the
+#: displacement over the odometry's is about the scale in use plus 0.56 of (truth -
+#: scale in use), less a shortfall of 0.019 on the venue suite through a 66-degree camera
+#: (225 pairs, 12 walks), 0.028 and 0.036 on the office suite (without and with 30 %
+#: missed), 0.044 on the two-wing floor, 0.002 in the door corridor, and 0.002 on the
 #: venue at 180 degrees: the fix is pinned along the walk only now and then, the odometry
 #: carries it between, and it gains a little lag each time. A learner that takes a
 #: stretch at its word settles where the two terms cancel, a scale short by the shortfall
