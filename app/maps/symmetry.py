@@ -80,9 +80,7 @@ def twin_pose(
     ``layout`` of a map with levels, (x, y) is a plane point and the turn is made in its
     level's frame (the twin is on the same level)."""
     cx, cy, angle = twin
-    shift = (
-        0.0 if layout is None or not layout.levels else layout.levels[layout.level_of(x)].offset_x
-    )
+    shift = 0.0 if layout is None else float(layout.offsets(layout.level_of(x)))
     ((tx, ty),) = _rotate(np.array([[x - shift, y]]), np.array([cx, cy]), angle)
     return float(tx) + shift, float(ty), wrap_rad(theta + angle)
 
@@ -115,6 +113,15 @@ def _walls_match(walls: NDArray[np.float64], image: NDArray[np.float64], tol_m: 
     return bool((np.isfinite(same) | np.isfinite(swapped)).all())
 
 
+def _file_frame(semantic_map: SemanticMap) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """The map's walls (rows x1, y1, x2, y2) and objects' (x, y) in the file's frame, each
+    level's in its own (the plane's arrays shift each level along x)."""
+    spec = semantic_map.spec
+    walls = np.array([[w.x1, w.y1, w.x2, w.y2] for w in spec.walls], dtype=np.float64)
+    xy = np.array([[o.x, o.y] for o in spec.objects], dtype=np.float64)
+    return walls.reshape(-1, 4), xy.reshape(-1, 2)
+
+
 def _stop_points(layout: LevelLayout) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
     """Each connector stop's centroid (file frame) and a class per connector kind, way,
     levels served and the stop's own level: a stop must turn onto a stop of that class."""
@@ -130,9 +137,8 @@ def _stop_points(layout: LevelLayout) -> tuple[NDArray[np.float64], NDArray[np.i
 
 def _find(semantic_map: SemanticMap, tol_m: float) -> tuple[tuple[float, float, float], ...]:
     layout = semantic_map.layout
-    spec = semantic_map.spec
     # In the file's frame: on a map with levels every level turns about the same point.
-    xy = np.array([[o.x, o.y] for o in spec.objects], dtype=np.float64).reshape(-1, 2)
+    walls, xy = _file_frame(semantic_map)
     cls = np.asarray(semantic_map.object_class, dtype=np.int64)
     if xy.shape[0] == 0:
         return ()
@@ -150,8 +156,6 @@ def _find(semantic_map: SemanticMap, tol_m: float) -> tuple[tuple[float, float, 
     # The farthest object goes onto an object of its class as far from the centre: each
     # such object gives the one angle a symmetry could have.
     base = math.atan2(rel[far, 1], rel[far, 0])
-    walls = np.array([[w.x1, w.y1, w.x2, w.y2] for w in spec.walls], dtype=np.float64)
-    walls = walls.reshape(-1, 4)
     found = []
     for j in np.flatnonzero((cls == cls[far]) & (np.abs(radius - radius[far]) <= tol_m)):
         angle = (math.atan2(rel[j, 1], rel[j, 0]) - base) % (2.0 * math.pi)
@@ -192,11 +196,8 @@ def _alike(semantic_map: SemanticMap, tol_m: float) -> tuple[tuple[int, ...], ..
     layout = semantic_map.layout
     if layout.count < 2:
         return ()
-    spec = semantic_map.spec
     # Each level's walls and objects in the file's frame (every level's own).
-    walls = np.array([[w.x1, w.y1, w.x2, w.y2] for w in spec.walls], dtype=np.float64)
-    walls = walls.reshape(-1, 4)
-    obj_xy = np.array([[o.x, o.y] for o in spec.objects], dtype=np.float64).reshape(-1, 2)
+    walls, obj_xy = _file_frame(semantic_map)
     obj_cls = np.asarray(semantic_map.object_class, dtype=np.int64)
     per_level = [
         (walls[layout.wall_level == k], obj_xy[layout.object_level == k],

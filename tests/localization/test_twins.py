@@ -4,6 +4,7 @@ same, so without a compass or a start that tells them apart, nothing is ever tol
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 import pytest
@@ -15,7 +16,7 @@ from app.localization.config import FilterConfig
 from app.localization.estimate import only_twins, with_twins
 from app.localization.filter import ParticleFilter
 from app.localization.types import Estimate, Hypothesis, InitialPose, Odometry
-from app.maps.model import parse_map
+from app.maps.model import SemanticMap, parse_map
 from app.maps.prepare import ensure_prepared
 from app.simulation.simulator import simulate
 from tests.helpers import symmetric_venue_spec
@@ -89,19 +90,28 @@ def test_hypotheses_are_spread_over_the_twins_and_merged_where_they_meet() -> No
     assert not only_twins(_estimate((3.0, 2.0, 0.0, 1.0, 0.1)), ())
 
 
+def _walk(
+    walked: SemanticMap, believed: SemanticMap
+) -> tuple[list[Any], list[tuple[Estimate, bool]]]:
+    """The symmetric room's walk (100 frames, 360 deg) on ``walked``, through a fresh
+    5,000-particle filter on ``believed``: the frames, and per frame the estimate and
+    whether the filter said only the twins were left."""
+    scenario = Scenario("symmetric_room", "nominal-360")
+    world, rng = (np.random.default_rng(s) for s in np.random.SeedSequence([0, 12]).spawn(2))
+    frames = simulate(walked, scenario.simulation(), world)[:100]
+    pf = ParticleFilter(believed, FilterConfig(particles=5000), rng=rng)
+    steps = [(pf.step(f.odometry, f.detections), pf.twins_undecided) for f in frames]
+    return frames, steps
+
+
 def test_on_a_walk_the_twin_is_listed_and_only_the_twins_are_said_to_be_left() -> None:
     """On the symmetric room the belief lists the person's place and its twin at equal
     weight, and after the first seconds says only the twins are left (the narrator then
     suggests nothing: tests/feedback); a start that tells them apart lists no twin."""
     room = hard_map("symmetric_room").map
-    scenario = Scenario("symmetric_room", "nominal-360")
-    world, rng = (np.random.default_rng(s) for s in np.random.SeedSequence([0, 12]).spawn(2))
-    frames = simulate(room, scenario.simulation(), world)[:100]
-    pf = ParticleFilter(room, FilterConfig(particles=5000), rng=rng)
-    undecided = []
-    for f in frames:
-        est = pf.step(f.odometry, f.detections)
-        undecided.append(pf.twins_undecided)
+    frames, steps = _walk(room, room)
+    est = steps[-1][0]
+    undecided = [u for _, u in steps]
     assert not est.converged and all(undecided[-50:])
     top, twin = est.hypotheses[:2]
     assert abs(top.weight - twin.weight) < 1e-9
@@ -145,16 +155,10 @@ def test_on_a_venue_that_turns_onto_itself_the_twin_is_on_the_persons_floor() ->
             "objects": upstairs(spec["objects"]),
         }
     )
-    scenario = Scenario("symmetric_room", "nominal-360")
-    world, rng = (np.random.default_rng(s) for s in np.random.SeedSequence([0, 12]).spawn(2))
-    frames = simulate(first_floor, scenario.simulation(), world)[:100]
-    pf = ParticleFilter(venue, FilterConfig(particles=5000), rng=rng)
-    undecided = []
-    for f in frames:
-        est = pf.step(f.odometry, f.detections)
-        undecided.append(pf.twins_undecided)
-        assert not est.converged
-    assert np.mean(undecided[-50:]) >= 0.9
+    frames, steps = _walk(first_floor, venue)
+    assert not any(e.converged for e, _ in steps)
+    est = steps[-1][0]
+    assert np.mean([u for _, u in steps[-50:]]) >= 0.9
     top, twin = est.hypotheses[:2]
     assert abs(top.weight - twin.weight) < 1e-9
     truth = frames[-1].truth
