@@ -83,6 +83,7 @@ from app.localization.sensor import (
     prepare_observation,
 )
 from app.localization.slide import SLIP_SCALE_STDS, OdometryCheck
+from app.localization.told_heading import TURNED_GAIN_FRAMES, ToldHeading
 from app.localization.types import Detection, Estimate, InitialPose, Odometry
 from app.localization.unseen import UnseenObjects
 from app.localization.walked import WANDER_SHARE, WalkedPath
@@ -298,6 +299,9 @@ class ParticleFilter:
             self.config.heading_slack_deg,
             None if source is None else SLIP_SCALE_STDS * BIAS_PRIORS[source].scale_std,
         )
+        #: The last told fix's heading, carried by the odometry
+        #: (:mod:`~app.localization.told_heading`).
+        self.told_heading = ToldHeading(BIAS_PRIORS["unknown" if source is None else source])
         #: The walk the odometry recorded, to test a place before it is told
         #: (:mod:`~app.localization.walked`).
         said = source or "unknown"
@@ -326,6 +330,7 @@ class ParticleFilter:
         self.latency.reset()
         self.geometry.reset()
         self.odometry_check.reset()
+        self.told_heading.reset()
         self.walked.reset()
         if self.odometry_bias is not None:
             self.odometry_bias.reset()
@@ -364,6 +369,9 @@ class ParticleFilter:
         self._blind_hold = False
         #: Frames in a row a gain was tested with a narrow radius (NARROW_FRAMES).
         self._narrow_frames = 0
+        #: Whether the gate's run towards a gain has faced otherwise than the last told
+        #: fix (app.localization.told_heading).
+        self._turned_run = False
         #: Whether a fix has been told since the filter last started from what it was
         #: given (see _place_is_unique).
         self._told_since_start = False
@@ -492,6 +500,7 @@ class ParticleFilter:
         self.continuation.reset()
         self.geometry.reset()
         self.odometry_check.reset()
+        self.told_heading.reset()
         if self.evidence is not None:
             self.evidence.reset()
         if self.unseen is not None:
@@ -793,6 +802,7 @@ class ParticleFilter:
             lx, ly, lr = self._last_fix
             walked = WALK_BOUND_SCALE * hypot(odometry.forward_m, odometry.left_m)
             self._last_fix = (lx, ly, lr + walked)
+        self.told_heading.moved(odometry, DEFAULT_FRAME_S * steps if frame_s is None else frame_s)
         if odometry is not None:
             self.geometry.moved(odometry)
             self.odometry_check.moved(odometry)
@@ -819,6 +829,7 @@ class ParticleFilter:
                 # The fix the bearings' geometry gave rides along with the person.
                 self.geometry.shift_x(self.floors.shift_x_m)
                 self.odometry_check.reset()  # the ride is no walk the odometry saw
+                self.told_heading.reset()
                 self.walked.reset()
                 if self.evidence is not None:
                     # The alternatives were carried by the walk's odometry, not the ride:
@@ -966,6 +977,14 @@ class ParticleFilter:
             slide_m=slide_m,
             gain_alternatives=gain_share,
         )
+        # A run towards a gain that faced otherwise than the last told fix on any of
+        # its frames (app.localization.told_heading): a run's headings wander by a few
+        # degrees, and one frame that happens to agree does not clear it.
+        streak = self._gate.streak
+        if streak <= 1 or was_held:
+            self._turned_run = False
+        if streak > 0 and not was_held and self.told_heading.disagrees(raw.theta_rad):
+            self._turned_run = True
         protection: float | None = None
         gained = est.converged and not was_held
         withheld = False
@@ -1004,7 +1023,20 @@ class ParticleFilter:
                     if not narrow:
                         withhold_because = "solution separation"
                 self._narrow_frames = self._narrow_frames + 1 if narrow else 0
-            if gained and not self.continuation.active and self._narrow_frames < NARROW_FRAMES:
+            if (
+                gained
+                and not self.continuation.active
+                and self._narrow_frames >= NARROW_FRAMES
+                and streak < TURNED_GAIN_FRAMES
+                and self._turned_run
+            ):
+                # A fix facing otherwise than the last told one, carried by the
+                # odometry, waits until the gate has found it steady for longer
+                # (app.localization.told_heading).
+                self._gate.withhold("turned from the last fix")
+                est = est.with_converged(False)
+                withheld = True
+            elif gained and not self.continuation.active and self._narrow_frames < NARROW_FRAMES:
                 # A fix is gained only once its radius has been narrow (GAIN_PROTECTION_M)
                 # for NARROW_FRAMES frames in a row; the gate tries again on the next
                 # frame (ConvergenceGate.withhold). A fix the gate holds is not tested
@@ -1027,6 +1059,7 @@ class ParticleFilter:
             self._told_since_start = True
             assert protection is not None
             self._last_fix = (est.x, est.y, protection)
+            self.told_heading.told(est.theta_rad)
         # Where a held fix has nothing in clear view (a lift car, a bare wall ahead of a
         # narrow camera), every detection is clutter wherever the person stands, yet
         # weighing them lets the few particles elsewhere that one happens to fit outweigh
@@ -1056,7 +1089,6 @@ class ParticleFilter:
             )
         # A run of frames on the way to a gain is held to the odometry as a fix is: its
         # estimates are anchors while it lasts (a new run starts without the last's).
-        streak = self._gate.streak
         if not est.converged and streak <= 1:
             self.odometry_check.drop_candidates()
         candidate = not est.converged and streak > 0
@@ -1163,6 +1195,10 @@ class ParticleFilter:
             return raw, w, ess
         told = self.estimate
         self._last_fix = None  # the evidence says the told place was not the person's
+        if told.converged:
+            # ... nor, swapped out while told, its heading the person's. (A cloud
+            # swapped out while nothing was told says nothing of the last fix.)
+            self.told_heading.reset()
         self.x, self.y, self.theta = self.evidence.swap(self.n)
         self.log_w = np.zeros(self.n)
         self._gate.reset()
@@ -1226,6 +1262,7 @@ class ParticleFilter:
             "frames_without_evidence": self.frames_without_evidence,
             "restarts": self.restarts,
             "narrow_frames": self._narrow_frames,
+            "turned_run": self._turned_run,
             "told_since_start": self._told_since_start,
             "settled_frames": self._settled_frames,
             "twins_possible": self._twins_possible,
@@ -1238,6 +1275,7 @@ class ParticleFilter:
             "latency": self.latency.checkpoint(),
             "geometry": self.geometry.checkpoint(),
             "odometry_check": self.odometry_check.checkpoint(),
+            "told_heading": self.told_heading.checkpoint(),
             "walked": self.walked.checkpoint(),
         }
         if self.odometry_bias is not None:
@@ -1282,6 +1320,7 @@ class ParticleFilter:
         self.frames_without_evidence = int(state["frames_without_evidence"])
         self.restarts = int(state["restarts"])
         self._narrow_frames = int(state.get("narrow_frames", 0))
+        self._turned_run = bool(state.get("turned_run", False))
         # (An older checkpoint: as if told, so no candidate forgives.)
         self._told_since_start = bool(state.get("told_since_start", True))
         self._settled_frames = int(state.get("settled_frames", 0))
@@ -1298,6 +1337,7 @@ class ParticleFilter:
         self.latency.restore(state.get("latency"))
         self.geometry.restore(state.get("geometry"))
         self.odometry_check.restore(state.get("odometry_check"))
+        self.told_heading.restore(state.get("told_heading"))
         self.walked.restore(state.get("walked"))
         if self.odometry_bias is not None:
             self.odometry_bias.restore(state.get("odometry_bias"))
