@@ -9,7 +9,12 @@ import numpy as np
 from app.localization.config import FilterConfig
 from app.localization.filter import ParticleFilter
 from app.localization.odometry_bias import BIAS_PRIORS
-from app.localization.told_heading import BASE_DEG, TURNED_GAIN_FRAMES, ToldHeading
+from app.localization.told_heading import (
+    BASE_DEG,
+    MIN_SINCE_S,
+    TURNED_GAIN_FRAMES,
+    ToldHeading,
+)
 from app.localization.types import Odometry, Pose
 from tests.helpers import paper_office, seen_from
 
@@ -24,6 +29,10 @@ def test_the_told_heading_turns_with_the_odometry() -> None:
     told.moved(Odometry(0.4, 0.0, math.radians(90.0)), 0.2)
     assert told.heading_rad is not None
     assert math.isclose(told.heading_rad, 0.5 + math.radians(90.0))
+    # Within MIN_SINCE_S of the told frame nothing disagrees: a fix taken up again so
+    # soon continues the one let go.
+    assert not told.disagrees(0.5 + math.radians(90.0 + 3.0 * BASE_DEG))
+    told.moved(Odometry(0.0, 0.0, 0.0), MIN_SINCE_S)
     assert not told.disagrees(0.5 + math.radians(90.0 + 0.9 * BASE_DEG))
     assert told.disagrees(0.5 + math.radians(90.0 + 1.5 * BASE_DEG))
     assert told.disagrees(0.5 - math.radians(1.5 * BASE_DEG) + math.radians(90.0))
@@ -60,13 +69,15 @@ def test_a_break_in_the_odometry_forgets_the_heading_and_a_checkpoint_keeps_it()
 
 def _first_fix(told_offset_deg: float | None) -> tuple[int, int, tuple[str, ...]]:
     """Standing still at POSE from a global start through a VIO phone's odometry, with a
-    fix facing ``told_offset_deg`` off POSE's heading told before (None: none): the
+    fix facing ``told_offset_deg`` off POSE's heading told MIN_SINCE_S before (None:
+    none): the
     frame of the first fix, the gate's streak then, and the reasons given on the frame
     before it."""
     config = FilterConfig(particles=3000, odometry_source="vio")
     pf = ParticleFilter(OFFICE, config, rng=np.random.default_rng(1))
     if told_offset_deg is not None:
         pf.told_heading.told(POSE.theta_rad + math.radians(told_offset_deg))
+        pf.told_heading.moved(Odometry(0.0, 0.0, 0.0), MIN_SINCE_S)  # told a while ago
     seen = seen_from(OFFICE, POSE)
     why: tuple[str, ...] = ()
     for k in range(120):
@@ -96,6 +107,7 @@ def test_the_told_heading_is_the_told_frames_median_not_the_last_ones() -> None:
         told.told(0.0)
         told.moved(Odometry(0.1, 0.0, 0.0), 0.2)
     told.told(math.radians(20.0))
+    told.moved(Odometry(0.0, 0.0, 0.0), MIN_SINCE_S)
     assert told.heading_rad is not None and abs(told.heading_rad) < 1e-12
     assert not told.disagrees(0.0)
     assert told.disagrees(math.radians(20.0 + BASE_DEG))
