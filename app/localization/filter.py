@@ -299,12 +299,13 @@ class ParticleFilter:
             self.config.heading_slack_deg,
             None if source is None else SLIP_SCALE_STDS * BIAS_PRIORS[source].scale_std,
         )
-        #: The last told fix's heading, carried by the odometry
+        # (A source not said is held to the widest prior.)
+        said = source or "unknown"
+        #: The heading the last told fixes had, carried by the odometry
         #: (:mod:`~app.localization.told_heading`).
-        self.told_heading = ToldHeading(BIAS_PRIORS["unknown" if source is None else source])
+        self.told_heading = ToldHeading(BIAS_PRIORS[said])
         #: The walk the odometry recorded, to test a place before it is told
         #: (:mod:`~app.localization.walked`).
-        said = source or "unknown"
         self.walked = WalkedPath(WANDER_SHARE[said], SLIP_SCALE_STDS * BIAS_PRIORS[said].scale_std)
         #: The fixes a gain would continue, not held to GAIN_PROTECTION_M (_step).
         self.continuation = Continuation()
@@ -370,7 +371,7 @@ class ParticleFilter:
         #: Frames in a row a gain was tested with a narrow radius (NARROW_FRAMES).
         self._narrow_frames = 0
         #: Whether the gate's run towards a gain has faced otherwise than the last told
-        #: fix (app.localization.told_heading).
+        #: fixes (app.localization.told_heading).
         self._turned_run = False
         #: Whether a fix has been told since the filter last started from what it was
         #: given (see _place_is_unique).
@@ -977,7 +978,7 @@ class ParticleFilter:
             slide_m=slide_m,
             gain_alternatives=gain_share,
         )
-        # A run towards a gain that faced otherwise than the last told fix on any of
+        # A run towards a gain that faced otherwise than the last told fixes on any of
         # its frames (app.localization.told_heading): a run's headings wander by a few
         # degrees, and one frame that happens to agree does not clear it.
         streak = self._gate.streak
@@ -1030,7 +1031,7 @@ class ParticleFilter:
                 and streak < TURNED_GAIN_FRAMES
                 and self._turned_run
             ):
-                # A fix facing otherwise than the last told one, carried by the
+                # A fix facing otherwise than the last told ones, carried by the
                 # odometry, waits until the gate has found it steady for longer
                 # (app.localization.told_heading).
                 self._gate.withhold("turned from the last fix")
