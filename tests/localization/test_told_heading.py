@@ -111,3 +111,26 @@ def test_the_told_heading_is_the_told_frames_median_not_the_last_ones() -> None:
     assert told.heading_rad is not None and abs(told.heading_rad) < 1e-12
     assert not told.disagrees(0.0)
     assert told.disagrees(math.radians(20.0 + BASE_DEG))
+
+
+def test_a_run_held_back_for_its_heading_stays_held_back_across_a_checkpoint() -> None:
+    """A session restored mid-run (a restart of the service) keeps the told heading and
+    the run's flag: the fix still waits for the longer steady run."""
+    config = FilterConfig(particles=3000, odometry_source="vio")
+    pf = ParticleFilter(OFFICE, config, rng=np.random.default_rng(1))
+    pf.told_heading.told(POSE.theta_rad + math.radians(3.0 * BASE_DEG))
+    pf.told_heading.moved(Odometry(0.0, 0.0, 0.0), MIN_SINCE_S)
+    seen = seen_from(OFFICE, POSE)
+    for _ in range(120):
+        assert not pf.step(Odometry(0.0, 0.0, 0.0), seen, frame_s=0.2).converged
+        if pf.gate.not_gained_because == ("turned from the last fix",):
+            break
+    else:
+        raise AssertionError("never held back for its heading")
+    again = ParticleFilter(pf.map, pf.config, rng=np.random.default_rng(9), state=pf.checkpoint())
+    assert again.told_heading.heading_rad == pf.told_heading.heading_rad
+    for _ in range(120):
+        if again.step(Odometry(0.0, 0.0, 0.0), seen, frame_s=0.2).converged:
+            assert again.gate.streak >= TURNED_GAIN_FRAMES
+            return
+    raise AssertionError("never converged after the restore")
