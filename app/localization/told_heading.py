@@ -70,7 +70,11 @@ class ToldHeading:
     """The heading told fixes had, carried by the odometry (module docstring).
 
     Kept as offsets from the odometry's own heading (its turns added up since the last
-    :meth:`reset`), one per told frame for the last ``TOLD_FRAMES`` of them; the told
+    :meth:`reset`; its own sum, not :class:`~app.localization.slide.OdometryCheck`'s,
+    which starts again at every swap of the belief, told or not: measured, forgetting
+    the told heading at a swap made while nothing was told left the stale office at
+    180 deg with 12 confidently-wrong frames instead of 2, seed 3's turned fix coming
+    right after one), one per told frame for the last ``TOLD_FRAMES`` of them; the told
     heading is their median carried to now. The median, not the last told frame's: a
     span of told frames ends for a reason, and its last frames are its worst (measured
     with an app that does not say its latency: a fix let go while turning faced 18-20

@@ -304,7 +304,8 @@ def _symmetry_problems(source: str, m: SemanticMap) -> list[Problem]:
     cx, cy, _ = turns[0]
     angles = [f"{math.degrees(a):.0f}" for _, _, a in turns]
     degrees = " and ".join([", ".join(angles[:-1]), angles[-1]] if len(angles) > 1 else angles)
-    every = " on every level (stairs, lifts and escalators onto their like)" * bool(m.layout.levels)
+    levels = " on every level (stairs, lifts and escalators onto their like)"
+    every = levels if m.layout.levels else ""
     return [
         Problem(
             source,
