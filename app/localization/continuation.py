@@ -19,7 +19,10 @@ knows, each from the moment it starts to the next fix or its deadline:
   stop, whose car or flight the bearings' geometry carries as a fix;
 * a fix let go for doubt alone (an alternative gained probability, then was refuted;
   its estimate jumped further in one step than the motion allows; or the evidence
-  swapped the belief onto a place within the told radius), for ``DOUBT_FRAMES`` frames.
+  swapped the belief onto a place within the told radius), for ``DOUBT_FRAMES`` frames;
+  one let go only because the bearings' geometry no longer bounded it (nothing in view
+  pinned it for a while, :mod:`~app.localization.dilution`), for
+  ``GEOMETRY_DOUBT_FRAMES``.
 
 The gain's other tests still apply (the slide check among them), and a gain the gate
 holds is never tested again for its radius.
@@ -54,6 +57,24 @@ STOP_EXIT_FRAMES = 25
 #: for 37-50 s at 0.1 m of error, each gain taken back for a radius of 2-3 m, and one
 #: swapped 0.13 m for 59 s.
 DOUBT_FRAMES = SLIDE_FRAMES
+#: A fix let go only because its bound grew past the gate's (``hold_geometry_m``: a
+#: narrow camera saw too little for too long) was not questioned at all, and is taken up
+#: again without a narrow radius for this many frames (10 s at 5 frames/s). Longer than
+#: DOUBT_FRAMES: on such a release the cloud spreads for a couple of seconds and the gain
+#: then waits for the evidence tracker's next search. Traced on the venue suite through a
+#: 66-degree camera with PDR odometry (seed 0, Second Floor): let go at 0.43 m of error,
+#: a geometry bound of 1.3-2 m again 12 frames later, the search's wait ending 32 frames
+#: after the release, then held to a first fix's 1.5 m radius for the rest of the floor
+#: (over 150 frames, 0.1-0.5 m off) where the floor's own map kept its fix.
+GEOMETRY_DOUBT_FRAMES = 2 * SLIDE_FRAMES
+#: The reasons (ConvergenceGate.lost_because) a fix let go for doubt is continued for
+#: longer than DOUBT_FRAMES after, and for how long.
+_LONGER_DOUBT: dict[tuple[str, ...], int] = {("weak geometry",): GEOMETRY_DOUBT_FRAMES}
+
+
+def doubt_frames(lost_because: tuple[str, ...]) -> int:
+    """How many frames a fix let go for doubt alone, for ``lost_because``, is continued."""
+    return _LONGER_DOUBT.get(lost_because, DOUBT_FRAMES)
 
 
 class Continuation:
@@ -71,6 +92,8 @@ class Continuation:
         self.out_of_stop: int | None = None
         #: Frames since a fix was let go for doubt alone; None without one.
         self.since_doubt: int | None = None
+        #: ... and how many it is continued for (:func:`doubt_frames`).
+        self.doubt_frames = DOUBT_FRAMES
 
     @property
     def active(self) -> bool:
@@ -82,22 +105,29 @@ class Continuation:
         up as a told fix let go in the stop is."""
         self.out_of_stop = 0
 
-    def doubted(self) -> None:
-        """A fix was let go for doubt alone (or swapped onto a place its radius held)."""
-        self.since_doubt = 0
+    def doubted(self, frames: int = DOUBT_FRAMES) -> None:
+        """A fix was let go for doubt alone (or swapped onto a place its radius held):
+        continued for ``frames`` frames."""
+        self.since_doubt, self.doubt_frames = 0, frames
 
     def after_frame(
-        self, *, let_go_for_doubt: bool, told: bool, in_stop: bool, was_told: bool
+        self,
+        *,
+        let_go_for_doubt: bool,
+        told: bool,
+        in_stop: bool,
+        was_told: bool,
+        doubt_frames: int = DOUBT_FRAMES,
     ) -> None:
         """This frame's end: ``let_go_for_doubt``, the gate let a fix go for doubt alone
-        on it; ``told``, a fix is told after it; ``in_stop``, its estimate is in a
-        connector's stop or between floors; ``was_told``, a fix was told after the
-        frame before."""
+        on it (continued for ``doubt_frames``); ``told``, a fix is told after it;
+        ``in_stop``, its estimate is in a connector's stop or between floors;
+        ``was_told``, a fix was told after the frame before."""
         if let_go_for_doubt:
-            self.since_doubt = 0
+            self.doubted(doubt_frames)
         elif self.since_doubt is not None:
             self.since_doubt += 1
-            if told or self.since_doubt > DOUBT_FRAMES:
+            if told or self.since_doubt > self.doubt_frames:
                 self.since_doubt = None
         if told:
             self.out_of_stop = None
@@ -116,6 +146,7 @@ class Continuation:
         state: dict[str, Any] = {
             "from_known_start": self.known_start,
             "since_doubt": self.since_doubt,
+            "doubt_frames": self.doubt_frames,
         }
         if levels:
             state["out_of_stop"] = self.out_of_stop
@@ -130,3 +161,4 @@ class Continuation:
         self.known_start = bool(state.get("from_known_start", False))
         doubt = state.get("since_doubt")
         self.since_doubt = None if doubt is None else int(doubt)
+        self.doubt_frames = int(state.get("doubt_frames", DOUBT_FRAMES))

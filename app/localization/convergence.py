@@ -41,7 +41,9 @@ from app.state import from_plain
 #: confidently wrong (seeds 10-29 at PDR 180 deg the same); phone suite 13 -> 13
 #: confidently wrong at 5 frames/s and 59 -> 59 at 10, availability unchanged to four
 #: places; integrity suite 3 -> 3, availability 0.8758 -> 0.8760.
-DOUBT_ONLY: tuple[tuple[str, ...], ...] = (("alternative",), ("jump",))
+#: Weak geometry joined them too: a bound grown past ``hold_geometry_m`` questions nothing
+#: about the place, only how closely it is known (continuation.GEOMETRY_DOUBT_FRAMES).
+DOUBT_ONLY: tuple[tuple[str, ...], ...] = (("alternative",), ("jump",), ("weak geometry",))
 
 
 @dataclass(frozen=True)
@@ -315,9 +317,10 @@ class ConvergenceGate:
     @property
     def let_go_for_doubt(self) -> bool:
         """Whether no fix is held and the last one was let go only because an
-        alternative gained probability, or only because its estimate jumped further in
-        one step than the motion allows (``hold_jump_m``): the place was questioned, not
-        refuted (:mod:`~app.localization.continuation`)."""
+        alternative gained probability, only because its estimate jumped further in one
+        step than the motion allows (``hold_jump_m``), or only because the bearings'
+        geometry no longer bounded it (``hold_geometry_m``): the place was questioned,
+        not refuted (:mod:`~app.localization.continuation`)."""
         return not self._held and self.lost_because in DOUBT_ONLY
 
     @property

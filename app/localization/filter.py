@@ -23,7 +23,7 @@ from numpy.typing import NDArray
 from app.localization import sensor_kernel
 from app.localization.compass import CompassReading, compass_log_likelihood
 from app.localization.config import FilterConfig
-from app.localization.continuation import Continuation
+from app.localization.continuation import Continuation, doubt_frames
 from app.localization.convergence import (
     GAIN_PROTECTION_M,
     ConvergenceGate,
@@ -1050,6 +1050,7 @@ class ParticleFilter:
         # (A told frame never reads in_stop: the guard only spares the stop lookup.)
         self.continuation.after_frame(
             let_go_for_doubt=was_held and self._gate.let_go_for_doubt,
+            doubt_frames=doubt_frames(self._gate.lost_because),
             told=est.converged,
             in_stop=not est.converged
             and (transit or (floors is not None and floors.in_stop(raw.x, raw.y))),

@@ -2,7 +2,13 @@
 
 from __future__ import annotations
 
-from app.localization.continuation import DOUBT_FRAMES, STOP_EXIT_FRAMES, Continuation
+from app.localization.continuation import (
+    DOUBT_FRAMES,
+    GEOMETRY_DOUBT_FRAMES,
+    STOP_EXIT_FRAMES,
+    Continuation,
+    doubt_frames,
+)
 
 
 def _frames(c: Continuation, n: int, *, in_stop: bool = False) -> None:
@@ -28,6 +34,37 @@ def test_doubt_lasts_doubt_frames_or_until_the_next_fix() -> None:
     assert not c.active
     c.doubted()  # a swap onto a place the told radius held
     c.after_frame(let_go_for_doubt=False, told=True, in_stop=False, was_told=False)
+    assert not c.active
+
+
+def test_a_fix_let_go_for_weak_geometry_is_continued_for_longer() -> None:
+    assert doubt_frames(("weak geometry",)) == GEOMETRY_DOUBT_FRAMES > DOUBT_FRAMES
+    assert doubt_frames(("alternative",)) == doubt_frames(("jump",)) == DOUBT_FRAMES
+    c = Continuation()
+    c.after_frame(
+        let_go_for_doubt=True,
+        told=False,
+        in_stop=False,
+        was_told=True,
+        doubt_frames=GEOMETRY_DOUBT_FRAMES,
+    )
+    _frames(c, GEOMETRY_DOUBT_FRAMES)
+    assert c.active
+    # ... through a checkpoint too (older ones, without the count, keep DOUBT_FRAMES).
+    again = Continuation()
+    again.restore(c.checkpoint(levels=False))
+    for each in (c, again):
+        _frames(each, 1)
+        assert not each.active
+    state = c.checkpoint(levels=False)
+    state.update(since_doubt=DOUBT_FRAMES)
+    del state["doubt_frames"]
+    again.restore(state)
+    _frames(again, 1)
+    assert not again.active
+    # A swap onto a place the told radius held is plain doubt.
+    c.doubted()
+    _frames(c, DOUBT_FRAMES + 1)
     assert not c.active
 
 

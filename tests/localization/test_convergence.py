@@ -265,9 +265,9 @@ def test_a_held_fix_is_let_go_when_it_jumps_beyond_the_motion() -> None:
 
 
 def test_only_doubt_alone_lets_the_regain_continue_the_fix() -> None:
-    """A fix let go for a jump or an alternative alone may be taken up again without a
-    first fix's narrow radius; one let go for anything else, or for a jump with a
-    misfit besides, may not."""
+    """A fix let go for a jump, an alternative or weak geometry alone may be taken up
+    again without a first fix's narrow radius; one let go for anything else, or for a
+    jump with a misfit besides, may not."""
     gate = _held_gate()
     assert not gate.let_go_for_doubt  # (held)
     for _ in range(gate.hold_misfit_frames):
@@ -279,3 +279,13 @@ def test_only_doubt_alone_lets_the_regain_continue_the_fix() -> None:
     gate = _held_gate()
     gate.confirm(_tight(), quality=BAD_FRAME, searched_ago=0, moved_m=-1.0)
     assert set(gate.lost_because) == {"jump", "bad frame"} and not gate.let_go_for_doubt
+    # A bound grown past the hold's questions how closely the place is known, not the
+    # place; with a bad frame besides it is no longer doubt alone.
+    wide = gate.hold_geometry_m + 0.5
+    gate = _held_gate()
+    gate.confirm(_tight(), quality=GOOD, searched_ago=0, geometry_m=wide)
+    assert gate.lost_because == ("weak geometry",) and gate.let_go_for_doubt
+    gate = _held_gate()
+    gate.confirm(_tight(), quality=BAD_FRAME, searched_ago=0, geometry_m=wide)
+    assert set(gate.lost_because) == {"weak geometry", "bad frame"}
+    assert not gate.let_go_for_doubt

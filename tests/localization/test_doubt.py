@@ -1,4 +1,5 @@
-"""A fix let go for doubt alone continues when it comes back (continuation.DOUBT_FRAMES)."""
+"""A fix let go for doubt alone continues when it comes back (continuation.DOUBT_FRAMES,
+GEOMETRY_DOUBT_FRAMES)."""
 
 from __future__ import annotations
 
@@ -8,7 +9,8 @@ import numpy as np
 import pytest
 
 import app.localization.filter as filter_module
-from app.localization.continuation import DOUBT_FRAMES
+from app.localization.continuation import DOUBT_FRAMES, GEOMETRY_DOUBT_FRAMES
+from app.localization.dilution import BearingGeometry
 from app.localization.evidence import EvidenceTracker
 from app.localization.filter import ParticleFilter
 from app.localization.types import Detection, Odometry, Pose
@@ -21,18 +23,19 @@ POSE = Pose(8.0, 3.0, math.pi / 2)
 
 
 def _located_then_let_go(
-    monkeypatch: pytest.MonkeyPatch, doubt: bool, through_a_checkpoint: bool = False
+    monkeypatch: pytest.MonkeyPatch, cause: str, through_a_checkpoint: bool = False
 ) -> tuple[tuple[str, ...], list[bool], list[float | None]]:
     """Standing at POSE through a 66-degree camera from a known start, a fix is told;
-    then for three frames either an alternative holds half the probability (``doubt``)
-    or the camera reports three boxes nothing on the map explains. Returns why the fix
-    was let go, and converged and the radius on each of the DOUBT_FRAMES frames after
-    (``through_a_checkpoint``: by a filter restored from a checkpoint taken then, as a
-    worker taking the session over would)."""
+    then for three frames an alternative holds half the probability (``cause``
+    "alternative"), the bearings' geometry bounds the place no closer than 6 m
+    ("geometry"), or the camera reports three boxes nothing on the map explains
+    ("junk"). Returns why the fix was let go, and converged and the radius on each of
+    the GEOMETRY_DOUBT_FRAMES frames after (``through_a_checkpoint``: by a filter
+    restored from a checkpoint taken then, as a worker taking the session over would)."""
     # The radius a first fix needs, lowered under this fix's (about 0.5 m): every gain
     # here is a wide one.
     monkeypatch.setattr(filter_module, "GAIN_PROTECTION_M", 0.3)
-    state = {"doubt": False}
+    state = {"doubt": False, "wide": False}
     for name in ("alternative_share", "confirmed_share", "gain_share"):
         real = getattr(EvidenceTracker, name)
         monkeypatch.setattr(
@@ -40,14 +43,20 @@ def _located_then_let_go(
             name,
             property(lambda self, real=real: 0.5 if state["doubt"] else real.fget(self)),
         )
+    radius_m = BearingGeometry.radius_m
+    monkeypatch.setattr(
+        BearingGeometry,
+        "radius_m",
+        lambda self, *pose: 6.0 if state["wide"] else radius_m(self, *pose),
+    )
     pf, seen, est = told_at(VENUE, POSE)
     still = Odometry(0.0, 0.0, 0.0)
     assert est.converged and est.protection_m is not None and est.protection_m > 0.3
     junk = [Detection("bench", b, 1.0) for b in (-0.4, 0.0, 0.4)]
     for _ in range(3):
-        state["doubt"] = doubt
-        est = pf.step(still, seen if doubt else junk)
-    state["doubt"] = False
+        state["doubt"], state["wide"] = cause == "alternative", cause == "geometry"
+        est = pf.step(still, junk if cause == "junk" else seen)
+    state["doubt"] = state["wide"] = False
     assert not est.converged
     why = pf._gate.lost_because
     if through_a_checkpoint:
@@ -55,7 +64,7 @@ def _located_then_let_go(
         pf = ParticleFilter(VENUE, pf.config, rng=np.random.default_rng(99))
         pf.restore(checkpoint.unpack(data)["filter"])
     converged, radius = [], []
-    for _ in range(DOUBT_FRAMES):
+    for _ in range(GEOMETRY_DOUBT_FRAMES):
         est = pf.step(still, seen)
         converged.append(est.converged)
         radius.append(est.protection_m)
@@ -66,9 +75,9 @@ def _located_then_let_go(
 def test_a_fix_let_go_for_an_alternative_alone_is_taken_up_without_a_narrow_radius(
     monkeypatch: pytest.MonkeyPatch, through_a_checkpoint: bool
 ) -> None:
-    why, converged, radius = _located_then_let_go(monkeypatch, True, through_a_checkpoint)
+    why, converged, radius = _located_then_let_go(monkeypatch, "alternative", through_a_checkpoint)
     assert why == ("alternative",)
-    assert any(converged), "the fix was not taken up within DOUBT_FRAMES"
+    assert any(converged[:DOUBT_FRAMES]), "the fix was not taken up within DOUBT_FRAMES"
     first = converged.index(True)
     gained = radius[first]
     assert gained is not None and gained > 0.3
@@ -77,6 +86,17 @@ def test_a_fix_let_go_for_an_alternative_alone_is_taken_up_without_a_narrow_radi
 def test_a_fix_let_go_for_what_the_camera_saw_needs_a_narrow_radius_again(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
-    why, converged, _ = _located_then_let_go(monkeypatch, doubt=False)
+    why, converged, _ = _located_then_let_go(monkeypatch, "junk")
     assert why and "alternative" not in why
     assert not any(converged)
+
+
+@pytest.mark.parametrize("through_a_checkpoint", [False, True])
+def test_a_fix_let_go_for_weak_geometry_alone_is_taken_up_without_a_narrow_radius(
+    monkeypatch: pytest.MonkeyPatch, through_a_checkpoint: bool
+) -> None:
+    why, converged, radius = _located_then_let_go(monkeypatch, "geometry", through_a_checkpoint)
+    assert why == ("weak geometry",)
+    assert any(converged), "the fix was not taken up within GEOMETRY_DOUBT_FRAMES"
+    gained = radius[converged.index(True)]
+    assert gained is not None and gained > 0.3
