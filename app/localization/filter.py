@@ -1462,11 +1462,15 @@ class ParticleFilter:
         fix would otherwise keep that fix from ever being gained (the contradiction
         blocks the gain, and only a told fix could forgive it; measured on the phone
         suite's stale office at 360 deg: 20 s and more at 0.1 m from the truth with no
-        alternative, "not sure"). Not once a fix has been told: an object that took a
-        fix away, or keeps one from coming back, is evidence against that place, and a
-        candidate forgiving it there took a look-alike corridor 7 m away for the truth
-        (measured on the same suite: 2 -> 23 confidently-wrong frames). Nor by a
-        candidate the estimate has only just jumped to (SETTLED_CANDIDATE_FRAMES)."""
+        alternative, "not sure"). Once a fix has been told, only by a candidate within
+        ``FORGIVE_PROTECTION_M`` of where the last one was told (and within its radius,
+        grown by the walk since): elsewhere an object that took a fix away, or keeps one
+        from coming back, is evidence against that place, and a candidate forgiving it
+        there took a look-alike corridor 7 m away for the truth (measured on the same
+        suite: 2 -> 23 confidently-wrong frames); at the told place itself it is the
+        object the told fix would have forgiven, had its radius been a little narrower
+        or the search's last look a little more recent. Nor by a candidate the estimate
+        has only just jumped to (SETTLED_CANDIDATE_FRAMES)."""
         ev = self.evidence
         q = self.quality
         est = self.estimate
@@ -1487,8 +1491,12 @@ class ParticleFilter:
                 and q.fit <= self._gate.hold_fit
             )
         gate = self._gate
+        last = self._last_fix
+        continues = last is not None and hypot(raw.x - last[0], raw.y - last[1]) <= min(
+            last[2], FORGIVE_PROTECTION_M
+        )
         return (
-            not self._told_since_start
+            (not self._told_since_start or continues)
             and self._settled_frames >= SETTLED_CANDIDATE_FRAMES
             and raw.converged
             and q.fit <= gate.gain_fit

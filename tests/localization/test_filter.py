@@ -308,10 +308,11 @@ def test_an_object_gone_before_the_first_fix_does_not_keep_it_from_being_gained(
     """With no start given, the object taken away comes into clear view before any fix
     is told: the contradiction keeps the fix from being gained, and only a told fix
     could forgive it. The candidate, alone in explaining what is seen and known within
-    a metre, forgives it instead, and the fix is gained at the truth; with the
-    candidate's radius taken as unknown, once a fix has been told (a checkpoint from
-    before this rule reads so), or while the candidate has not stayed put long enough
-    (SETTLED_CANDIDATE_FRAMES beyond the stream), it never is."""
+    a metre, forgives it instead, and the fix is gained at the truth; so it does where a
+    fix was told before and let go; with the candidate's radius taken as unknown, once a
+    fix has been told elsewhere (more than a metre away) or nowhere known (a checkpoint
+    from before this rule reads so), or while the candidate has not stayed put long
+    enough (SETTLED_CANDIDATE_FRAMES beyond the stream), it never is."""
     from app.localization import filter as filter_module
 
     settled = filter_module.SETTLED_CANDIDATE_FRAMES
@@ -329,9 +330,13 @@ def test_an_object_gone_before_the_first_fix_does_not_keep_it_from_being_gained(
         pf = ParticleFilter(pf.map, pf.config, rng=np.random.default_rng(1))  # no start
         if candidates_forgive == "radius unknown":
             monkeypatch.setattr(pf, "_candidate_radius_m", lambda raw: np.inf)
-        elif candidates_forgive == "told before":
+        elif candidates_forgive.startswith("told"):
             state = pf.checkpoint()
             del state["told_since_start"]
+            if candidates_forgive != "told before":
+                # A fix was told and let go, 2 m wide, here or 1.5 m away.
+                away = 1.5 if candidates_forgive == "told 1.5 m away" else 0.0
+                state["last_fix"] = [10.0 + away, 9.0, 2.0]
             pf = ParticleFilter(pf.map, pf.config, rng=np.random.default_rng(1), state=state)
         elif candidates_forgive == "not settled":
             monkeypatch.setattr(filter_module, "SETTLED_CANDIDATE_FRAMES", 10**6)
@@ -353,7 +358,11 @@ def test_an_object_gone_before_the_first_fix_does_not_keep_it_from_being_gained(
     assert first_flag and not any(told[: first_flag[0] + 1])
     assert told[-1] and sum(told) >= 20
     assert pf.checkpoint()["told_since_start"] is True
-    for case in ("radius unknown", "told before", "not settled"):
+    # Once a fix has been told, a candidate forgives only within a metre of where it was.
+    pf, told, changed = located("told here")
+    assert pf.unseen is not None and pf.unseen.absent[changed]
+    assert told[-1] and sum(told) >= 20
+    for case in ("radius unknown", "told before", "told 1.5 m away", "not settled"):
         pf, told, changed = located(case)
         assert pf.unseen is not None and not pf.unseen.absent.any(), case
         assert not any(told), case
