@@ -67,14 +67,12 @@ DOUBT_FRAMES = SLIDE_FRAMES
 #: after the release, then held to a first fix's 1.5 m radius for the rest of the floor
 #: (over 150 frames, 0.1-0.5 m off) where the floor's own map kept its fix.
 GEOMETRY_DOUBT_FRAMES = 2 * SLIDE_FRAMES
-#: The reasons (ConvergenceGate.lost_because) a fix let go for doubt is continued for
-#: longer than DOUBT_FRAMES after, and for how long.
-_LONGER_DOUBT: dict[tuple[str, ...], int] = {("weak geometry",): GEOMETRY_DOUBT_FRAMES}
 
 
 def doubt_frames(lost_because: tuple[str, ...]) -> int:
-    """How many frames a fix let go for doubt alone, for ``lost_because``, is continued."""
-    return _LONGER_DOUBT.get(lost_because, DOUBT_FRAMES)
+    """How many frames a fix let go for doubt alone, for ``lost_because`` (the gate's),
+    is continued."""
+    return GEOMETRY_DOUBT_FRAMES if lost_because == ("weak geometry",) else DOUBT_FRAMES
 
 
 class Continuation:

@@ -72,14 +72,27 @@ def _located_then_let_go(
 
 
 @pytest.mark.parametrize("through_a_checkpoint", [False, True])
-def test_a_fix_let_go_for_an_alternative_alone_is_taken_up_without_a_narrow_radius(
-    monkeypatch: pytest.MonkeyPatch, through_a_checkpoint: bool
+@pytest.mark.parametrize(
+    ("cause", "why", "within"),
+    [
+        ("alternative", ("alternative",), DOUBT_FRAMES),
+        ("geometry", ("weak geometry",), GEOMETRY_DOUBT_FRAMES),
+    ],
+)
+def test_a_fix_let_go_for_doubt_alone_is_taken_up_without_a_narrow_radius(
+    monkeypatch: pytest.MonkeyPatch,
+    through_a_checkpoint: bool,
+    cause: str,
+    why: tuple[str, ...],
+    within: int,
 ) -> None:
-    why, converged, radius = _located_then_let_go(monkeypatch, "alternative", through_a_checkpoint)
-    assert why == ("alternative",)
-    assert any(converged[:DOUBT_FRAMES]), "the fix was not taken up within DOUBT_FRAMES"
-    first = converged.index(True)
-    gained = radius[first]
+    """An alternative that gained probability, or a geometry bound grown past the
+    hold's: taken up within the doubt's window (DOUBT_FRAMES, GEOMETRY_DOUBT_FRAMES)
+    at a radius a first fix could not have."""
+    let_go, converged, radius = _located_then_let_go(monkeypatch, cause, through_a_checkpoint)
+    assert let_go == why
+    assert any(converged[:within]), f"the fix was not taken up within {within} frames"
+    gained = radius[converged.index(True)]
     assert gained is not None and gained > 0.3
 
 
@@ -89,14 +102,3 @@ def test_a_fix_let_go_for_what_the_camera_saw_needs_a_narrow_radius_again(
     why, converged, _ = _located_then_let_go(monkeypatch, "junk")
     assert why and "alternative" not in why
     assert not any(converged)
-
-
-@pytest.mark.parametrize("through_a_checkpoint", [False, True])
-def test_a_fix_let_go_for_weak_geometry_alone_is_taken_up_without_a_narrow_radius(
-    monkeypatch: pytest.MonkeyPatch, through_a_checkpoint: bool
-) -> None:
-    why, converged, radius = _located_then_let_go(monkeypatch, "geometry", through_a_checkpoint)
-    assert why == ("weak geometry",)
-    assert any(converged), "the fix was not taken up within GEOMETRY_DOUBT_FRAMES"
-    gained = radius[converged.index(True)]
-    assert gained is not None and gained > 0.3
