@@ -21,7 +21,12 @@ Metrics per scenario (the integrity suite's definitions, :mod:`app.experiments.i
 * **frames to converge**: median over seeds of the first converged frame's number
   (1-based; known starts mostly);
 * the reliability of ``protection_m``: converged frames binned by the radius claimed,
-  each bin's 99th-percentile error against the radius (:func:`reliability`).
+  each bin's 99th-percentile error against the radius (:func:`reliability`);
+* the reliability of the alternatives' probability (what ``converged`` is gained and
+  held against, :mod:`~app.localization.evidence`): every frame since the evidence
+  tracker's first search binned by the share it gives the other places, against how
+  often the estimate was in fact more than 1 m off, on maps as drawn and on stale ones
+  (:func:`alternatives_reliability`).
 """
 
 from __future__ import annotations
@@ -45,6 +50,7 @@ from app.experiments.hard_maps import hard_map
 from app.experiments.integrity import FLIP_M, RIGHT_M, WRONG_M, format_cell
 from app.experiments.runner import map_jobs
 from app.localization.camera import Camera
+from app.localization.convergence import ConvergenceGate
 from app.localization.types import InitialPose
 from app.maps.check import load_map
 from app.maps.model import SemanticMap
@@ -289,6 +295,9 @@ class PhoneRun:
     step_ms: np.ndarray
     #: Whether the frames carried ``detections_age_s`` to the session.
     age_passed: bool
+    #: The probability the evidence tracker gives the other places than the estimate's
+    #: (nan before its first search, or without one).
+    alternatives: np.ndarray
 
 
 def frame_input_fields() -> frozenset[str]:
@@ -387,6 +396,7 @@ def run_scenario(
     conv = np.zeros(n, dtype=bool)
     prot = np.full(n, np.nan)
     ms = np.empty(n)
+    alternatives = np.full(n, np.nan)
     for i, f in enumerate(frames):
         t0 = time.perf_counter()
         out = session.process_sync(frame_input(f, fields, timestamps))  # type: ignore[arg-type]
@@ -398,9 +408,12 @@ def run_scenario(
         conv[i] = e.converged
         if e.protection_m is not None:
             prot[i] = e.protection_m
+        tracker = session.filter.evidence
+        if tracker is not None and tracker.searched_ago is not None:
+            alternatives[i] = tracker.alternative_share
     t = np.array([f.t for f in frames])
     passed = "detections_age_s" in fields and any(f.detections_age_s is not None for f in frames)
-    return PhoneRun(scenario, seed, t, err, conv, prot, ms, passed)
+    return PhoneRun(scenario, seed, t, err, conv, prot, ms, passed, alternatives)
 
 
 def _job(args: tuple[Scenario, int, int, float | None, float | None]) -> PhoneRun:
@@ -484,6 +497,60 @@ def reliability(runs: list[PhoneRun]) -> list[dict[str, float | int]]:
     return rows
 
 
+#: Bin edges of the alternatives' share of the probability for their reliability table
+#: (a bin's upper edge included; 0 exactly, no alternative tracked, is a bin of its own).
+ALTERNATIVE_EDGES = (0.0, 0.001, 0.01, 0.03, 0.1, 0.3, 1.0)
+
+
+def _episodes(inside: np.ndarray) -> list[tuple[int, int]]:
+    """The runs of consecutive True frames in ``inside``: (first, end) index pairs."""
+    edges = np.diff(np.concatenate(([0], inside.astype(np.int8), [0])))
+    starts, ends = np.flatnonzero(edges == 1).tolist(), np.flatnonzero(edges == -1).tolist()
+    return list(zip(starts, ends, strict=True))
+
+
+def alternatives_reliability(runs: list[PhoneRun]) -> list[dict[str, object]]:
+    """Every frame since the evidence tracker's first search, binned by the share of the
+    probability it gives other places than the estimate's, on maps as drawn and on stale
+    ones: per bin the frames, the episodes (runs of consecutive frames of a walk in the
+    bin: frames of one episode are one piece of evidence, not many), the mean share
+    claimed, and how many frames and episodes had the estimate more than ``WRONG_M``
+    off. A claim is calibrated when that share of the episodes matches it; smaller is
+    conservative."""
+    bins = [(0.0, 0.0), *itertools.pairwise(ALTERNATIVE_EDGES)]
+    rows: list[dict[str, object]] = []
+    for stale in (False, True):
+        for lo, hi in bins:
+            frames = episodes = wrong_frames = wrong_episodes = 0
+            claimed = 0.0
+            for r in runs:
+                if ("stale" in r.scenario.condition) != stale:
+                    continue
+                share = r.alternatives
+                inside = (share == 0.0) if hi == 0.0 else (share > lo) & (share <= hi)
+                for a, b in _episodes(inside):
+                    off = r.err_m[a:b] > WRONG_M
+                    frames += b - a
+                    episodes += 1
+                    wrong_frames += int(off.sum())
+                    wrong_episodes += int(off.any())
+                    claimed += float(share[a:b].sum())
+            if frames:
+                rows.append(
+                    {
+                        "map": "stale" if stale else "as drawn",
+                        "share_from": lo,
+                        "share_to": hi,
+                        "frames": frames,
+                        "episodes": episodes,
+                        "claimed": claimed / frames,
+                        "wrong_frames": wrong_frames,
+                        "wrong_episodes": wrong_episodes,
+                    }
+                )
+    return rows
+
+
 def summarize(runs: list[PhoneRun]) -> dict[str, object]:
     by: dict[Scenario, list[PhoneRun]] = defaultdict(list)
     for r in runs:
@@ -493,7 +560,12 @@ def summarize(runs: list[PhoneRun]) -> dict[str, object]:
         row: dict[str, object] = {"map": s.map_name, "condition": s.condition}
         row.update(metrics(rs))
         rows.append(row)
-    return {"scenarios": rows, "total": metrics(runs), "reliability": reliability(runs)}
+    return {
+        "scenarios": rows,
+        "total": metrics(runs),
+        "reliability": reliability(runs),
+        "alternatives_reliability": alternatives_reliability(runs),
+    }
 
 
 def markdown_table(summary: dict[str, object]) -> str:
@@ -533,6 +605,24 @@ def reliability_table(summary: dict[str, object]) -> str:
         lines.append(
             f"| {r['radius_from_m']:g}-{hi} | {r['frames']} | {r['median_radius_m']:.2f} "
             f"| {r['error_p50_m']:.3f} | {r['error_p99_m']:.3f} | {r['covered']:.4f} |"
+        )
+    return "\n".join(lines)
+
+
+def alternatives_table(summary: dict[str, object]) -> str:
+    rows = summary.get("alternatives_reliability", [])
+    assert isinstance(rows, list)
+    lines = [
+        "| map | alternatives' share | frames | episodes | mean share claimed "
+        "| frames > 1 m off | episodes with one |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for r in rows:
+        span = "none" if r["share_to"] == 0.0 else f"{r['share_from']:g}-{r['share_to']:g}"
+        lines.append(
+            f"| {r['map']} | {span} | {r['frames']} | {r['episodes']} | {r['claimed']:.4f} "
+            f"| {r['wrong_frames']} ({r['wrong_frames'] / r['frames']:.4f}) "
+            f"| {r['wrong_episodes']} ({r['wrong_episodes'] / r['episodes']:.4f}) |"
         )
     return "\n".join(lines)
 
@@ -601,6 +691,19 @@ def markdown(
             "## Reliability of `protection_m` (all scenarios' converged frames)",
             "",
             reliability_table(summary),
+            "",
+            "## Reliability of the alternatives' probability",
+            "",
+            "Every frame since the evidence tracker's first search, by the share of the "
+            "probability it gives places other than the estimate's (`converged` is gained "
+            f"only while it is at most {ConvergenceGate.gain_alternatives:g}, or "
+            f"{ConvergenceGate.gain_rivals:g} with the evidence against look-alikes "
+            "tracked for 10 s halved, and held while at most "
+            f"{ConvergenceGate.hold_alternatives:g}), against how often the estimate was "
+            f"more than {WRONG_M:g} m off. An episode is a run of consecutive frames of one "
+            "walk in the bin: its frames are one piece of evidence, not many.",
+            "",
+            alternatives_table(summary),
             "",
             f"Median step time over all frames: {total['median_step_ms']:.2f} ms.",
             "",

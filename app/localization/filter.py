@@ -976,7 +976,7 @@ class ParticleFilter:
             lone_detection=len(detections) == 1,
             geometry_m=(fix_m := self.geometry.radius_m(raw.x, raw.y, raw.theta_rad)),
             slide_m=slide_m,
-            gain_alternatives=gain_share,
+            gain_share=gain_share,
         )
         # A run towards a gain that faced otherwise than the last told fixes on any of
         # its frames (app.localization.told_heading): a run's headings wander by a few

@@ -18,6 +18,7 @@ from app.experiments.phone import (
     QUICK,
     PhoneRun,
     Scenario,
+    alternatives_reliability,
     frame_input,
     frame_input_fields,
     metrics,
@@ -33,11 +34,18 @@ from app.localization.convergence import GAIN_PROTECTION_M
 from app.simulation.phone import PhoneEffects, simulate_phone, vio_phone
 
 
-def fake(err: list[float], conv: list[bool], prot: list[float]) -> PhoneRun:
+def fake(
+    err: list[float],
+    conv: list[bool],
+    prot: list[float],
+    alternatives: list[float] | None = None,
+    condition: str = "vio-360",
+) -> PhoneRun:
     n = len(err)
+    share = np.full(n, np.nan) if alternatives is None else np.array(alternatives)
     return PhoneRun(
-        Scenario("office_suite", "vio-360"), 0, np.arange(n) * 0.2, np.array(err),
-        np.array(conv), np.array(prot), np.zeros(n), False,
+        Scenario("office_suite", condition), 0, np.arange(n) * 0.2, np.array(err),
+        np.array(conv), np.array(prot), np.zeros(n), False, share,
     )  # fmt: skip
 
 
@@ -65,6 +73,31 @@ def test_metrics_by_hand() -> None:
     assert sum(row["frames"] for row in rows) == 6
     small = next(row for row in rows if row["radius_from_m"] == 0.0)
     assert small["frames"] == 1 and small["covered"] == 0.0  # 0.2 m against 0.1 m
+
+
+def test_alternatives_reliability_by_hand() -> None:
+    nan = math.nan
+    drawn = fake(
+        [9.0, 0.1, 0.1, 1.5, 0.2, 0.1, 0.1, 2.0, 0.1],
+        [False] * 9,
+        [nan] * 9,
+        [nan, 0.0, 0.02, 0.02, 0.0, 0.02, 0.5, 0.5, 0.0],
+    )
+    stale = fake([1.2, 0.1], [True, True], [2.0, 2.0], [0.02, 0.0], "vio-stale-360")
+    rows = {(r["map"], r["share_to"]): r for r in alternatives_reliability([drawn, stale])}
+    # Before the first search (nan) no bin; "none" (exactly 0) is a bin of its own.
+    none = rows[("as drawn", 0.0)]
+    assert none["frames"] == 3 and none["episodes"] == 3 and none["wrong_frames"] == 0
+    # 0.02 twice in a row (one episode, one frame 1.5 m off), then once more alone.
+    mid = rows[("as drawn", 0.03)]
+    assert (mid["frames"], mid["episodes"]) == (3, 2)
+    assert (mid["wrong_frames"], mid["wrong_episodes"]) == (1, 1)
+    assert mid["claimed"] == pytest.approx(0.02)
+    top = rows[("as drawn", 1.0)]
+    assert (top["frames"], top["episodes"], top["wrong_frames"]) == (2, 1, 1)
+    assert rows[("stale", 0.03)]["wrong_frames"] == 1
+    assert rows[("stale", 0.0)]["frames"] == 1
+    assert ("as drawn", 0.1) not in rows  # empty bins are left out
 
 
 def test_scenarios_cover_the_issue() -> None:

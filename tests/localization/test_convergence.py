@@ -160,20 +160,30 @@ def test_frames_seeing_one_object_do_not_count_towards_a_light_cluster() -> None
     assert gate.lost_because == ("light",)
 
 
-def test_a_gain_is_held_to_the_stricter_share_and_a_hold_is_not() -> None:
-    """``gain_alternatives`` (the share with long-tracked look-alikes' evidence counted
-    at half weight) stops a gain; once held, only ``alternatives`` counts."""
-    gate = ConvergenceGate()
-    strict = 2.0 * gate.gain_alternatives  # above the gain's bound, below the hold's
-    for _ in range(gate.frames + 3):
-        out = gate.confirm(
-            _tight(), quality=GOOD, searched_ago=0, alternatives=0.0, gain_alternatives=strict
-        )
-        assert not out.converged
+def test_a_gain_is_held_to_both_shares_and_a_hold_is_not() -> None:
+    """A gain asks the plain share within ``gain_alternatives`` and the share with
+    long-tracked look-alikes' evidence discounted within ``gain_rivals``; once held, only
+    ``alternatives`` counts (against ``hold_alternatives``)."""
+    g = ConvergenceGate()
+    assert g.gain_alternatives < g.gain_rivals < g.hold_alternatives
+    between = (g.gain_alternatives + g.gain_rivals) / 2.0
+    beyond = (g.gain_rivals + g.hold_alternatives) / 2.0
+
+    def gains(alternatives: float, gain_share: float) -> bool:
+        gate = ConvergenceGate()
+        out = _tight()
+        for _ in range(gate.frames + 3):
+            out = gate.confirm(
+                _tight(), quality=GOOD, searched_ago=0, alternatives=alternatives,
+                gain_share=gain_share,
+            )  # fmt: skip
+        return out.converged
+
+    assert gains(0.0, between)  # rivals' discounted share under its own bound
+    assert not gains(0.0, beyond)
+    assert not gains(between, between)  # the plain share over 1 %
     held = _held_gate()
-    out = held.confirm(
-        _tight(), quality=GOOD, searched_ago=0, alternatives=0.0, gain_alternatives=strict
-    )
+    out = held.confirm(_tight(), quality=GOOD, searched_ago=0, alternatives=0.0, gain_share=beyond)
     assert out.converged
 
 
