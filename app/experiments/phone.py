@@ -614,7 +614,7 @@ def alternatives_table(summary: dict[str, object]) -> str:
     assert isinstance(rows, list)
     lines = [
         "| map | alternatives' share | frames | episodes | mean share claimed "
-        "| frames > 1 m off | episodes with one |",
+        f"| frames > {WRONG_M:g} m off | episodes with one |",
         "|---|---|---|---|---|---|---|",
     ]
     for r in rows:
