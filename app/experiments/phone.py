@@ -49,8 +49,10 @@ from app.bench import machine_line
 from app.experiments.hard_maps import hard_map
 from app.experiments.integrity import FLIP_M, RIGHT_M, WRONG_M, format_cell
 from app.experiments.runner import map_jobs
+from app.localization.alternatives import EvidenceSettings
 from app.localization.camera import Camera
 from app.localization.convergence import ConvergenceGate
+from app.localization.pacing import WEIGH_PERIOD_S
 from app.localization.types import InitialPose
 from app.maps.check import load_map
 from app.maps.model import SemanticMap
@@ -497,8 +499,9 @@ def reliability(runs: list[PhoneRun]) -> list[dict[str, float | int]]:
     return rows
 
 
-#: Bin edges of the alternatives' share of the probability for their reliability table
-#: (a bin's upper edge included; 0 exactly, no alternative tracked, is a bin of its own).
+#: Bin edges of the alternatives' share of the probability for their reliability table:
+#: bin k holds the shares over edge k-1 up to edge k, bin 0 a share of exactly 0 (no
+#: alternative tracked).
 ALTERNATIVE_EDGES = (0.0, 0.001, 0.01, 0.03, 0.1, 0.3, 1.0)
 
 
@@ -517,37 +520,35 @@ def alternatives_reliability(runs: list[PhoneRun]) -> list[dict[str, object]]:
     claimed, and how many frames and episodes had the estimate more than ``WRONG_M``
     off. A claim is calibrated when that share of the episodes matches it; smaller is
     conservative."""
-    bins = [(0.0, 0.0), *itertools.pairwise(ALTERNATIVE_EDGES)]
+    # Per (stale, bin): frames, episodes, frames off, episodes off, share claimed.
+    tally: dict[tuple[bool, int], list[float]] = defaultdict(lambda: [0, 0, 0, 0, 0.0])
+    for r in runs:
+        stale = CONDITIONS[r.scenario.condition].effects.stale is not None
+        # (A share not measured, nan, sorts past the last bin.)
+        bins = np.searchsorted(ALTERNATIVE_EDGES, r.alternatives)
+        for k in range(len(ALTERNATIVE_EDGES)):
+            for a, b in _episodes(bins == k):
+                off = r.err_m[a:b] > WRONG_M
+                t = tally[stale, k]
+                t[0] += b - a
+                t[1] += 1
+                t[2] += int(off.sum())
+                t[3] += int(off.any())
+                t[4] += float(r.alternatives[a:b].sum())
     rows: list[dict[str, object]] = []
-    for stale in (False, True):
-        for lo, hi in bins:
-            frames = episodes = wrong_frames = wrong_episodes = 0
-            claimed = 0.0
-            for r in runs:
-                if ("stale" in r.scenario.condition) != stale:
-                    continue
-                share = r.alternatives
-                inside = (share == 0.0) if hi == 0.0 else (share > lo) & (share <= hi)
-                for a, b in _episodes(inside):
-                    off = r.err_m[a:b] > WRONG_M
-                    frames += b - a
-                    episodes += 1
-                    wrong_frames += int(off.sum())
-                    wrong_episodes += int(off.any())
-                    claimed += float(share[a:b].sum())
-            if frames:
-                rows.append(
-                    {
-                        "map": "stale" if stale else "as drawn",
-                        "share_from": lo,
-                        "share_to": hi,
-                        "frames": frames,
-                        "episodes": episodes,
-                        "claimed": claimed / frames,
-                        "wrong_frames": wrong_frames,
-                        "wrong_episodes": wrong_episodes,
-                    }
-                )
+    for (stale, k), (frames, episodes, off_frames, off_episodes, claimed) in sorted(tally.items()):
+        rows.append(
+            {
+                "map": "stale" if stale else "as drawn",
+                "share_from": ALTERNATIVE_EDGES[max(k - 1, 0)],
+                "share_to": ALTERNATIVE_EDGES[k],
+                "frames": int(frames),
+                "episodes": int(episodes),
+                "claimed": claimed / frames,
+                "wrong_frames": int(off_frames),
+                "wrong_episodes": int(off_episodes),
+            }
+        )
     return rows
 
 
@@ -698,7 +699,8 @@ def markdown(
             "probability it gives places other than the estimate's (`converged` is gained "
             f"only while it is at most {ConvergenceGate.gain_alternatives:g}, or "
             f"{ConvergenceGate.gain_rivals:g} with the evidence against look-alikes "
-            "tracked for 10 s halved, and held while at most "
+            f"tracked for {EvidenceSettings.rival_frames * WEIGH_PERIOD_S:g} s counted at "
+            f"{EvidenceSettings.rival_weight:g} of itself, and held while at most "
             f"{ConvergenceGate.hold_alternatives:g}), against how often the estimate was "
             f"more than {WRONG_M:g} m off. An episode is a run of consecutive frames of one "
             "walk in the bin: its frames are one piece of evidence, not many.",
