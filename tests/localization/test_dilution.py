@@ -137,18 +137,16 @@ def test_the_bound_reaches_as_far_back_along_a_narrow_cone_as_the_bearings_allow
     def mean_square(back_m: float) -> float:
         """The mean over frames of the squared bearing changes with the walk moved back
         by ``back_m`` and turned about the last pose by the best of a fine grid."""
-        best = math.inf
-        for turn in np.radians(np.arange(-10.0, 10.0, 0.01)):
-            c, s = math.cos(turn), math.sin(turn)
-            total = 0.0
-            for px, py, _ in poses:
-                qx = x + c * (px - x) - s * (py - y) - back_m
-                qy = y + s * (px - x) + c * (py - y)
-                for ox, oy in m.object_xy:
-                    change = math.atan2(oy - qy, ox - qx) - turn - math.atan2(oy - py, ox - px)
-                    total += change * change
-            best = min(best, total / len(poses))
-        return best
+        turn = np.radians(np.arange(-10.0, 10.0, 0.01))  # every turn of the grid at once
+        c, s = np.cos(turn), np.sin(turn)
+        total = np.zeros_like(turn)
+        for px, py, _ in poses:
+            qx = x + c * (px - x) - s * (py - y) - back_m
+            qy = y + s * (px - x) + c * (py - y)
+            for ox, oy in m.object_xy:
+                change = np.arctan2(oy - qy, ox - qx) - turn - math.atan2(oy - py, ox - px)
+                total += change * change
+        return float(total.min()) / len(poses)
 
     limit = (Q99_2D * geo.bias_rad) ** 2
     linear = Q99_2D * geo.bias_rad / math.sqrt(_weakest(geo, x, y))

@@ -5,23 +5,21 @@ from __future__ import annotations
 import asyncio
 
 from app.localization.types import Detection
-from app.maps.check import load_map_dir
-from app.resources import bundled_maps_dir
 from app.service.errors import SessionNotFound
 from app.service.metrics import Metrics
 from app.service.sessions import SessionManager
 from app.service.types import FrameInput, SessionSpec
-from tests.helpers import make_settings
+from tests.helpers import bundled_maps, make_settings
 
 
 def make_manager(**overrides: object) -> SessionManager:
-    return SessionManager(load_map_dir(bundled_maps_dir()), make_settings(**overrides), Metrics())
+    return SessionManager(bundled_maps(), make_settings(**overrides), Metrics())
 
 
 def test_idle_sessions_expire() -> None:
     async def main() -> None:
         manager = SessionManager(
-            load_map_dir(bundled_maps_dir()), make_settings(session_idle_timeout_s=0.2), Metrics()
+            bundled_maps(), make_settings(session_idle_timeout_s=0.2), Metrics()
         )
         idle = await manager.create(SessionSpec(map_name="paper_office", particles=200))
         busy = await manager.create(SessionSpec(map_name="paper_office", particles=200))
@@ -42,7 +40,7 @@ def test_idle_sessions_expire() -> None:
 
 def test_snapshot_is_a_copy() -> None:
     async def main() -> None:
-        manager = SessionManager(load_map_dir(bundled_maps_dir()), make_settings(), Metrics())
+        manager = SessionManager(bundled_maps(), make_settings(), Metrics())
         s = await manager.create(SessionSpec(map_name="paper_office", particles=300))
         snap = s.snapshot()
         assert snap.estimate is None and snap.frames == 0

@@ -11,8 +11,6 @@ import pytest
 import viser
 
 from app.demo import frame_input_of, new_walk
-from app.maps.check import load_map_dir
-from app.resources import bundled_maps_dir
 from app.service.metrics import Metrics
 from app.service.sessions import SessionManager
 from app.service.types import FrameInput, SessionSpec
@@ -21,7 +19,7 @@ from app.simulation.simulator import simulate
 from app.viz.particles import MAX_DRAWN, detection_rays, sample_particles
 from app.viz.scene import build_map_scene, top_down_camera
 from app.viz.view import LiveView
-from tests.helpers import free_port, make_settings, paper_office
+from tests.helpers import bundled_maps, free_port, make_settings, paper_office
 
 OFFICE = paper_office()
 
@@ -56,7 +54,7 @@ def test_camera_frames_the_whole_map(server: viser.ViserServer) -> None:
 
 
 def make_manager() -> SessionManager:
-    return SessionManager(load_map_dir(bundled_maps_dir()), make_settings(), Metrics())
+    return SessionManager(bundled_maps(), make_settings(), Metrics())
 
 
 def test_particles_are_sampled_by_weight_and_capped() -> None:
