@@ -131,9 +131,9 @@ class ConvergenceGate:
     #: evidence asked against a look-alike that has lasted 10 s). At 1 % (the plain
     #: share's bound) a rival at 0.01 % of the plain probability kept a fix back; at 3 %
     #: one at 0.09 % does. The share overstates the risk several times over on maps as
-    #: drawn (docs/results/phone.md, the alternatives' reliability): of 530 episodes at
+    #: drawn (docs/results/phone.md, the alternatives' reliability): of 528 episodes at
     #: 1-3 % (0.018 on average: about 9.5 to expect) none had the estimate more than a
-    #: metre off, of 503 at 3-10 % (about 28) one; on stale maps it says little (18-34 %
+    #: metre off, of 503 at 3-10 % (about 28) one; on stale maps it says little (16-29 %
     #: of the episodes off at every share up to 30 %). Measured on the phone suite
     #: (seeds 0-9): the door corridor through a 66 deg camera at PDR grade with 30 %
     #: missed detections, right within 0.4 m and not told for 28 s behind rivals one

@@ -14,8 +14,10 @@ from app.localization.convergence import GAIN_PROTECTION_M
 from app.localization.evidence import EvidenceTracker
 from app.localization.filter import (
     GAIN_SEPARATION_M,
+    GAIN_SEPARATION_MAX_M,
     SEPARATION_RINGS_FOV_DEG,
     ParticleFilter,
+    separation_allows_gain,
 )
 from app.localization.models import BearingSensorModel, OdometryMotionModel
 from app.localization.search import Separation, explaining
@@ -194,7 +196,7 @@ def test_a_first_fix_waits_while_one_object_pulls_it_beyond_its_radius(
             if est.converged:
                 assert est.protection_m is not None
                 # Told only where the pull is within its radius (or half a metre).
-                assert pull_m <= max(GAIN_SEPARATION_M, est.protection_m)
+                assert separation_allows_gain(pull_m, est.protection_m)
                 return k
         return None
 
@@ -205,6 +207,25 @@ def test_a_first_fix_waits_while_one_object_pulls_it_beyond_its_radius(
     else:
         # A first fix's radius is at most GAIN_PROTECTION_M, under the pull: never told.
         assert first is None
+
+
+@pytest.mark.parametrize(
+    ("pull_m", "radius_m", "told"),
+    [
+        (0.45, 0.2, True),  # within half a metre, whatever the radius
+        (0.6, 0.55, False),  # beyond both
+        (0.9, 1.32, True),  # within the radius and a metre
+        # The traced gain: a moved plant pulled a fix 1.09 m, within its 1.32 m radius;
+        # told, it was 1.19 m off.
+        (1.09, 1.32, False),
+        (GAIN_SEPARATION_MAX_M + 0.01, GAIN_PROTECTION_M, False),
+    ],
+)
+def test_a_pull_over_a_metre_keeps_a_first_fix_untold_whatever_its_radius(
+    pull_m: float, radius_m: float, told: bool
+) -> None:
+    assert GAIN_SEPARATION_M < GAIN_SEPARATION_MAX_M < GAIN_PROTECTION_M
+    assert separation_allows_gain(pull_m, radius_m) is told
 
 
 def test_several_objects_left_out_together_are_each_left_out() -> None:
