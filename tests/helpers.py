@@ -31,6 +31,8 @@ from app.maps.model import SemanticMap, parse_map
 from app.maps.prepare import ensure_prepared
 from app.resources import bundled_maps_dir
 from app.server import BearingsServer, uvicorn_config
+from app.service.metrics import Metrics
+from app.service.sessions import SessionManager
 from app.simulation.camera import CameraModel, visible_objects
 
 
@@ -105,6 +107,12 @@ def make_settings(**overrides: object) -> Settings:
         "max_message_bytes": 8192,
     }
     return Settings(**{**base, **overrides})
+
+
+def make_manager(**overrides: object) -> SessionManager:
+    """A session manager over the bundled maps (:func:`bundled_maps`), in memory, with
+    :func:`make_settings` and ``overrides``."""
+    return SessionManager(bundled_maps(), make_settings(**overrides), Metrics())
 
 
 # ------------------------------------------------------------------------- servers

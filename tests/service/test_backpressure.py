@@ -17,7 +17,7 @@ from app.localization.types import Detection, Odometry, Pose
 from app.service.errors import CapacityReached
 from app.service.queueing import FrameQueue, merge_frames
 from app.service.types import FrameInput, SessionSpec
-from tests.service.test_sessions_expiry import make_manager
+from tests.helpers import make_manager
 
 NO_NOISE = FilterConfig(
     trans_noise_frac=0.0, rot_noise_frac=0.0, trans_noise_floor_m=0.0, rot_noise_floor_deg=0.0

@@ -21,7 +21,7 @@ from app.localization.types import Detection, Odometry
 from app.service.errors import SessionNotFound, SessionUnavailable
 from app.service.scheduler import FairStepper
 from app.service.types import FrameInput, FrameOutcome, SessionSpec
-from tests.service.test_sessions_expiry import make_manager
+from tests.helpers import make_manager
 
 
 @dataclass(frozen=True)

@@ -6,21 +6,13 @@ import asyncio
 
 from app.localization.types import Detection
 from app.service.errors import SessionNotFound
-from app.service.metrics import Metrics
-from app.service.sessions import SessionManager
 from app.service.types import FrameInput, SessionSpec
-from tests.helpers import bundled_maps, make_settings
-
-
-def make_manager(**overrides: object) -> SessionManager:
-    return SessionManager(bundled_maps(), make_settings(**overrides), Metrics())
+from tests.helpers import make_manager
 
 
 def test_idle_sessions_expire() -> None:
     async def main() -> None:
-        manager = SessionManager(
-            bundled_maps(), make_settings(session_idle_timeout_s=0.2), Metrics()
-        )
+        manager = make_manager(session_idle_timeout_s=0.2)
         idle = await manager.create(SessionSpec(map_name="paper_office", particles=200))
         busy = await manager.create(SessionSpec(map_name="paper_office", particles=200))
         for _ in range(4):
@@ -40,7 +32,7 @@ def test_idle_sessions_expire() -> None:
 
 def test_snapshot_is_a_copy() -> None:
     async def main() -> None:
-        manager = SessionManager(bundled_maps(), make_settings(), Metrics())
+        manager = make_manager()
         s = await manager.create(SessionSpec(map_name="paper_office", particles=300))
         snap = s.snapshot()
         assert snap.estimate is None and snap.frames == 0

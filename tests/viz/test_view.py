@@ -19,7 +19,7 @@ from app.simulation.simulator import simulate
 from app.viz.particles import MAX_DRAWN, detection_rays, sample_particles
 from app.viz.scene import build_map_scene, top_down_camera
 from app.viz.view import LiveView
-from tests.helpers import bundled_maps, free_port, make_settings, paper_office
+from tests.helpers import free_port, make_manager, make_settings, paper_office
 
 OFFICE = paper_office()
 
@@ -51,10 +51,6 @@ def test_camera_frames_the_whole_map(server: viser.ViserServer) -> None:
     half_width = pos[2] * np.tan(np.radians(75 / 2))
     assert half_width >= 5.0
     assert top_down_camera(OFFICE)[0][2] == pytest.approx(pos[2])
-
-
-def make_manager() -> SessionManager:
-    return SessionManager(bundled_maps(), make_settings(), Metrics())
 
 
 def test_particles_are_sampled_by_weight_and_capped() -> None:

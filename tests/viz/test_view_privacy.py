@@ -22,8 +22,7 @@ from app.demo import new_walk
 from app.main import create_app
 from app.service.types import FrameInput, SessionSpec
 from app.viz.view import LiveView
-from tests.helpers import free_port
-from tests.viz.test_view import make_manager
+from tests.helpers import free_port, make_manager
 
 
 def decode(message: bytes) -> bytes:
