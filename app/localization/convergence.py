@@ -62,6 +62,9 @@ class FitQuality:
     bad_frame: bool = False
     #: An object in clear view keeps going unreported (:mod:`~app.localization.unseen`).
     contradicted: bool = False
+    #: ... and one such object was never reported at this place (not a far object the
+    #: detector sees now and then, missed by chance for a few frames).
+    never_reported: bool = False
 
 
 class ConvergenceGate:
@@ -177,6 +180,16 @@ class ConvergenceGate:
     #: Frames with detections free of an unseen-object contradiction that gaining
     #: ``converged`` again takes once one has taken it away (5 s at 5 frames/s).
     regain_after_unseen_frames: int = 25
+    #: Frames with detections in a row an unseen-object contradiction must last to let
+    #: a held fix go, unless one of its objects was never reported at this place
+    #: (``FitQuality.never_reported``: then at once). Traced on the venue suite at PDR
+    #: grade through a 66-degree camera (seed 4): a door 7.3 m away, reported now and
+    #: then, flagged for one frame (its miss evidence just past the threshold) and
+    #: reported the next took a right fix away, and the first-fix rules gave it back
+    #: 65 s later. On the phone suite's stale office through a 180-degree camera (seed
+    #: 3) a fix 1.0 m off was kept one frame longer by an object 3 m away never
+    #: reported there.
+    hold_unseen_frames: int = 2
     #: A jump of the estimate farther than this (m) leaves the place an unseen-object
     #: contradiction was raised at (the unseen check's counts start again past 1 m too).
     unseen_place_m: float = 1.0
@@ -198,6 +211,8 @@ class ConvergenceGate:
         #: Frames with detections since the last unseen-object contradiction, counted
         #: once one has taken ``converged`` away (None: none has since the last reset).
         self._since_unseen: int | None = None
+        #: Frames with detections in a row that raised an unseen-object contradiction.
+        self._unseen_run = 0
         self.lost_because: tuple[str, ...] = ()
         #: Why the last :meth:`confirm` gave no fix while none was held (for diagnostics,
         #: ``tools/why_not_located.py``): the gain's tests it failed, or the reason the
@@ -213,6 +228,7 @@ class ConvergenceGate:
             "light": self._light,
             "misfit": self._misfit,
             "since_unseen": self._since_unseen,
+            "unseen_run": self._unseen_run,
         }
 
     def restore(self, state: Mapping[str, Any]) -> None:
@@ -223,6 +239,7 @@ class ConvergenceGate:
         self._misfit = int(state.get("misfit", 0))
         since = state.get("since_unseen")
         self._since_unseen = None if since is None else int(since)
+        self._unseen_run = int(state.get("unseen_run", 0))
 
     def confirm(
         self,
@@ -264,7 +281,9 @@ class ConvergenceGate:
                 "jump": step > moved_m + self.hold_jump_m,
                 "misfit": self._misfit_lasts(quality, evidence_frame),
                 "bad frame": quality is not None and quality.bad_frame,
-                "unseen object": quality is not None and quality.contradicted,
+                "unseen object": quality is not None
+                and quality.contradicted
+                and (quality.never_reported or self._unseen_run >= self.hold_unseen_frames),
                 "dead reckoning": frames_without_evidence > self.hold_without_evidence,
                 "alternative": against > self.hold_alternatives,
                 "odometry lost": motion_lost,
@@ -362,6 +381,9 @@ class ConvergenceGate:
         view is as unresolved as one that took a fix away. Once the estimate jumps
         farther than ``unseen_place_m`` it was about another place, and is forgotten.
         """
+        if evidence_frame:
+            contradicted = quality is not None and quality.contradicted
+            self._unseen_run = self._unseen_run + 1 if contradicted else 0
         if quality is not None and quality.contradicted:
             self._since_unseen = 0
         elif self._since_unseen is None:

@@ -32,6 +32,7 @@ from app.localization.convergence import (
     protection_radius,
     widened_radius,
 )
+from app.localization.dilution import JUMP_M as GEOMETRY_JUMP_M
 from app.localization.dilution import BearingGeometry
 from app.localization.dilution import warm_up as warm_up_dilution
 from app.localization.estimate import (
@@ -907,6 +908,7 @@ class ParticleFilter:
                 InitialPose(raw.x, raw.y, raw.theta_rad, RIDE_START_STD_M, RIDE_START_STD_RAD)
             )
             self._after_ride = True
+        self._follow_blind_level(raw, odometry)
         share, confirmed, gain_share = 0.0, 0.0, 0.0
         searched_ago: int | None = 0
         floors = self.floors
@@ -1447,13 +1449,57 @@ class ParticleFilter:
             fit = q.fit + a_fit * (fit - q.fit)
             unexplained = q.unexplained + a_share * (unexplained - q.unexplained)
         contradicted = self.unseen is not None and self.unseen.contradicted
-        self.quality = FitQuality(fit, unexplained, bad, contradicted)
+        never = contradicted and self.unseen is not None and self.unseen.never_reported
+        self.quality = FitQuality(fit, unexplained, bad, contradicted, never)
 
     def _exclude_from_models(self, objects: list[int]) -> None:
         """Take ``objects`` out of the filter's sensor model and the evidence tracker's."""
         self.sensor.exclude(objects)
         if self._tracker_sensor is not self.sensor:
             self._tracker_sensor.exclude(objects)
+
+    def _follow_blind_level(self, raw: Estimate, odometry: Odometry | None) -> None:
+        """Without a barometer the belief changes level by itself (particles in a stop
+        take its connector, and what is seen decides). When this frame's estimate ``raw``
+        is on another level than the last answer's, at the same place of the level's map
+        (a lift car is one on every floor), the person rode, and the filter's
+        walk-bound parts follow as after a ride the barometer counted: the bearings'
+        geometry moves with the estimate (``BearingGeometry.shift_x``), the odometry's
+        checks and the told heading start again, and the evidence tracker starts afresh
+        at the new floor (its alternatives, and a known start given on the floor left,
+        were places in the plane of that floor), its search coming at the base interval
+        until the next fix, as after a ride.
+
+        Before, the estimate's jump of a level's width cleared the geometry and left its
+        fix downstairs ("weak geometry" for seconds on leaving a lift: venue suite
+        without a barometer), and a known start on the Ground Floor swapped every step
+        of a belief that the First Floor's view had moved up straight back down: a
+        session started at a known pose never left the floor it started on.
+        """
+        floors = self.floors
+        if floors is None or not floors.blind:
+            return
+        layout = self.map.layout
+        last = self.estimate
+        was, now = layout.level_of(last.x), layout.level_of(raw.x)
+        if was == now:
+            return
+        dx = float(layout.offsets(now) - layout.offsets(was))
+        moved = 0.0 if odometry is None else hypot(odometry.forward_m, odometry.left_m)
+        if hypot(raw.x - dx - last.x, raw.y - last.y) > moved + GEOMETRY_JUMP_M:
+            return  # another place altogether, not a ride
+        self.geometry.shift_x(dx)
+        self.odometry_check.reset()
+        self.told_heading.reset()
+        self.walked.reset()
+        self._last_fix = None  # on the level left
+        if self.evidence is not None:
+            self.evidence.reset()
+            if last.converged:
+                self.evidence.set_prior(
+                    InitialPose(raw.x, raw.y, raw.theta_rad, RIDE_START_STD_M, RIDE_START_STD_RAD)
+                )
+        self._after_ride = True
 
     def _exclude_moved(self) -> None:
         """Take the objects the unseen-object check forgave as moved out of the sensor

@@ -183,6 +183,13 @@ class UnseenObjects:
             & ~self.absent
         )
 
+    @property
+    def never_reported(self) -> bool:
+        """Whether an object the counts flag has not been reported once at this place
+        (not a far one the detector reports now and then: ConvergenceGate's
+        ``hold_unseen_frames``)."""
+        return bool((self._flagged() & (self.seen <= 0.0)).any())
+
     def forgive(self) -> int:
         """Take the objects flagged now for moved or gone from the world (those with near
         misses for moved, :attr:`moved`); how many there were. A fixture (a door, a

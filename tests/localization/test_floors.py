@@ -702,6 +702,38 @@ def test_without_a_barometer_a_gain_is_not_made_in_a_stop_but_comes_on_leaving_i
     assert converged[out], (out, converged[out:])
 
 
+def test_without_a_barometer_a_known_start_rides_the_lift_and_its_geometry_follows() -> None:
+    """Started at a known pose in the lift car on the Ground Floor, no barometer: the
+    doors open on the First Floor, whose view moves the belief up, and the person walks
+    out. Before, the evidence tracker, whose known start lay on the Ground Floor's plane,
+    swapped every step of the belief straight back down (the session never left the
+    floor it started on), and the estimate's jump of a level's width cleared the bearings'
+    geometry and left its fix downstairs. Now they follow as after a counted ride."""
+    car = Pose(1.5, 1.5, np.pi / 2)  # facing the car's door (north)
+    start = InitialPose(car.x, car.y, car.theta_rad, 0.1, 0.05)
+    pf = ParticleFilter(
+        VENUE, FilterConfig(particles=2000), rng=np.random.default_rng(1), initial_pose=start
+    )
+    assert pf.floors is not None
+    for _ in range(10):
+        pf.step(Odometry(), seen_from(VENUE, car), frame_s=0.2)
+    assert pf.floors.blind and pf.geometry.bound_m(car.x, car.y) < 1.0
+    levels, radii, told = [], [], []
+    for k in range(35):  # 10 frames in the car, then out of it north (0.1 m a frame)
+        pose = Pose(car.x + PITCH, car.y + 0.1 * max(k - 10, 0), car.theta_rad)
+        walk = Odometry(0.1 if k > 10 else 0.0, 0.0, 0.0)
+        est = pf.step(walk, seen_from(VENUE, pose), frame_s=0.2)
+        levels.append(VENUE.layout.level_of(est.x))
+        radii.append(pf.geometry.bound_m(est.x, est.y))  # (radius_m would keep a fix)
+        if est.converged:
+            told.append(math.hypot(est.x - pose.x, est.y - pose.y))
+    up = levels.index(1)
+    assert up <= 3 and all(lv == 1 for lv in levels[up:]), levels
+    assert max(radii[up:]) < 1.0, radii
+    # Told on the First Floor once out of the car's stop, and right.
+    assert len(told) >= 10 and max(told) < 0.3, told
+
+
 def test_a_ride_begun_located_asks_for_the_search_a_gain_waits_for_until_the_next_fix() -> None:
     # Located at the stairs' foot on the Ground Floor, up the stairs by the barometer, then
     # the First Floor's view from the stairs' head: until the fix there, the filter asks

@@ -202,6 +202,21 @@ def test_a_detector_that_misses_a_third_must_miss_an_object_longer() -> None:
     assert any(_walk_past(UnseenObjects(sm, cfg), sm, 0.7, absent, 60, seed=3))
 
 
+def test_an_object_reported_here_before_is_told_from_one_never_reported() -> None:
+    sm = generated_map(40, seed=2)
+    cfg = FilterConfig()
+    obj, _ = _loneliest_in_view(sm, cfg)
+    never = UnseenObjects(sm, cfg)
+    flags = _walk_past(never, sm, 1.0, obj, 20, seed=1)
+    assert flags[-1] and never.never_reported
+    # Reported on the first frames at this place, then missed as long.
+    before = UnseenObjects(sm, cfg)
+    assert not any(_walk_past(before, sm, 1.0, -1, 3, seed=1))
+    flags = _walk_past(before, sm, 1.0, obj, 20, seed=1)
+    assert flags[-1] and not before.never_reported
+    assert not UnseenObjects(sm, cfg).never_reported  # (nothing flagged)
+
+
 def test_an_object_taken_away_or_moved_is_forgiven_and_a_moved_one_is_told_apart() -> None:
     sm = generated_map(40, seed=2)
     cfg = FilterConfig()
