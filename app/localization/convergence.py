@@ -186,7 +186,7 @@ class ConvergenceGate:
     #: grade through a 66-degree camera (seed 4): a door 7.3 m away, reported now and
     #: then, flagged for one frame (its miss evidence just past the threshold) and
     #: reported the next took a right fix away, and the first-fix rules gave it back
-    #: 65 s later. On the phone suite's stale office through a 180-degree camera (seed
+    #: 64 s later. On the phone suite's stale office through a 180-degree camera (seed
     #: 3) a fix 1.0 m off was kept one frame longer by an object 3 m away never
     #: reported there.
     hold_unseen_frames: int = 2

@@ -849,16 +849,8 @@ class ParticleFilter:
                 self._restart_global(after_ride=True)
             self.log_w = self.floors.rule_out_levels(self.x, self.log_w)
             if not contradicted and self.floors.changed:
-                # The fix the bearings' geometry gave rides along with the person.
-                self.geometry.shift_x(self.floors.shift_x_m)
-                self.odometry_check.reset()  # the ride is no walk the odometry saw
-                self.told_heading.reset()
-                self.walked.reset()
+                self._rode(self.floors.shift_x_m)
                 if self.evidence is not None:
-                    # The alternatives were carried by the walk's odometry, not the ride:
-                    # none of them rode along. The next search looks afresh, at what
-                    # the ride says: the person is where this connector let them off.
-                    self.evidence.reset()
                     # The exit is a known start only for a belief that was located as
                     # the ride began: a cloud that had lost the person in the lift car
                     # (its view blocked) rode along wherever it was, and a prior there
@@ -899,15 +891,8 @@ class ParticleFilter:
                     start=(raw.x, raw.y, raw.theta_rad),
                     drift=self.config.trans_noise_frac,
                 )
-        if rode and self.evidence is not None:
-            # A look-alike place elsewhere on the new level (the top of the other
-            # escalator) is no alternative for someone who just rode this connector:
-            # the ride is a known start there, as loose as a stop is wide (its prior
-            # odds exclude places far from it, as a known start's do).
-            self.evidence.set_prior(
-                InitialPose(raw.x, raw.y, raw.theta_rad, RIDE_START_STD_M, RIDE_START_STD_RAD)
-            )
-            self._after_ride = True
+        if rode:
+            self._start_at_ride_exit(raw)
         self._follow_blind_level(raw, odometry)
         share, confirmed, gain_share = 0.0, 0.0, 0.0
         searched_ago: int | None = 0
@@ -1488,17 +1473,39 @@ class ParticleFilter:
         moved = 0.0 if odometry is None else hypot(odometry.forward_m, odometry.left_m)
         if hypot(raw.x - dx - last.x, raw.y - last.y) > moved + GEOMETRY_JUMP_M:
             return  # another place altogether, not a ride
-        self.geometry.shift_x(dx)
-        self.odometry_check.reset()
+        self._rode(dx)
+        self._last_fix = None  # on the level left
+        if last.converged:
+            self._start_at_ride_exit(raw)
+        else:
+            self._after_ride = True
+
+    def _rode(self, dx_m: float) -> None:
+        """The person rode to another level, ``dx_m`` across the filter's plane (counted
+        by the barometer, or without one seen): what the walk built follows or starts
+        again."""
+        # The fix the bearings' geometry gave rides along with the person.
+        self.geometry.shift_x(dx_m)
+        self.odometry_check.reset()  # the ride is no walk the odometry saw
         self.told_heading.reset()
         self.walked.reset()
-        self._last_fix = None  # on the level left
         if self.evidence is not None:
+            # The alternatives were carried by the walk's odometry, not the ride: none
+            # of them rode along. The next search looks afresh, at what the ride says:
+            # the person is where this connector let them off.
             self.evidence.reset()
-            if last.converged:
-                self.evidence.set_prior(
-                    InitialPose(raw.x, raw.y, raw.theta_rad, RIDE_START_STD_M, RIDE_START_STD_RAD)
-                )
+
+    def _start_at_ride_exit(self, raw: Estimate) -> None:
+        """A ride the belief was located for ended at ``raw``: a look-alike place
+        elsewhere on the new level (the top of the other escalator) is no alternative
+        for someone who just rode this connector, so the exit is a known start, as loose
+        as a stop is wide (its prior odds exclude places far from it, as a known
+        start's do); and until the next fix a gain's search comes at the base interval
+        (``_after_ride``)."""
+        if self.evidence is not None:
+            self.evidence.set_prior(
+                InitialPose(raw.x, raw.y, raw.theta_rad, RIDE_START_STD_M, RIDE_START_STD_RAD)
+            )
         self._after_ride = True
 
     def _exclude_moved(self) -> None:
