@@ -16,7 +16,11 @@ knows, each from the moment it starts to the next fix or its deadline:
 * a ride the belief placed the person in one connector for, though it held no fix
   (:meth:`~app.localization.floors.FloorTracker.pinned_stop`: the barometer says they
   rode, the belief says which connector), for ``STOP_EXIT_FRAMES`` frames out of the
-  stop, whose car or flight the bearings' geometry carries as a fix;
+  stop, whose car or flight the bearings' geometry carries as a fix; frames on which the
+  gain waits for nothing but the evidence tracker's search are not counted (once its
+  searches find nothing they come every ``max_search_every`` frames, as many as the
+  window: a run of steady frames broken once after a search waited for the next one
+  beyond the window);
 * a fix let go for doubt alone (an alternative gained probability, then was refuted;
   its estimate jumped further in one step than the motion allows; or the evidence
   swapped the belief onto a place within the told radius), for ``DOUBT_FRAMES`` frames;
@@ -92,6 +96,8 @@ class Continuation:
         self.since_doubt: int | None = None
         #: ... and how many it is continued for (:func:`doubt_frames`).
         self.doubt_frames = DOUBT_FRAMES
+        #: Whether ``out_of_stop`` counts from a ride the belief was pinned for.
+        self.pinned = False
 
     @property
     def active(self) -> bool:
@@ -102,6 +108,7 @@ class Continuation:
         """A ride the belief placed the person in one connector for: its exit is taken
         up as a told fix let go in the stop is."""
         self.out_of_stop = 0
+        self.pinned = True
 
     def doubted(self, frames: int = DOUBT_FRAMES) -> None:
         """A fix was let go for doubt alone (or swapped onto a place its radius held):
@@ -116,11 +123,13 @@ class Continuation:
         in_stop: bool,
         was_told: bool,
         doubt_frames: int = DOUBT_FRAMES,
+        search_wait: bool = False,
     ) -> None:
         """This frame's end: ``let_go_for_doubt``, the gate let a fix go for doubt alone
         on it (continued for ``doubt_frames``); ``told``, a fix is told after it;
         ``in_stop``, its estimate is in a connector's stop or between floors;
-        ``was_told``, a fix was told after the frame before."""
+        ``was_told``, a fix was told after the frame before; ``search_wait``, the gain
+        waited for nothing but a search on it (not counted out of a pinned ride's stop)."""
         if let_go_for_doubt:
             self.doubted(doubt_frames)
         elif self.since_doubt is not None:
@@ -130,13 +139,17 @@ class Continuation:
         if told:
             self.out_of_stop = None
             self.known_start = False
+            self.pinned = False
         elif in_stop:
             if self.out_of_stop is not None or was_told:
                 self.out_of_stop = 0
-        elif self.out_of_stop is not None:
+            if was_told:
+                self.pinned = False
+        elif self.out_of_stop is not None and not (self.pinned and search_wait):
             self.out_of_stop += 1
             if self.out_of_stop > STOP_EXIT_FRAMES:
                 self.out_of_stop = None
+                self.pinned = False
 
     def checkpoint(self, levels: bool) -> dict[str, Any]:
         """The filter's checkpoint keys (``out_of_stop`` on maps with several levels
@@ -148,6 +161,7 @@ class Continuation:
         }
         if levels:
             state["out_of_stop"] = self.out_of_stop
+            state["pinned_exit"] = self.pinned
         return state
 
     def restore(self, state: Mapping[str, Any]) -> None:
@@ -156,6 +170,7 @@ class Continuation:
         # with the flag.)
         out = state.get("out_of_stop") if state.get("fix_into_stop", True) else None
         self.out_of_stop = None if out is None else int(out)
+        self.pinned = self.out_of_stop is not None and bool(state.get("pinned_exit", False))
         self.known_start = bool(state.get("from_known_start", False))
         doubt = state.get("since_doubt")
         self.since_doubt = None if doubt is None else int(doubt)

@@ -1063,6 +1063,7 @@ class ParticleFilter:
             in_stop=not est.converged
             and (transit or (floors is not None and floors.in_stop(raw.x, raw.y))),
             was_told=self.estimate.converged,
+            search_wait=self._gate.not_gained_because == ("no search yet",),
         )
         if est.converged:
             self._after_ride = False

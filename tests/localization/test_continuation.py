@@ -11,9 +11,15 @@ from app.localization.continuation import (
 )
 
 
-def _frames(c: Continuation, n: int, *, in_stop: bool = False) -> None:
+def _frames(c: Continuation, n: int, *, in_stop: bool = False, search_wait: bool = False) -> None:
     for _ in range(n):
-        c.after_frame(let_go_for_doubt=False, told=False, in_stop=in_stop, was_told=False)
+        c.after_frame(
+            let_go_for_doubt=False,
+            told=False,
+            in_stop=in_stop,
+            was_told=False,
+            search_wait=search_wait,
+        )
 
 
 def test_a_known_start_lasts_until_the_first_fix() -> None:
@@ -81,6 +87,44 @@ def test_a_fix_let_go_in_a_stop_is_continued_for_stop_exit_frames_out_of_it() ->
     # A stop entered with nothing told starts nothing.
     _frames(c, 10, in_stop=True)
     assert not c.active
+
+
+def test_a_pinned_exit_does_not_count_frames_that_wait_only_for_a_search() -> None:
+    c = Continuation()
+    c.rode_pinned()
+    _frames(c, 10, in_stop=True)  # the car's door wait
+    _frames(c, STOP_EXIT_FRAMES - 5)
+    # The gain waits only for the evidence tracker's search: the exit is no older for it
+    # (searches that find nothing come every 25 frames, the window's length) ...
+    _frames(c, 60, search_wait=True)
+    assert c.active and c.out_of_stop == STOP_EXIT_FRAMES - 5
+    # ... through a checkpoint too.
+    again = Continuation()
+    again.restore(c.checkpoint(levels=True))
+    _frames(again, 10, search_wait=True)
+    assert again.active and again.out_of_stop == STOP_EXIT_FRAMES - 5
+    # Frames short of anything else count.
+    for each in (c, again):
+        _frames(each, 6)
+        assert not each.active
+        _frames(each, 1, in_stop=True)  # (the count ran out: nothing pinned restarts)
+        assert not each.active
+    # A told fix let go in a stop counts every frame out of it, as before.
+    told = Continuation()
+    told.after_frame(let_go_for_doubt=False, told=False, in_stop=True, was_told=True)
+    _frames(told, STOP_EXIT_FRAMES, search_wait=True)
+    assert told.active
+    _frames(told, 1, search_wait=True)
+    assert not told.active
+    # A checkpoint from before the key: the exit counts every frame.
+    state = c.checkpoint(levels=True)
+    state.update(out_of_stop=3)
+    del state["pinned_exit"]
+    again.restore(state)
+    _frames(again, STOP_EXIT_FRAMES - 3, search_wait=True)
+    assert again.active
+    _frames(again, 1, search_wait=True)
+    assert not again.active
 
 
 def test_checkpoints_keep_every_count_and_older_ones_resume() -> None:
