@@ -814,10 +814,6 @@ class ParticleFilter:
         """:meth:`step` in capture time: ``odometry`` is the motion between captures,
         ``frame_s`` the time since the previous frame (None: not known), adding up
         ``steps`` frames (:mod:`~app.localization.pacing`)."""
-        rode = False  # a ride between levels ended with this frame's level change
-        # A ride the belief was not located for, but placed the person in one connector
-        # for (its stop: centre and radius), FloorTracker.pinned_stop.
-        pinned: tuple[float, float, float] | None = None
         self.predict(odometry, steps)
         if odometry is None:
             self._last_fix = None
@@ -835,34 +831,7 @@ class ParticleFilter:
             self.walked.reset()
             # ... nor to hold blind: out of the car, the detections are evidence again
             self._blind_hold = False
-        if self.floors is not None:
-            told = self.estimate
-            fix = self._last_fix
-            if self._gate.held and told.converged and told.protection_m is not None:
-                fix = (told.x, told.y, told.protection_m)
-            self.x, self.log_w, contradicted = self.floors.apply(
-                self.x, self.y, self.log_w, altitude, self.rng, fix, frame_s
-            )
-            if self.floors.changed:
-                self._last_fix = None  # on the level left
-            if contradicted:
-                self._restart_global(after_ride=True)
-            self.log_w = self.floors.rule_out_levels(self.x, self.log_w)
-            if not contradicted and self.floors.changed:
-                self._rode(self.floors.shift_x_m)
-                if self.evidence is not None:
-                    # The exit is a known start only for a belief that was located as
-                    # the ride began: a cloud that had lost the person in the lift car
-                    # (its view blocked) rode along wherever it was, and a prior there
-                    # would rule out the true exit (measured through a 180-degree camera
-                    # on the venue suite: a fix 4.5 m off, gained after a lift ride).
-                    if self.floors.first_change:
-                        self._located_at_ride = self._gate.held
-                    rode = self._located_at_ride
-                if not rode:
-                    # Not located, but placed in one connector by a belief that rode it:
-                    # its whole stop (not the cloud's point in it) is where they are.
-                    pinned = self.floors.pinned_stop(self.x, self.y, self.weights)
+        rode, pinned = self._change_level(altitude, frame_s)
         # During a blind hold (decided below) the detections weigh nothing.
         mean_ll, w = self._correct(detections, weigh=not self._blind_hold)
         if heading is not None:
@@ -873,27 +842,7 @@ class ParticleFilter:
             w = self.weights
         ess = effective_sample_size(w)
         raw = estimate_pose(self.x, self.y, self.theta, w, ess=ess, rng=self.rng)
-        if pinned is not None:
-            # The person left that connector: its stop is a fix to carry along, and the
-            # first fix out of it continues it (the belief's heading rode along).
-            cx, cy, radius = pinned
-            self.geometry.offer_fix((cx, cy, raw.theta_rad), radius)
-            self.continuation.rode_pinned()
-            if self.evidence is not None:
-                # ... and for the evidence tracker a known start of the stop's size,
-                # whatever the heading (the belief was not located): a place the
-                # walk since would have begun outside the stop is no alternative.
-                # (Traced on the venue suite through a 66-degree camera: a look-alike
-                # 2 m away took a fix away for over 30 s after such a ride, where the
-                # floor's own map, started at the exit, never considered it.)
-                self.evidence.set_prior(
-                    InitialPose(cx, cy, raw.theta_rad, radius * PINNED_START_STDS, math.pi),
-                    start=(raw.x, raw.y, raw.theta_rad),
-                    drift=self.config.trans_noise_frac,
-                )
-        if rode:
-            self._start_at_ride_exit(raw)
-        self._follow_blind_level(raw, odometry)
+        self._leave_connector(raw, rode, pinned, odometry)
         share, confirmed, gain_share = 0.0, 0.0, 0.0
         searched_ago: int | None = 0
         floors = self.floors
@@ -994,67 +943,14 @@ class ParticleFilter:
             self._turned_run = False
         if streak > 0 and not was_held and self.told_heading.disagrees(raw.theta_rad):
             self._turned_run = True
-        protection: float | None = None
         gained = est.converged and not was_held
-        withheld = False
         if est.converged and transit and not kept:  # the stop's rules above
             est = est.with_converged(False)
         if not gained:
             self._narrow_frames = 0
-        if est.converged or gained:
-            reach = self.evidence.farthest_m(est.x, est.y) if self.evidence is not None else 0.0
-            radius = protection_radius(self.x, self.y, w, est, self.rng, share, reach)
-            # Errors the cloud cannot know of (a box's centre, an object drawn a little off)
-            # repeat every frame; the geometry bounds what they can do (capped at the map's
-            # size: a fix no geometry pins down is still somewhere on the map). Residuals
-            # larger than the noise and bias explain, and a slide away from the odometry,
-            # widen it (convergence.widened_radius).
-            reach = self.geometry.reach_m(raw.x, raw.y, fix_m)
-            radius = max(radius, min(max(fix_m, reach), self._map_span_m))
-            fit = None if self.quality is None else self.quality.fit
-            protection = widened_radius(radius, fit, slide_m)
-            # Why a gain is taken back (ConvergenceGate.not_gained_because).
-            withhold_because = "narrow frames"
-            if gained:
-                # ... and only where the recorded walk could have led (walked.py).
-                wide_view = self.config.fov_deg >= SEPARATION_RINGS_FOV_DEG
-                narrow = protection <= (
-                    WIDE_VIEW_GAIN_PROTECTION_M if wide_view else GAIN_PROTECTION_M
-                )
-                if not narrow:
-                    withhold_because = "wide radius"
-                elif not self.walked.fits(self.map.free_space, est.x, est.y, est.theta_rad):
-                    narrow, withhold_because = False, "walk"
-                if narrow and self.evidence is not None and not self.continuation.active:
-                    rings = self.config.fov_deg >= SEPARATION_RINGS_FOV_DEG
-                    sep = self.evidence.separation_m(est.x, est.y, est.theta_rad, rings)
-                    narrow = separation_allows_gain(max(sep.near_m, sep.far_m), protection)
-                    if not narrow:
-                        withhold_because = "solution separation"
-                self._narrow_frames = self._narrow_frames + 1 if narrow else 0
-            if (
-                gained
-                and not self.continuation.active
-                and self._narrow_frames >= NARROW_FRAMES
-                and streak < TURNED_GAIN_FRAMES
-                and self._turned_run
-            ):
-                # A fix facing otherwise than the last told ones, carried by the
-                # odometry, waits until the gate has found it steady for longer
-                # (app.localization.told_heading).
-                self._gate.withhold("turned from the last fix")
-                est = est.with_converged(False)
-                withheld = True
-            elif gained and not self.continuation.active and self._narrow_frames < NARROW_FRAMES:
-                # A fix is gained only once its radius has been narrow (GAIN_PROTECTION_M)
-                # for NARROW_FRAMES frames in a row; the gate tries again on the next
-                # frame (ConvergenceGate.withhold). A fix the gate holds is not tested
-                # again (held through a connector's stop, it is told on leaving it,
-                # however its radius grew on the way), nor one that continues a fix or a
-                # known start (app.localization.continuation).
-                self._gate.withhold(withhold_because)
-                est = est.with_converged(False)
-                withheld = True
+        est, protection, withheld = self._protect(
+            est, raw, w, share, fix_m, slide_m, gained=gained, streak=streak
+        )
         # (A told frame never reads in_stop: the guard only spares the stop lookup.)
         self.continuation.after_frame(
             let_go_for_doubt=was_held and self._gate.let_go_for_doubt,
@@ -1443,6 +1339,157 @@ class ParticleFilter:
         self.sensor.exclude(objects)
         if self._tracker_sensor is not self.sensor:
             self._tracker_sensor.exclude(objects)
+
+    def _protect(
+        self,
+        est: Estimate,
+        raw: Estimate,
+        w: NDArray[np.float64],
+        share: float,
+        fix_m: float,
+        slide_m: float,
+        *,
+        gained: bool,
+        streak: int,
+    ) -> tuple[Estimate, float | None, bool]:
+        """The protection radius of the gate's answer ``est`` (told, or ``gained`` on
+        this frame), and a gain taken back for it: ``est`` (not converged when taken
+        back), the radius (None while nothing is told or gained), and whether a gain
+        was taken back. ``raw``: the frame's estimate before the gate; ``w``: the
+        weights; ``share``: the alternatives' probability; ``fix_m``: the bearings'
+        geometry's bound; ``slide_m``: the slide from the odometry; ``streak``: the
+        gate's steady frames."""
+        protection: float | None = None
+        withheld = False
+        if not (est.converged or gained):
+            return est, protection, withheld
+        reach = self.evidence.farthest_m(est.x, est.y) if self.evidence is not None else 0.0
+        radius = protection_radius(self.x, self.y, w, est, self.rng, share, reach)
+        # Errors the cloud cannot know of (a box's centre, an object drawn a little off)
+        # repeat every frame; the geometry bounds what they can do (capped at the map's
+        # size: a fix no geometry pins down is still somewhere on the map). Residuals
+        # larger than the noise and bias explain, and a slide away from the odometry,
+        # widen it (convergence.widened_radius).
+        reach = self.geometry.reach_m(raw.x, raw.y, fix_m)
+        radius = max(radius, min(max(fix_m, reach), self._map_span_m))
+        fit = None if self.quality is None else self.quality.fit
+        protection = widened_radius(radius, fit, slide_m)
+        # Why a gain is taken back (ConvergenceGate.not_gained_because).
+        withhold_because = "narrow frames"
+        if gained:
+            # ... and only where the recorded walk could have led (walked.py).
+            wide_view = self.config.fov_deg >= SEPARATION_RINGS_FOV_DEG
+            narrow = protection <= (WIDE_VIEW_GAIN_PROTECTION_M if wide_view else GAIN_PROTECTION_M)
+            if not narrow:
+                withhold_because = "wide radius"
+            elif not self.walked.fits(self.map.free_space, est.x, est.y, est.theta_rad):
+                narrow, withhold_because = False, "walk"
+            if narrow and self.evidence is not None and not self.continuation.active:
+                rings = self.config.fov_deg >= SEPARATION_RINGS_FOV_DEG
+                sep = self.evidence.separation_m(est.x, est.y, est.theta_rad, rings)
+                narrow = separation_allows_gain(max(sep.near_m, sep.far_m), protection)
+                if not narrow:
+                    withhold_because = "solution separation"
+            self._narrow_frames = self._narrow_frames + 1 if narrow else 0
+        if (
+            gained
+            and not self.continuation.active
+            and self._narrow_frames >= NARROW_FRAMES
+            and streak < TURNED_GAIN_FRAMES
+            and self._turned_run
+        ):
+            # A fix facing otherwise than the last told ones, carried by the
+            # odometry, waits until the gate has found it steady for longer
+            # (app.localization.told_heading).
+            self._gate.withhold("turned from the last fix")
+            est = est.with_converged(False)
+            withheld = True
+        elif gained and not self.continuation.active and self._narrow_frames < NARROW_FRAMES:
+            # A fix is gained only once its radius has been narrow (GAIN_PROTECTION_M)
+            # for NARROW_FRAMES frames in a row; the gate tries again on the next
+            # frame (ConvergenceGate.withhold). A fix the gate holds is not tested
+            # again (held through a connector's stop, it is told on leaving it,
+            # however its radius grew on the way), nor one that continues a fix or a
+            # known start (app.localization.continuation).
+            self._gate.withhold(withhold_because)
+            est = est.with_converged(False)
+            withheld = True
+        return est, protection, withheld
+
+    def _change_level(
+        self, altitude: AltitudeReading | None, frame_s: float | None
+    ) -> tuple[bool, tuple[float, float, float] | None]:
+        """The level change this frame's altitude (or the view, without a barometer)
+        makes (:meth:`~app.localization.floors.FloorTracker.apply`): whether a ride the
+        belief was located for ended with it (``rode``), and for a ride it was not
+        located for but placed the person in one connector for, that connector's stop
+        (centre and radius, :meth:`~app.localization.floors.FloorTracker.pinned_stop`;
+        else None)."""
+        rode = False
+        pinned: tuple[float, float, float] | None = None
+        if self.floors is None:
+            return rode, pinned
+        told = self.estimate
+        fix = self._last_fix
+        if self._gate.held and told.converged and told.protection_m is not None:
+            fix = (told.x, told.y, told.protection_m)
+        self.x, self.log_w, contradicted = self.floors.apply(
+            self.x, self.y, self.log_w, altitude, self.rng, fix, frame_s
+        )
+        if self.floors.changed:
+            self._last_fix = None  # on the level left
+        if contradicted:
+            self._restart_global(after_ride=True)
+        self.log_w = self.floors.rule_out_levels(self.x, self.log_w)
+        if not contradicted and self.floors.changed:
+            self._rode(self.floors.shift_x_m)
+            if self.evidence is not None:
+                # The exit is a known start only for a belief that was located as
+                # the ride began: a cloud that had lost the person in the lift car
+                # (its view blocked) rode along wherever it was, and a prior there
+                # would rule out the true exit (measured through a 180-degree camera
+                # on the venue suite: a fix 4.5 m off, gained after a lift ride).
+                if self.floors.first_change:
+                    self._located_at_ride = self._gate.held
+                rode = self._located_at_ride
+            if not rode:
+                # Not located, but placed in one connector by a belief that rode it:
+                # its whole stop (not the cloud's point in it) is where they are.
+                pinned = self.floors.pinned_stop(self.x, self.y, self.weights)
+        return rode, pinned
+
+    def _leave_connector(
+        self,
+        raw: Estimate,
+        rode: bool,
+        pinned: tuple[float, float, float] | None,
+        odometry: Odometry | None,
+    ) -> None:
+        """After :meth:`_change_level`: a ride's exit as a known start (``rode``: the
+        belief was located as it began; ``pinned``: it was not, but placed the person in
+        that connector's stop), and without a barometer, a level change the view made
+        (:meth:`_follow_blind_level`); ``raw`` is this frame's estimate."""
+        if pinned is not None:
+            # The person left that connector: its stop is a fix to carry along, and the
+            # first fix out of it continues it (the belief's heading rode along).
+            cx, cy, radius = pinned
+            self.geometry.offer_fix((cx, cy, raw.theta_rad), radius)
+            self.continuation.rode_pinned()
+            if self.evidence is not None:
+                # ... and for the evidence tracker a known start of the stop's size,
+                # whatever the heading (the belief was not located): a place the
+                # walk since would have begun outside the stop is no alternative.
+                # (Traced on the venue suite through a 66-degree camera: a look-alike
+                # 2 m away took a fix away for over 30 s after such a ride, where the
+                # floor's own map, started at the exit, never considered it.)
+                self.evidence.set_prior(
+                    InitialPose(cx, cy, raw.theta_rad, radius * PINNED_START_STDS, math.pi),
+                    start=(raw.x, raw.y, raw.theta_rad),
+                    drift=self.config.trans_noise_frac,
+                )
+        if rode:
+            self._start_at_ride_exit(raw)
+        self._follow_blind_level(raw, odometry)
 
     def _follow_blind_level(self, raw: Estimate, odometry: Odometry | None) -> None:
         """Without a barometer the belief changes level by itself (particles in a stop
