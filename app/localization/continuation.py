@@ -29,7 +29,9 @@ knows, each from the moment it starts to the next fix or its deadline:
   ``GEOMETRY_DOUBT_FRAMES``.
 
 The gain's other tests still apply (the slide check among them), and a gain the gate
-holds is never tested again for its radius.
+holds is never tested again for its radius. A fix let go for doubt is also taken up with
+the cluster a held fix keeps, not a first gain's tighter one
+(:meth:`~app.localization.convergence.ConvergenceGate.cluster_holds`).
 """
 
 from __future__ import annotations

@@ -20,7 +20,7 @@ from __future__ import annotations
 import functools
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -276,8 +276,7 @@ class ConvergenceGate:
             against = alternatives if confirmed_alternatives is None else confirmed_alternatives
             reasons = {
                 "light": top is None or self._light >= self.hold_light_frames,
-                "wide": max(raw.std_x_m, raw.std_y_m) > self.hold_std_xy_m
-                or raw.std_theta_rad > self.hold_std_theta_rad,
+                "wide": self._wide(raw),
                 "jump": step > moved_m + self.hold_jump_m,
                 "misfit": self._misfit_lasts(quality, evidence_frame),
                 "bad frame": quality is not None and quality.bad_frame,
@@ -337,6 +336,27 @@ class ConvergenceGate:
             # Every test passed but the fix has not stayed put for ``frames`` frames.
             self.not_gained_because = shortfalls or ("not steady yet",)
         return raw.with_converged(self._held)
+
+    def shift_x(self, dx_m: float) -> None:
+        """The person rode to another level, ``dx_m`` across the filter's plane: the
+        last estimate, against which the next one's step is measured, rides along."""
+        if self._last is not None:
+            self._last = replace(self._last, x=self._last.x + dx_m)
+
+    def _wide(self, raw: Estimate) -> bool:
+        """Whether the cluster is wider than a held fix's may be (``hold_std_*``)."""
+        return (
+            max(raw.std_x_m, raw.std_y_m) > self.hold_std_xy_m
+            or raw.std_theta_rad > self.hold_std_theta_rad
+        )
+
+    def cluster_holds(self, raw: Estimate) -> bool:
+        """Whether ``raw``'s cluster passes the tests a held fix's does (its top place at
+        least ``hold_mass`` of the weight, no wider than ``hold_std_*``), looser than
+        the clustering's ``converged`` a first gain asks for (estimate.ClusterSettings:
+        0.9 of the weight within 0.25 m)."""
+        top = raw.hypotheses[0] if raw.hypotheses else None
+        return top is not None and top.weight >= self.hold_mass and not self._wide(raw)
 
     def withhold(self, because: str = "wide radius") -> None:
         """Take back a gain :meth:`confirm` just made, because the fix's protection

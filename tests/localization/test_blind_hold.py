@@ -137,3 +137,31 @@ def test_a_one_level_map_never_holds_blind(small_room: SemanticMap) -> None:
     not explain may be what corrects a drifting odometry."""
     pf, _, _ = _blank_wall_walk(small_room, 0)
     assert pf._sees_nothing and not pf._blind_hold
+
+
+def test_a_fix_held_into_a_lift_rides_with_the_barometer_and_is_told_on_arrival() -> None:
+    """Located as the ride began, a person rides one storey in a car that shows nothing
+    but false boxes (at the lift's 1 m/s), for longer than the hold's frames without
+    evidence allow: the fix rides along and is told again as soon as the barometer has
+    them on the First Floor, in the car there; the level is right."""
+    pf, _ = into_the_car(4, [])
+    assert pf.estimate.converged
+    rng = np.random.default_rng(11)
+    storey_m = 4.5
+    told_riding = False
+    altitude = STILL.relative_m
+    # 4.5 m at 0.2 m a frame (1 m/s at 5 frames/s), then the door wait: with the 40
+    # frames in the car before, more frames without evidence than a hold allows.
+    frames = int(storey_m / 0.2) + 20
+    assert 40 + frames > pf.gate.hold_without_evidence
+    for _ in range(frames):
+        altitude = min(altitude + 0.2, STILL.relative_m + storey_m)
+        est = pf.step(Odometry(), false_boxes(rng), altitude=AltitudeReading(altitude))
+        if pf.floors is not None and pf.floors.in_transit:
+            told_riding = told_riding or est.converged
+    assert not told_riding  # nobody is located between floors
+    layout = VENUE.layout
+    assert est.converged, pf.gate.lost_because
+    assert layout.level_of(est.x) == 1
+    on_first = float(est.x - layout.offsets(1))
+    assert np.hypot(on_first - CAR.x, est.y - CAR.y) < 0.5

@@ -13,7 +13,14 @@ from app.localization.continuation import DOUBT_FRAMES, GEOMETRY_DOUBT_FRAMES
 from app.localization.dilution import BearingGeometry
 from app.localization.evidence import EvidenceTracker
 from app.localization.filter import ParticleFilter
-from app.localization.types import Detection, Odometry, Pose
+from app.localization.types import (
+    Detection,
+    Estimate,
+    Hypothesis,
+    InitialPose,
+    Odometry,
+    Pose,
+)
 from app.service import checkpoint
 from app.simulation.venue import venue_map
 from tests.helpers import told_at
@@ -102,3 +109,59 @@ def test_a_fix_let_go_for_what_the_camera_saw_needs_a_narrow_radius_again(
     why, converged, _ = _located_then_let_go(monkeypatch, "junk")
     assert why and "alternative" not in why
     assert not any(converged)
+
+
+def _spread(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Every frame's cluster (filter.estimate_pose) as a held fix may be and a first
+    gain may not: all the weight, but 0.35 m wide along x (the clustering's converged
+    asks at most 0.25 m, the gate's hold at most 0.5 m)."""
+    real = filter_module.estimate_pose
+
+    def spread(*args: object, **kwargs: object) -> Estimate:
+        e = real(*args, **kwargs)  # type: ignore[arg-type]
+        top = e.hypotheses[0] if e.hypotheses else None
+        if top is None:
+            return e
+        hyps = (Hypothesis(top.x, top.y, top.theta_rad, 1.0, top.std_xy_m), *e.hypotheses[1:])
+        return Estimate(
+            e.x, e.y, e.theta_rad, 0.35, e.std_y_m, e.std_theta_rad, False, hyps,
+            e.n_particles, e.ess, e.protection_m,
+        )  # fmt: skip
+
+    monkeypatch.setattr(filter_module, "estimate_pose", spread)
+
+
+def test_a_fix_let_go_for_doubt_is_taken_up_with_the_cluster_a_held_fix_keeps(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """The alternative's doubt gone, a cloud as wide as a held fix may be (not as tight
+    as a first gain's) is the fix again within the doubt's window; without the doubt
+    (a first gain, here from a known start) it is not."""
+    monkeypatch.setattr(filter_module, "GAIN_PROTECTION_M", 0.3)
+    state = {"doubt": False}
+    for name in ("alternative_share", "confirmed_share", "gain_share"):
+        real = getattr(EvidenceTracker, name)
+        monkeypatch.setattr(
+            EvidenceTracker,
+            name,
+            property(lambda self, real=real: 0.5 if state["doubt"] else real.fget(self)),
+        )
+    pf, seen, est = told_at(VENUE, POSE)
+    assert est.converged
+    still = Odometry(0.0, 0.0, 0.0)
+    _spread(monkeypatch)
+    state["doubt"] = True
+    for _ in range(3):
+        est = pf.step(still, seen)
+    state["doubt"] = False
+    assert not est.converged and pf._gate.lost_because == ("alternative",)
+    converged = [pf.step(still, seen).converged for _ in range(DOUBT_FRAMES)]
+    assert any(converged), "the fix was not taken up again within the doubt's window"
+
+    first = ParticleFilter(
+        VENUE,
+        pf.config,
+        rng=np.random.default_rng(3),
+        initial_pose=InitialPose(POSE.x, POSE.y, POSE.theta_rad, 0.1, 0.05),
+    )
+    assert not any(first.step(still, seen).converged for _ in range(DOUBT_FRAMES))
