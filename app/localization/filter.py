@@ -543,17 +543,21 @@ class ParticleFilter:
         return 0.0 if mean_ll is None else self._recover(mean_ll)
 
     def _correct(
-        self, detections: Sequence[Detection], weigh: bool = True
+        self, detections: Sequence[Detection], weigh: bool = True, riding: bool = False
     ) -> tuple[float | None, NDArray[np.float64] | None]:
         """The log of this frame's mean likelihood (None: no detections, nothing
         weighed), for the recovery (:meth:`_recover`), and the normalized weights
         computed on the way (None when it did not weigh: :attr:`weights` then computes
         them). With ``weigh`` false the detections are kept as the frame's observation
-        (what the estimate is checked against) and weigh nothing: no evidence."""
+        (what the estimate is checked against) and weigh nothing: no evidence. While
+        ``riding`` (the barometer has the person between floors) a frame without
+        evidence is not counted as dead reckoning: the barometer carries them then,
+        not the odometry, and a lift car's walls show nothing."""
         obs = self.sensor.observe(detections)
         self.last_observation = obs
         if obs.empty or not weigh:
-            self.frames_without_evidence += 1
+            if not riding:
+                self.frames_without_evidence += 1
             return None, None
         self.frames_without_evidence = 0
         if self._wide_first:
@@ -832,15 +836,12 @@ class ParticleFilter:
             # ... nor to hold blind: out of the car, the detections are evidence again
             self._blind_hold = False
         rode, pinned = self._change_level(altitude, frame_s)
-        # During a blind hold (decided below) the detections weigh nothing. While the
-        # barometer has the person between floors, a frame that sees nothing (a lift
-        # car's walls) is no dead reckoning: the barometer carries them, not the
-        # odometry, and a fix held into the ride is not let go for the car's blank view.
-        riding = self.floors is not None and not self.floors.blind and self.floors.in_transit
-        dark = self.frames_without_evidence
-        mean_ll, w = self._correct(detections, weigh=not self._blind_hold)
-        if riding and self.frames_without_evidence > dark:
-            self.frames_without_evidence = dark
+        # During a blind hold (decided below) the detections weigh nothing; between
+        # floors a blank view is no dead reckoning, so a fix held into a ride is not let
+        # go for the car's walls.
+        floors = self.floors
+        riding = floors is not None and not floors.blind and floors.in_transit
+        mean_ll, w = self._correct(detections, weigh=not self._blind_hold, riding=riding)
         if heading is not None:
             self._twins_possible = False  # a heading from outside tells the twins apart
             self.log_w = self.log_w + compass_log_likelihood(self.theta, heading)
@@ -852,7 +853,6 @@ class ParticleFilter:
         self._leave_connector(raw, rode, pinned, odometry)
         share, confirmed, gain_share = 0.0, 0.0, 0.0
         searched_ago: int | None = 0
-        floors = self.floors
         transit = floors is not None and floors.between_floors(raw.x, raw.y)
         # Without a barometer the stop alone says "between floors"; the view may still
         # have put all but ``LEVEL_SURE_SHARE`` of the belief on one floor (below).

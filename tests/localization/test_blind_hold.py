@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from app.localization.config import FilterConfig
 from app.localization.filter import ParticleFilter
@@ -139,11 +140,16 @@ def test_a_one_level_map_never_holds_blind(small_room: SemanticMap) -> None:
     assert pf._sees_nothing and not pf._blind_hold
 
 
-def test_a_fix_held_into_a_lift_rides_with_the_barometer_and_is_told_on_arrival() -> None:
+@pytest.mark.parametrize("through_a_checkpoint", [False, True])
+def test_a_fix_held_into_a_lift_rides_with_the_barometer_and_is_told_on_arrival(
+    through_a_checkpoint: bool,
+) -> None:
     """Located as the ride began, a person rides one storey in a car that shows nothing
     but false boxes (at the lift's 1 m/s), for longer than the hold's frames without
     evidence allow: the fix rides along and is told again as soon as the barometer has
-    them on the First Floor, in the car there; the level is right."""
+    them on the First Floor, in the car there; the level is right
+    (``through_a_checkpoint``: by a filter restored mid-ride from a checkpoint, as a
+    worker taking the session over after a store outage would)."""
     pf, _ = into_the_car(4, [])
     assert pf.estimate.converged
     rng = np.random.default_rng(11)
@@ -154,7 +160,11 @@ def test_a_fix_held_into_a_lift_rides_with_the_barometer_and_is_told_on_arrival(
     # frames in the car before, more frames without evidence than a hold allows.
     frames = int(storey_m / 0.2) + 20
     assert 40 + frames > pf.gate.hold_without_evidence
-    for _ in range(frames):
+    for k in range(frames):
+        if through_a_checkpoint and k == 10:
+            pf = ParticleFilter(
+                VENUE, pf.config, rng=np.random.default_rng(12), state=pf.checkpoint()
+            )
         altitude = min(altitude + 0.2, STILL.relative_m + storey_m)
         est = pf.step(Odometry(), false_boxes(rng), altitude=AltitudeReading(altitude))
         if pf.floors is not None and pf.floors.in_transit:

@@ -29,6 +29,20 @@ VENUE = venue_map()
 POSE = Pose(8.0, 3.0, math.pi / 2)
 
 
+def _doubt_switch(monkeypatch: pytest.MonkeyPatch) -> dict[str, bool]:
+    """A switch: while its ``"doubt"`` is True the evidence tracker gives the other
+    places half the probability (every share the filter reads), else its own."""
+    state = {"doubt": False}
+    for name in ("alternative_share", "confirmed_share", "gain_share"):
+        real = getattr(EvidenceTracker, name)
+        monkeypatch.setattr(
+            EvidenceTracker,
+            name,
+            property(lambda self, real=real: 0.5 if state["doubt"] else real.fget(self)),
+        )
+    return state
+
+
 def _located_then_let_go(
     monkeypatch: pytest.MonkeyPatch, cause: str, through_a_checkpoint: bool = False
 ) -> tuple[tuple[str, ...], list[bool], list[float | None]]:
@@ -42,14 +56,8 @@ def _located_then_let_go(
     # The radius a first fix needs, lowered under this fix's (about 0.5 m): every gain
     # here is a wide one.
     monkeypatch.setattr(filter_module, "GAIN_PROTECTION_M", 0.3)
-    state = {"doubt": False, "wide": False}
-    for name in ("alternative_share", "confirmed_share", "gain_share"):
-        real = getattr(EvidenceTracker, name)
-        monkeypatch.setattr(
-            EvidenceTracker,
-            name,
-            property(lambda self, real=real: 0.5 if state["doubt"] else real.fget(self)),
-        )
+    state = _doubt_switch(monkeypatch)
+    state["wide"] = False
     radius_m = BearingGeometry.radius_m
     monkeypatch.setattr(
         BearingGeometry,
@@ -138,14 +146,7 @@ def test_a_fix_let_go_for_doubt_is_taken_up_with_the_cluster_a_held_fix_keeps(
     as a first gain's) is the fix again within the doubt's window; without the doubt
     (a first gain, here from a known start) it is not."""
     monkeypatch.setattr(filter_module, "GAIN_PROTECTION_M", 0.3)
-    state = {"doubt": False}
-    for name in ("alternative_share", "confirmed_share", "gain_share"):
-        real = getattr(EvidenceTracker, name)
-        monkeypatch.setattr(
-            EvidenceTracker,
-            name,
-            property(lambda self, real=real: 0.5 if state["doubt"] else real.fget(self)),
-        )
+    state = _doubt_switch(monkeypatch)
     pf, seen, est = told_at(VENUE, POSE)
     assert est.converged
     still = Odometry(0.0, 0.0, 0.0)
