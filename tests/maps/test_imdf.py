@@ -313,6 +313,52 @@ def test_an_escalator_without_its_way_is_no_connector(tmp_path: Path) -> None:
     assert check_data(data, source="x", expected_name="x").map is not None
 
 
+def _unit_ids(category: str) -> list[str]:
+    """The ids of the venue's units of ``category``, in the file's order (L0 up)."""
+    units = json.loads((VENUE / "unit.geojson").read_text())["features"]
+    return [f["id"] for f in units if f["properties"]["category"] == category]
+
+
+def test_an_id_used_twice_keeps_the_unit_a_connector_stands_on(tmp_path: Path) -> None:
+    """A real export gave an amenity the id of a stairs unit (IMDF ids are unique): the
+    stairs keep every floor, and the summary names the two features."""
+    stairs_l1 = _unit_ids("stairs")[1]
+
+    def reuse(d: dict) -> None:
+        d["features"][0]["id"] = stairs_l1
+
+    data, summary = import_imdf(_broken(tmp_path, "amenity.geojson", reuse), "x")
+    (stairs,) = [c for c in data["connectors"] if c["kind"] == "stairs"]
+    assert [s["level"] for s in stairs["stops"]] == ["L0", "L1", "L2"]
+    text = "\n".join(summary.lines())
+    assert (
+        f"ids used twice (IMDF ids are unique; the feature read first keeps it, the other "
+        f"is no connector's stop): amenity.geojson: features[0] has the id of "
+        f"unit.geojson: features[18] ({stairs_l1})"
+    ) in text
+    # The amenity is still an object (only its place as a stop went).
+    assert len(objects_of(data, "L0", "information")) == 1
+    assert "check:" not in text
+
+
+def test_stairs_that_pass_a_level_without_a_stop_are_pointed_out(tmp_path: Path) -> None:
+    """Stairs units on the ground and second floors only (the first floor's unit is no
+    stairs): one flight from L0 to L2, which the summary asks to check."""
+    stairs_l1 = _unit_ids("stairs")[1]
+
+    def not_stairs(d: dict) -> None:
+        for f in d["features"]:
+            if f["id"] == stairs_l1:
+                f["properties"]["category"] = "unspecified"
+
+    data, summary = import_imdf(_broken(tmp_path, "unit.geojson", not_stairs), "x")
+    (stairs,) = [c for c in data["connectors"] if c["kind"] == "stairs"]
+    assert [s["level"] for s in stairs["stops"]] == ["L0", "L2"]
+    text = "\n".join(summary.lines())
+    assert "  check: stairs-1 goes from L0 to L2, with no stop on L1" in text
+    assert "ids used twice" not in text
+
+
 def test_names_in_the_manifest_s_language_and_no_venue_file(tmp_path: Path) -> None:
     def french(d: dict) -> None:
         d["features"][0]["properties"]["name"] = {"en": "Ground Floor", "fr": "Rez-de-chaussée"}

@@ -30,7 +30,7 @@ import numpy as np
 import shapely
 
 from app.maps.importers.common import MapImportError, snap_objects
-from app.maps.importers.imdf_connectors import CONNECTOR_UNITS, Place, connectors
+from app.maps.importers.imdf_connectors import CONNECTOR_UNITS, Place, Places, connectors
 from app.maps.importers.imdf_objects import (
     LevelParts,
     amenity_objects,
@@ -144,7 +144,7 @@ def import_imdf(
     summary.imdf_levels = len(features["level"])
     summary.not_read = not_read
     occupants = _occupant_names(features, language)
-    places: dict[str, Place] = {}
+    places = Places()
     unit_level: dict[str, LevelParts] = {}
     regions: list[dict[str, object]] = []
     for i, f in enumerate(features["unit"]):
@@ -155,7 +155,8 @@ def import_imdf(
         uname = text_of(f.props.get("name"), language) or occupants.get(f.id)
         level.units.append((f, geom, category, uname))
         unit_level[f.id] = level
-        places[f.id] = Place(level.id, level.ordinal, geom, uname, CONNECTOR_UNITS.get(category))
+        kind = CONNECTOR_UNITS.get(category)
+        places.add(f.id, Place(level.id, level.ordinal, geom, uname, kind), where)
         if uname:
             outline = geom if geom.geom_type == "Polygon" else max(geom.geoms, key=lambda p: p.area)
             # Surveyed outlines carry a vertex every few centimetres on curves; 2 cm is
@@ -216,8 +217,12 @@ def import_imdf(
     for level in levels:
         summary.snapped += snap_objects(level.objects, level.walls, snap_m)
     made_connectors = connectors(
-        [f.props for f in features["relationship"]], places, summary.report
+        [f.props for f in features["relationship"]],
+        places,
+        summary.report,
+        [lv.id for lv in sorted(levels, key=lambda lv: lv.ordinal)],
     )
+    summary.shared_ids = places.shared
     summary.relationships = len(features["relationship"])
     summary.connectors.update(str(c["kind"]) for c in made_connectors)
     # A venue of several buildings has one IMDF level per building and floor: say which

@@ -21,7 +21,8 @@ and a half around it.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+import itertools
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -54,6 +55,32 @@ class Place:
     kind: str | None  # the connector kind of a connector unit, else None
 
 
+class Places(dict[str, Place]):
+    """The features a connector can stop at, by IMDF id (relationships name them so).
+
+    IMDF ids are unique across a venue's files, but real exports are not always: one
+    seen here gave an amenity the id of a stairs unit, and the amenity, read later,
+    took the stairs' place, so that the stairs lost a floor. The first feature read
+    with an id keeps it (units are read first: the outlines a connector stands on);
+    later ones are not stops and are listed in :attr:`shared`.
+    """
+
+    def __init__(self) -> None:
+        super().__init__()
+        self._where: dict[str, str] = {}
+        #: Features whose id an earlier one had, said as "<file and feature> has the
+        #: id of <the first> (<id>)".
+        self.shared: list[str] = []
+
+    def add(self, fid: str, place: Place, where: str) -> None:
+        """``place`` under ``fid``, unless a feature read before has that id."""
+        if fid in self:
+            self.shared.append(f"{where} has the id of {self._where[fid]} ({fid})")
+            return
+        self[fid] = place
+        self._where[fid] = where
+
+
 @dataclass
 class ConnectorReport:
     """What was made of relationships and connector units (for the import summary)."""
@@ -61,6 +88,10 @@ class ConnectorReport:
     from_relationships: int = 0
     by_overlap: int = 0
     not_used: dict[str, int] = field(default_factory=dict)
+    #: Stairs, escalators and ramps whose next stop lies more than one map level away
+    #: ("stairs-1 goes from L3 to L5, with no stop on L4"): a flight that passes a floor
+    #: without a door to it, or a unit missing on that floor; worth a look.
+    skipping: list[str] = field(default_factory=list)
 
     def skip(self, why: str) -> None:
         self.not_used[why] = self.not_used.get(why, 0) + 1
@@ -96,6 +127,7 @@ def connectors(
     relationships: list[Mapping[str, object]],
     places: Mapping[str, Place],
     report: ConnectorReport,
+    levels: Sequence[str] = (),
 ) -> list[dict[str, object]]:
     """The map file's ``connectors``.
 
@@ -103,6 +135,8 @@ def connectors(
         relationships: the IMDF relationship features' properties.
         places: every unit, opening and amenity by IMDF id (units carry their kind).
         report: counts what was used and why the rest was not.
+        levels: the map's level ids from the lowest up, to say which stairs, escalators
+            and ramps pass a level without a stop (``report.skipping``).
     """
     out: list[dict[str, object]] = []
     used: set[str] = set()
@@ -159,10 +193,18 @@ def connectors(
             )
             report.by_overlap += 1
     counts: dict[str, int] = {}
+    rank = {level: i for i, level in enumerate(levels)}
     for c in out:
         k = str(c["kind"])
         counts[k] = counts.get(k, 0) + 1
         c["id"] = f"{k}-{counts[k]}"
+        if k == "elevator":
+            continue  # (a lift passes floors it does not serve)
+        stops = [str(s["level"]) for s in c["stops"]]  # type: ignore[attr-defined]
+        for a, b in itertools.pairwise(stops):
+            if a in rank and b in rank and rank[b] - rank[a] > 1:
+                between = ", ".join(levels[rank[a] + 1 : rank[b]])
+                report.skipping.append(f"{c['id']} goes from {a} to {b}, with no stop on {between}")
     return [{"id": c.pop("id"), **c} for c in out]
 
 

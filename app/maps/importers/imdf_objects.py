@@ -10,7 +10,7 @@ import numpy as np
 import shapely
 
 from app.maps.importers.common import MapImportError
-from app.maps.importers.imdf_connectors import CONNECTOR_UNITS, POINT_STOP_M, Place
+from app.maps.importers.imdf_connectors import CONNECTOR_UNITS, POINT_STOP_M, Place, Places
 from app.maps.importers.imdf_read import Feature, Projector, class_word, text_of
 from app.maps.importers.imdf_summary import ImdfSummary
 from app.maps.importers.imdf_walls import open_kind
@@ -66,7 +66,7 @@ def map_object(cls: str, x: float, y: float, label: str | None, level: str) -> d
     return obj
 
 
-def opening_objects(level: LevelParts, places: dict[str, Place], summary: ImdfSummary) -> set[str]:
+def opening_objects(level: LevelParts, places: Places, summary: ImdfSummary) -> set[str]:
     """Doors, elevators and restrooms at the level's openings; the ids of the units
     that got their object there."""
     seen: set[str] = set()
@@ -93,8 +93,10 @@ def opening_objects(level: LevelParts, places: dict[str, Place], summary: ImdfSu
                 level.objects.append(map_object("restroom", mid.x, mid.y, unit[3], level.id))
                 summary.unit_objects["restroom"] += 1
                 seen.add(unit[0].id)
-        places[f.id] = Place(
-            level.id, level.ordinal, line.buffer(POINT_STOP_M, quad_segs=2), name, None
+        places.add(
+            f.id,
+            Place(level.id, level.ordinal, line.buffer(POINT_STOP_M, quad_segs=2), name, None),
+            f"opening.geojson ({f.id})",
         )
     return seen
 
@@ -102,7 +104,7 @@ def opening_objects(level: LevelParts, places: dict[str, Place], summary: ImdfSu
 def amenity_objects(
     features: list[Feature],
     unit_level: Mapping[str, LevelParts],
-    places: dict[str, Place],
+    places: Places,
     language: str,
     summary: ImdfSummary,
 ) -> None:
@@ -129,7 +131,9 @@ def amenity_objects(
         label = text_of(f.props.get("name"), language)
         level.objects.append(map_object(cls, geom.x, geom.y, label, level.id))
         summary.amenity_objects[cls] += 1
-        places[f.id] = Place(
-            level.id, level.ordinal, geom.buffer(POINT_STOP_M, quad_segs=2), label, None
+        places.add(
+            f.id,
+            Place(level.id, level.ordinal, geom.buffer(POINT_STOP_M, quad_segs=2), label, None),
+            f"amenity.geojson: features[{i}]",
         )
     summary.amenities = len(features)

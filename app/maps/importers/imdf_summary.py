@@ -37,6 +37,8 @@ class ImdfSummary:
     #: Other .geojson files of the venue, not read (feature types the import has no use
     #: for, or a tool's own files).
     not_read: list[str] = field(default_factory=list)
+    #: Features that reused an id an earlier feature had (imdf_connectors.Places).
+    shared_ids: list[str] = field(default_factory=list)
 
     def lines(self) -> list[str]:
         def counts(c: Mapping[str, int]) -> str:
@@ -63,5 +65,15 @@ class ImdfSummary:
             f"{self.relationships} relationships, {r.by_overlap} by overlapping units); "
             f"not used: {counts(r.not_used)}",
             f"  {self.snapped} objects moved onto a wall of their level",
+            *[f"  check: {line}" for line in r.skipping],
+            *(
+                [
+                    f"  ids used twice (IMDF ids are unique; the feature read first keeps "
+                    f"it, the other is no connector's stop): {'; '.join(self.shared_ids[:3])}"
+                    + (f"; and {len(self.shared_ids) - 3} more" if len(self.shared_ids) > 3 else "")
+                ]
+                if self.shared_ids
+                else []
+            ),
             *([f"  files not read: {', '.join(self.not_read)}"] if self.not_read else []),
         ]
