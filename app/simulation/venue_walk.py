@@ -24,7 +24,7 @@ import numpy as np
 
 from app.localization.floors import AltitudeReading
 from app.localization.types import Pose
-from app.maps.geometry import wrap_angle
+from app.maps.geometry import segments_cross_walls, wrap_angle
 from app.maps.model import SemanticMap
 from app.simulation.camera import CameraModel
 from app.simulation.phone import PhoneEffects, add_sway, phone_frames, phone_streams
@@ -138,6 +138,7 @@ def _truth(
     emit(0, False)
     for k, leg in enumerate(legs):
         if isinstance(leg, Walk):
+            _check_clear(semantic_map, level, (float(pos[0]), float(pos[1])), leg.points, k)
             ride_state.clear()
             go(leg.points, cfg.speed_mps, k, False)
             continue
@@ -163,6 +164,32 @@ def _truth(
         for _ in range(round(leg.wait_s * cfg.rate_hz)):
             emit(k, True)
     return out
+
+
+def _check_clear(
+    semantic_map: SemanticMap,
+    level: int,
+    at: tuple[float, float],
+    points: tuple[tuple[float, float], ...],
+    leg: int,
+) -> None:
+    """Refuse a walking leg (from ``at`` through ``points``, file frame) that crosses a
+    wall of its level: the simulated person would pass where nobody can, and a filter
+    that keeps its particles out of walls would rightly fall behind them (a walk drawn
+    by hand into a lift car through its side wall looked like the filter's fault)."""
+    path = np.array([at, *points], dtype=np.float64)
+    if path.shape[0] < 2 or semantic_map.walls.shape[0] == 0:
+        return
+    path[:, 0] += float(semantic_map.layout.offsets(level))
+    crossed = segments_cross_walls(path[:-1], path[1:], semantic_map.walls)
+    if crossed.any():
+        i = int(np.flatnonzero(crossed)[0])
+        a = tuple(round(float(v), 3) for v in (at, *points)[i])
+        b = tuple(round(float(v), 3) for v in points[i])
+        lv = semantic_map.layout.levels[level].id
+        raise ValueError(
+            f"walk leg {leg}: the stretch from {a} to {b} crosses a wall of level {lv}"
+        )
 
 
 def _barometer(

@@ -4,6 +4,7 @@ suite's phone condition filtered as the service filters a session."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from app.localization.types import Odometry
 from app.maps.geometry import wrap_angle
@@ -103,3 +104,22 @@ def test_no_barometer_no_altitude() -> None:
         MAP, START, LEGS, cfg, PhoneEffects(), np.random.default_rng(0), Barometer(noise_m=0.4)
     )
     assert all(vf.altitude is not None for vf in noisy)
+
+
+def test_a_walk_through_a_wall_is_refused_with_the_stretch_that_crosses_it() -> None:
+    """A walking leg drawn by hand through a wall of its level (here the riverside
+    station's newsstand, a kiosk on the Ground Floor's corridor) is no walk anybody
+    can make: the simulator says which leg, which stretch and which level."""
+    from app.maps.check import load_map
+    from app.resources import bundled_maps_dir
+    from app.simulation.venue_walk import Walk
+
+    station = load_map(bundled_maps_dir() / "riverside_station.json")
+    cfg = SimulationConfig(path=((0.0, 0.0),))
+    through = [Walk(((-2.5, 0.0), (15.0, 0.0)))]
+    with pytest.raises(ValueError, match=r"walk leg 0: the stretch from \(-2\.5, 0\.0\) to "
+                       r"\(15\.0, 0\.0\) crosses a wall of level L0"):  # fmt: skip
+        simulate_venue(station, "L0", through, cfg, np.random.default_rng(0))
+    around = [Walk(((-2.5, 1.5), (15.0, 1.5)))]
+    frames = simulate_venue(station, "L0", around, cfg, np.random.default_rng(0))
+    assert frames[-1].frame.truth.x - frames[0].frame.truth.x > 17.0
