@@ -8,7 +8,14 @@ import pytest
 from app.maps.check import load_map
 from app.maps.geometry import point_segment_distance, segments_cross_walls
 from app.maps.model import WALL_CLEARANCE_M, MapNotPrepared, SemanticMap, parse_map
-from app.maps.prepare import build, content_key, ensure_prepared, grid_frame, prepare
+from app.maps.prepare import (
+    build,
+    build_free_space,
+    content_key,
+    ensure_prepared,
+    grid_frame,
+    prepare,
+)
 from app.resources import bundled_maps_dir
 
 
@@ -127,3 +134,36 @@ def test_grids_of_another_map_are_refused() -> None:
     got = build(small)
     with pytest.raises(ValueError, match="13 objects does not fit a map of 1"):
         other.attach(got.free_space, got.visibility)
+
+
+def test_each_floor_of_a_venue_gets_a_floor_s_cells_so_a_narrow_door_stays_open() -> None:
+    """Six floors of 60 x 80 m laid side by side, each with a small room behind a
+    0.7 m door. One budget of cells for the whole plane made them 0.39 m wide, whose
+    clearance (0.1 m plus half a cell's diagonal) from both jambs no cell centre in the
+    doorway has: the room was closed to the particles (a real building's lift cars
+    were). With a floor's cells per level the doorway is free space."""
+    ids = [f"L{k}" for k in range(6)]
+    walls = []
+    objects = []
+    for lv in ids:
+        box = [(0, 0, 60, 0), (60, 0, 60, 80), (60, 80, 0, 80), (0, 80, 0, 0)]
+        room = [(10, 10, 12, 10), (12, 10, 12, 12.5), (10, 12.5, 10, 10)]
+        room += [(10, 12.5, 10.65, 12.5), (11.35, 12.5, 12, 12.5)]  # the door: 10.65-11.35
+        walls += [{"x1": a, "y1": b, "x2": c, "y2": d, "level": lv} for a, b, c, d in box + room]
+        objects += [{"class": "door", "x": 11.0, "y": 12.5, "level": lv}]
+        objects += [{"class": "plant", "x": 30.0, "y": 40.0, "level": lv}]
+    m = parse_map(
+        {
+            "name": "six_floors",
+            "levels": [{"id": lv, "name": lv, "ordinal": k} for k, lv in enumerate(ids)],
+            "walls": walls,
+            "objects": objects,
+        }
+    )
+    fs = build_free_space(m)
+    assert fs.resolution_m < 0.2
+    ys = np.linspace(12.3, 12.7, 9)
+    for k in range(6):
+        xs = np.linspace(10.65, 11.35, 15) + float(m.layout.offsets(k))
+        gx, gy = np.meshgrid(xs, ys)
+        assert fs.is_free(gx.ravel(), gy.ravel()).any(), f"the door of level L{k} is closed"
