@@ -184,8 +184,7 @@ def _check_clear(
     crossed = segments_cross_walls(path[:-1], path[1:], semantic_map.walls)
     if crossed.any():
         i = int(np.flatnonzero(crossed)[0])
-        a = tuple(round(float(v), 3) for v in (at, *points)[i])
-        b = tuple(round(float(v), 3) for v in points[i])
+        a, b = ((round(float(x), 3), round(float(y), 3)) for x, y in ((at, *points)[i], points[i]))
         lv = semantic_map.layout.levels[level].id
         raise ValueError(
             f"walk leg {leg}: the stretch from {a} to {b} crosses a wall of level {lv}"

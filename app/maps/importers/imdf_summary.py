@@ -66,14 +66,15 @@ class ImdfSummary:
             f"not used: {counts(r.not_used)}",
             f"  {self.snapped} objects moved onto a wall of their level",
             *[f"  check: {line}" for line in r.skipping],
-            *(
-                [
-                    f"  ids used twice (IMDF ids are unique; the feature read first keeps "
-                    f"it, the other is no connector's stop): {'; '.join(self.shared_ids[:3])}"
-                    + (f"; and {len(self.shared_ids) - 3} more" if len(self.shared_ids) > 3 else "")
-                ]
-                if self.shared_ids
-                else []
-            ),
+            *([self._shared_line()] if self.shared_ids else []),
             *([f"  files not read: {', '.join(self.not_read)}"] if self.not_read else []),
         ]
+
+    def _shared_line(self) -> str:
+        """The features that reused an id, the first three named."""
+        named = "; ".join(self.shared_ids[:3])
+        more = len(self.shared_ids) - 3
+        return (
+            "  ids used twice (IMDF ids are unique; the feature read first keeps it, the "
+            f"other is no connector's stop): {named}" + (f"; and {more} more" if more > 0 else "")
+        )
