@@ -20,11 +20,12 @@ from app.localization.floors import (
     FloorTracker,
 )
 from app.localization.types import InitialPose, Odometry, Pose
-from app.maps.model import SemanticMap
+from app.maps.model import SemanticMap, parse_map
+from app.maps.prepare import build_free_space, build_visibility
 from app.service import checkpoint
 from app.simulation.camera import CameraModel
 from app.simulation.simulator import SimulationConfig
-from app.simulation.venue import venue_legs, venue_map
+from app.simulation.venue import venue_legs, venue_map, venue_spec
 from app.simulation.venue_walk import Barometer, Ride, Walk, simulate_venue
 from tests.helpers import seen_from
 
@@ -133,6 +134,41 @@ def test_a_one_level_map_has_no_tracker_and_the_venue_checkpoint_keeps_it(
         VENUE, FilterConfig(particles=500), rng=np.random.default_rng(0), state=state
     )
     assert again.floors is not None and again.floors.anchor_m == pytest.approx(12.0)
+
+
+def test_a_checkpoint_of_a_coarser_free_space_grid_resumes_on_the_finer_one() -> None:
+    """A worker upgraded to finer free-space cells (``PREPARE_VERSION`` 2 gave a map with
+    levels a floor's worth of cells per level) resumes a session checkpointed by one with
+    coarser cells: the particles, the walked path and the gate carry over as they are,
+    and the person is followed through the lift to the Second Floor, never told on a
+    wrong floor or a metre off, and never started again."""
+    coarse = parse_map(venue_spec())
+    free = build_free_space(coarse, 0.25)
+    coarse.attach(free, build_visibility(coarse, free))
+    assert VENUE.free_space.resolution_m < 0.1
+    start, legs = venue_legs()
+    cfg = SimulationConfig(path=((0.0, 0.0),), miss_prob=0.1, false_rate=0.2)
+    frames = simulate_venue(VENUE, start, legs[:3], cfg, np.random.default_rng(4))
+    ride = next(i for i, vf in enumerate(frames) if vf.riding)
+    old = ParticleFilter(coarse, FilterConfig(particles=3000), rng=np.random.default_rng(5))
+    for vf in frames[:ride]:
+        est = old.step(vf.frame.odometry, vf.frame.detections, altitude=vf.altitude)
+    assert est.converged
+    data = checkpoint.pack({"format": checkpoint.FORMAT_VERSION, "filter": old.checkpoint()})
+    new = ParticleFilter(VENUE, FilterConfig(particles=3000), rng=np.random.default_rng(6))
+    new.restore(checkpoint.unpack(data)["filter"])
+    told = wrong = 0
+    for vf in frames[ride:]:
+        f = vf.frame
+        est = new.step(f.odometry, f.detections, altitude=vf.altitude)
+        if est.converged and not vf.riding:
+            told += 1
+            off = math.hypot(est.x - f.truth.x, est.y - f.truth.y)
+            wrong += VENUE.layout.level_of(est.x) != vf.level or off > 1.0
+    walking = sum(not vf.riding for vf in frames[ride:])
+    assert wrong == 0 and new.restarts == 0
+    assert told > 0.8 * walking, (told, walking)
+    assert VENUE.layout.level_of(est.x) == 2 and est.converged
 
 
 @pytest.mark.parametrize("seed", [0, 1])
@@ -700,6 +736,43 @@ def test_without_a_barometer_a_gain_is_not_made_in_a_stop_but_comes_on_leaving_i
     out = in_stop.index(False)
     assert not any(converged[:out])
     assert converged[out], (out, converged[out:])
+
+
+@pytest.mark.parametrize("barometer", [True, False])
+def test_a_known_start_on_each_floor_standing_still_is_told_there_within_5_frames(
+    barometer: bool,
+) -> None:
+    """The contract's known start (5 cm, 1 deg) on a venue: given on any of its floors,
+    standing still and seeing what a 360 deg camera sees there, the filter tells that
+    place on that floor by the fifth frame, with or without the barometer, and offers
+    no hypothesis on another floor (places drawn at random in each floor's free space,
+    outside every connector's stop, seeing at least three objects)."""
+    rng = np.random.default_rng(7)
+    layout = VENUE.layout
+    starts = [0, 0, 0]  # per floor
+    while min(starts) < 2:
+        x, y = (float(v) for v in VENUE.free_space.sample(1, rng)[0])
+        level = layout.level_of(x)
+        pose = Pose(x, y, float(rng.uniform(-np.pi, np.pi)))
+        seen = seen_from(VENUE, pose)
+        pf = ParticleFilter(
+            VENUE,
+            FilterConfig(particles=2000),
+            rng=np.random.default_rng(sum(starts)),
+            initial_pose=InitialPose(x, y, pose.theta_rad, 0.05, np.radians(1.0)),
+        )
+        assert pf.floors is not None
+        if len(seen) < 3 or pf.floors.in_stop(x, y) or starts[level] == 2:
+            continue
+        starts[level] += 1
+        altitude = AltitudeReading(100.0 + layout.levels[level].elevation_m, 0.5)
+        told = [
+            pf.step(Odometry(), seen, altitude=altitude if barometer else None, frame_s=0.2)
+            for _ in range(5)
+        ]
+        assert told[-1].converged, (level, [e.converged for e in told])
+        assert math.hypot(told[-1].x - x, told[-1].y - y) < 0.2
+        assert {layout.level_of(h.x) for h in told[-1].hypotheses} == {level}
 
 
 def test_without_a_barometer_a_known_start_rides_the_lift_and_its_geometry_follows() -> None:
