@@ -8,7 +8,8 @@ after a door wait, and a door wait at the end). The true level is the one whose
 elevation is nearest the altitude. The frames are what a phone sends: odometry in the
 body frame (the
 ride's horizontal motion, as visual-inertial tracking measures it; nothing while the
-lift moves), detections of what is in view on the true level, and the barometer's
+lift moves), detections of what is in view on the true level (none while a lift moves:
+its doors are shut; false detections still come), and the barometer's
 altitude: the truth plus a drift (a random offset, a random rate and a random walk)
 plus noise.
 
@@ -18,7 +19,7 @@ plane (:mod:`app.maps.levels`), so the odometry never sees a level's offset.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -85,8 +86,9 @@ class VenueFrame:
 
 def _truth(
     semantic_map: SemanticMap, start_level: str, legs: list[Leg], cfg: SimulationConfig
-) -> list[tuple[float, float, float, int, float, int, bool]]:
-    """(x, y, theta, level, altitude, leg, riding) per frame, file frame."""
+) -> list[tuple[float, float, float, int, float, int, bool, bool]]:
+    """(x, y, theta, level, altitude, leg, riding, shut) per frame, file frame; ``shut``:
+    in a lift car between its door waits, the doors closed (nothing of any floor in view)."""
     layout = semantic_map.layout
     dt = 1.0 / cfg.rate_hz
     step_turn = np.radians(cfg.turn_rate_deg_s) * dt
@@ -96,10 +98,10 @@ def _truth(
     heading = 0.0
     alt = layout.levels[level].elevation_m
     elevations = np.array([lv.elevation_m for lv in layout.levels])
-    out: list[tuple[float, float, float, int, float, int, bool]] = []
+    out: list[tuple[float, float, float, int, float, int, bool, bool]] = []
 
-    def emit(k: int, riding: bool) -> None:
-        out.append((float(pos[0]), float(pos[1]), heading, level, alt, k, riding))
+    def emit(k: int, riding: bool, shut: bool = False) -> None:
+        out.append((float(pos[0]), float(pos[1]), heading, level, alt, k, riding, shut))
 
     def go(points: tuple[tuple[float, float], ...], speed: float, k: int, riding: bool) -> None:
         nonlocal pos, heading
@@ -121,7 +123,7 @@ def _truth(
 
     ride_state: dict[str, float] = {}
 
-    def step(k: int, riding: bool) -> None:
+    def step(k: int, riding: bool, shut: bool = False) -> None:
         nonlocal alt, level
         if riding and ride_state:
             alt = float(
@@ -133,7 +135,7 @@ def _truth(
             )
             # The true level: the one whose elevation is nearest the altitude.
             level = int(np.argmin(np.abs(elevations - alt)))
-        emit(k, riding)
+        emit(k, riding, shut)
 
     emit(0, False)
     for k, leg in enumerate(legs):
@@ -158,7 +160,10 @@ def _truth(
         if leg.points:
             go(leg.points, leg.speed_mps, k, True)
         while abs(alt - a1) > 1e-9:
-            step(k, True)
+            # A lift moves with its doors closed: the car's walls and doors are all
+            # its rider sees (until this, the simulated car showed each floor it passed
+            # through its doorway).
+            step(k, True, shut=not leg.points)
         level = to
         ride_state.clear()
         for _ in range(round(leg.wait_s * cfg.rate_hz)):
@@ -224,18 +229,22 @@ def simulate_venue(
     truth = _truth(semantic_map, start_level, legs, config)
     baro_rng = rng.spawn(1)[0]
     dt = 1.0 / config.rate_hz
-    readings = _barometer([alt for *_, alt, _, _ in truth], barometer, baro_rng, dt)
+    readings = _barometer([row[4] for row in truth], barometer, baro_rng, dt)
+    shut_view = replace(config, blocked_sector_deg=360.0)
     frames: list[VenueFrame] = []
     prev: Pose | None = None
-    for i, (x, y, th, level, alt, k, riding) in enumerate(truth):
+    for i, (x, y, th, level, alt, k, riding, shut) in enumerate(truth):
         t = i * dt
         file_pose = Pose(x, y, th)
         px = x + float(layout.offsets(level))
         plane_pose = Pose(px, y, th)
         odo = None if prev is None else _odometry(prev, file_pose, config, rng)
         prev = file_pose
-        dets, widths = _detections(semantic_map, plane_pose, False, config, camera, rng)
-        frame = SimFrame(round(t, 6), plane_pose, odo, dets, False, tuple(widths))
+        # (A lift car's closed doors block the whole view: only false detections.)
+        dets, widths = _detections(
+            semantic_map, plane_pose, shut, shut_view if shut else config, camera, rng
+        )
+        frame = SimFrame(round(t, 6), plane_pose, odo, dets, shut, tuple(widths))
         frames.append(VenueFrame(frame, file_pose, level, alt, readings[i], k, riding))
     return frames
 
@@ -270,18 +279,26 @@ def simulate_venue_phone(
     xyz = np.array([row[:3] for row in truth], dtype=np.float64)
     level = np.array([row[3] for row in truth], dtype=np.int64)
     striding = np.array(
-        [not riding or getattr(legs[k], "kind", "") == "stairs" for *_, k, riding in truth]
+        [not riding or getattr(legs[k], "kind", "") == "stairs" for *_, k, riding, _ in truth]
     )
     add_sway(xyz, config.rate_hz, effects, streams["sway"], striding)
+    shut = np.array([row[7] for row in truth], dtype=bool)
     none = np.zeros(len(truth), dtype=bool)
     phone = phone_frames(
-        world, xyz, none, none, config, effects, streams, plane_x=layout.offsets(level)
+        world,
+        xyz,
+        shut,
+        none,
+        replace(config, blocked_sector_deg=360.0),
+        effects,
+        streams,
+        plane_x=layout.offsets(level),
     )
     readings = _barometer([row[4] for row in truth], barometer, baro_rng, 1.0 / config.rate_hz)
     frames: list[VenueFrame] = []
     for f in phone:
         i = round(f.t * config.rate_hz)
         x, y, th = (float(v) for v in xyz[i])
-        _, _, _, lv, alt, k, riding = truth[i]
+        _, _, _, lv, alt, k, riding, _ = truth[i]
         frames.append(VenueFrame(f, Pose(x, y, th), lv, alt, readings[i], k, riding))
     return frames

@@ -123,3 +123,29 @@ def test_a_walk_through_a_wall_is_refused_with_the_stretch_that_crosses_it() -> 
     around = [Walk(((-2.5, 1.5), (15.0, 1.5)))]
     frames = simulate_venue(station, "L0", around, cfg, np.random.default_rng(0))
     assert frames[-1].frame.truth.x - frames[0].frame.truth.x > 17.0
+
+
+@pytest.mark.parametrize("phone", [False, True])
+def test_a_lift_car_moves_with_its_doors_shut(phone: bool) -> None:
+    """While the lift moves, its rider sees none of the floors it passes (before, the
+    simulated car showed each of them through its doorway); while the doors are open,
+    before and after, the floor the car stands at is in view, and the stairs and
+    escalators are ridden in full view."""
+    cfg: dict[str, object] = {"miss_prob": 0.0, "false_rate": 0.0}
+    if phone:
+        frames = walk(PhoneEffects(), **cfg)
+    else:
+        sim = SimulationConfig(path=((0.0, 0.0),), **cfg)  # type: ignore[arg-type]
+        frames = simulate_venue(MAP, START, LEGS, sim, np.random.default_rng(2))
+    kinds = [getattr(leg, "kind", "walk") for leg in LEGS]
+    lift = [vf for vf in frames if vf.riding and kinds[vf.leg] == "elevator"]
+    # The car moves from the first frame off the Ground Floor's altitude to the first at
+    # the Second Floor's (9 m), doors shut.
+    off = next(i for i, vf in enumerate(lift) if vf.true_altitude_m > 0.0)
+    at = next(i for i, vf in enumerate(lift) if vf.true_altitude_m == 9.0)
+    moving, waiting = lift[off : at + 1], lift[:off] + lift[at + 1 :]
+    assert len(moving) > 30 and len({vf.level for vf in moving}) == 3  # passes the First
+    assert all(not vf.frame.detections for vf in moving)
+    assert len(waiting) > 20 and all(vf.frame.detections for vf in waiting)
+    others = [vf for vf in frames if vf.riding and kinds[vf.leg] != "elevator"]
+    assert sum(bool(vf.frame.detections) for vf in others) > 0.9 * len(others)
