@@ -53,7 +53,7 @@ from app.localization.alternatives import EvidenceSettings
 from app.localization.camera import Camera
 from app.localization.convergence import ConvergenceGate
 from app.localization.pacing import WEIGH_PERIOD_S
-from app.localization.types import InitialPose
+from app.localization.types import InitialPose, Pose
 from app.maps.check import load_map
 from app.maps.model import SemanticMap
 from app.resources import bundled_maps_dir
@@ -352,12 +352,15 @@ def run_scenario(
     on_frame: Callable[[Session, PhoneFrame, FrameOutcome], None] | None = None,
     alter: Callable[[list[PhoneFrame]], list[PhoneFrame]] | None = None,
     timestamps: bool = True,
+    start: Callable[[SemanticMap, Pose], InitialPose | None] | None = None,
 ) -> PhoneRun:
     """Simulate one walk and feed it, frame by frame, to a fresh session;
     ``on_frame(session, frame, outcome)`` after each frame (a tool's look at the
     session's state, e.g. ``tools/odometry_scale.py``); ``alter`` changes the simulated
     frames before they are sent (an effect the simulator does not model,
-    ``tools/unmodelled.py``); ``timestamps`` False sends the frames without them."""
+    ``tools/unmodelled.py``); ``timestamps`` False sends the frames without them;
+    ``start(map, first true pose)`` gives the session's ``initial_pose`` instead of the
+    condition's (a start given wrong, ``tools/wrong_start.py``)."""
     from app.service.sessions import SessionManager
     from app.service.types import SensorSpec, SessionSpec
 
@@ -374,7 +377,9 @@ def run_scenario(
     if alter is not None:
         frames = alter(frames)
     initial = None
-    if cond.known_start is not None:
+    if start is not None:
+        initial = start(semantic_map, frames[0].truth)
+    elif cond.known_start is not None:
         ks = cond.known_start
         initial = InitialPose(
             ks.x, ks.y, math.radians(ks.theta_deg), ks.std_xy_m, math.radians(ks.std_theta_deg)

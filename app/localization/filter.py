@@ -163,6 +163,10 @@ FORGIVE_SLIDE_M = 0.25
 #: 15 and 25 frames caught more of seeds 0-29 (15 frames each) but nothing more of
 #: 30-59, and cost the symmetric paper office up to 0.05 of its availability.
 SETTLED_CANDIDATE_FRAMES = 10
+#: Frames with detections that contradict a start given (an object in clear view never
+#: reported, or a frame bad on its own) before its first fix, after which the start is
+#: taken for wrong and the filter starts again from no knowledge.
+START_CONTRADICTED_FRAMES = 5
 #: A known start tells a map's twins apart (app.maps.symmetry) when each twin lies more
 #: than this many of the start's stds from it, in position or in heading.
 TWIN_START_STDS = 3.0
@@ -420,6 +424,12 @@ class ParticleFilter:
         #: the evidence search asks for it at the base interval (see _weigh_alternatives).
         self._after_ride = False
         self.continuation.reset(known_start=initial_pose is not None)
+        #: Whether the belief still rests on the start given (initial_pose), not yet
+        #: told nor given up (see START_CONTRADICTED_FRAMES), and the frames with
+        #: detections that contradicted it so far.
+        self._given_start = initial_pose is not None
+        self._start_contradicted = 0
+        self._frame_misfit = False
         #: Whether a twin of the person's place (app.maps.symmetry) is as likely as the
         #: place itself: from a start that does not tell them apart, until a compass does.
         self._twins_possible = self._start_has_twins(initial_pose)
@@ -493,6 +503,25 @@ class ParticleFilter:
             # wrong everywhere. Start again from no knowledge rather than keep ghosts.
             self._restart_global()
 
+    def _doubt_the_start(self, est: Estimate) -> None:
+        """A start given (``initial_pose``) that what the camera sees contradicts on
+        ``START_CONTRADICTED_FRAMES`` frames with detections before a fix is told
+        there is taken for wrong: the filter starts again from no knowledge."""
+        if est.converged:
+            self._given_start = False
+            return
+        obs, q = self.last_observation, self.quality
+        if obs is None or obs.empty or q is None:
+            return
+        # An object in clear view never reported, a frame that contradicts the place on
+        # its own, or one with at least two detections' worth of score that fails the
+        # gain's fit test by itself (the smoothed fit is no such sign: one false box on
+        # the first frame keeps it past the threshold for a second).
+        if q.contradicted or self._bad_run > 0 or self._frame_misfit:
+            self._start_contradicted += 1
+        if self._start_contradicted >= START_CONTRADICTED_FRAMES:
+            self._restart_global()
+
     def _anywhere(self, n: int) -> tuple[NDArray[np.float64], ...]:
         """``n`` poses uniform over the free space with uniform headings."""
         pts = self.map.free_space.sample(n, self.rng)
@@ -524,8 +553,11 @@ class ParticleFilter:
         self.geometry.reset()
         self.odometry_check.reset()
         self.told_heading.reset()
+        self._given_start = False
+        self._start_contradicted = 0
         if self.evidence is not None:
             self.evidence.reset()
+            self.evidence.set_prior(None)  # a start from no knowledge has no known start
         if self.unseen is not None:
             self.unseen.reset()
         self.restarts += 1
@@ -989,6 +1021,8 @@ class ParticleFilter:
             was_told=self.estimate.converged,
             search_wait=self._gate.not_gained_because == ("no search yet",),
         )
+        if self._given_start:
+            self._doubt_the_start(est)
         if est.converged:
             self._after_ride = False
             self._told_since_start = True
@@ -1199,6 +1233,8 @@ class ParticleFilter:
             "narrow_frames": self._narrow_frames,
             "turned_run": self._turned_run,
             "told_since_start": self._told_since_start,
+            "given_start": self._given_start,
+            "start_contradicted": self._start_contradicted,
             "settled_frames": self._settled_frames,
             "twins_possible": self._twins_possible,
             "last_fix": None if self._last_fix is None else list(self._last_fix),
@@ -1258,6 +1294,10 @@ class ParticleFilter:
         self._turned_run = bool(state.get("turned_run", False))
         # (An older checkpoint: as if told, so no candidate forgives.)
         self._told_since_start = bool(state.get("told_since_start", True))
+        # (a checkpoint from before a given start could be doubted: not doubted)
+        self._given_start = bool(state.get("given_start", False))
+        self._start_contradicted = int(state.get("start_contradicted", 0))
+        self._frame_misfit = False
         self._settled_frames = int(state.get("settled_frames", 0))
         # (An older checkpoint: as before twins were known.)
         self._twins_possible = bool(state.get("twins_possible", False))
@@ -1302,6 +1342,7 @@ class ParticleFilter:
         """
         obs = self.last_observation
         top = raw.hypotheses[0] if raw.hypotheses else None
+        self._frame_misfit = False
         if obs is None or obs.empty:
             return  # (nor does a frame without detections say what is in view)
         self._sees_nothing = False
@@ -1344,6 +1385,11 @@ class ParticleFilter:
         # turning, a person walking past); a kidnap stays bad.
         self._bad_run = self._bad_run + 1 if bad_now else 0
         bad = self._bad_run >= BAD_FRAMES_IN_A_ROW
+        # This frame alone, with at least two detections' worth of score, failing the
+        # gain's fit test (see _doubt_the_start).
+        self._frame_misfit = total >= 2.0 and (
+            fit > self._gate.gain_fit or unexplained > self._gate.gain_unexplained
+        )
         a_share = FIT_SMOOTHING * min(1.0, total / FIT_FULL_SCORE)
         if self.unseen is not None:
             if self.unseen.frame_expected == 0 and good == 0.0:
