@@ -386,6 +386,8 @@ class ParticleFilter:
         #: (:func:`~app.localization.motion.implausible`: its translation refused, its
         #: turn kept).
         self.odometry_refused = False
+        #: Whether the last frame gave up the start given (START_CONTRADICTED_FRAMES).
+        self.start_given_up = False
         #: Frames with detections in a row that were bad on their own (see _update_fit).
         self._bad_run = 0
         #: The last frame's estimate had nothing in clear view and explained nothing
@@ -503,24 +505,30 @@ class ParticleFilter:
             # wrong everywhere. Start again from no knowledge rather than keep ghosts.
             self._restart_global()
 
-    def _doubt_the_start(self, est: Estimate) -> None:
-        """A start given (``initial_pose``) that what the camera sees contradicts on
-        ``START_CONTRADICTED_FRAMES`` frames with detections before a fix is told
-        there is taken for wrong: the filter starts again from no knowledge."""
-        if est.converged:
-            self._given_start = False
-            return
+    def _doubt_the_start(self, est: Estimate) -> bool:
+        """Whether a start given (``initial_pose``) is given up on this frame: what the
+        camera sees has contradicted it on ``START_CONTRADICTED_FRAMES`` frames with
+        detections, this one included, before a fix was told there. The filter then
+        starts again from no knowledge (and this frame's fix, if any, is not told)."""
         obs, q = self.last_observation, self.quality
-        if obs is None or obs.empty or q is None:
-            return
         # An object in clear view never reported, a frame that contradicts the place on
         # its own, or one with at least two detections' worth of score that fails the
         # gain's fit test by itself (the smoothed fit is no such sign: one false box on
         # the first frame keeps it past the threshold for a second).
-        if q.contradicted or self._bad_run > 0 or self._frame_misfit:
+        if (
+            obs is not None
+            and not obs.empty
+            and q is not None
+            and (q.contradicted or self._bad_run > 0 or self._frame_misfit)
+        ):
             self._start_contradicted += 1
         if self._start_contradicted >= START_CONTRADICTED_FRAMES:
             self._restart_global()
+            self.start_given_up = True
+            return True
+        if est.converged:
+            self._given_start = False
+        return False
 
     def _anywhere(self, n: int) -> tuple[NDArray[np.float64], ...]:
         """``n`` poses uniform over the free space with uniform headings."""
@@ -736,6 +744,7 @@ class ParticleFilter:
         # a frame without odometry: that lets a held fix go, and the fix is as good as
         # it was a frame ago.)
         self.odometry_refused = implausible(odometry, frame_s)
+        self.start_given_up = False
         if self.odometry_refused:
             assert odometry is not None
             odometry = Odometry(0.0, 0.0, odometry.turn_rad)
@@ -1021,8 +1030,8 @@ class ParticleFilter:
             was_told=self.estimate.converged,
             search_wait=self._gate.not_gained_because == ("no search yet",),
         )
-        if self._given_start:
-            self._doubt_the_start(est)
+        if self._given_start and self._doubt_the_start(est):
+            est = est.with_converged(False).with_protection(None)
         if est.converged:
             self._after_ride = False
             self._told_since_start = True

@@ -75,6 +75,14 @@ AGE_WITHOUT_TIMESTAMPS = (
 )
 
 
+#: What the client hears on the frame the session gave up its ``initial_pose``
+#: (docs/API.md, InitialPose).
+START_GIVEN_UP = (
+    "initial_pose: what the camera sees contradicts the start given, so the session "
+    "now looks for the person everywhere on the map (as without initial_pose)"
+)
+
+
 def refused_odometry_warning(odometry: Odometry | None, frame_s: float | None) -> str:
     """What the client hears when the filter refused a frame's translation as faster
     than a person on foot (:func:`~app.localization.motion.implausible`)."""
@@ -234,6 +242,8 @@ class Session:
             )
             if self.filter.odometry_refused:
                 warnings.append(refused_odometry_warning(frame.odometry, frame_s))
+            if self.filter.start_given_up:
+                warnings.append(START_GIVEN_UP)
             feedback = self.narrator.update(
                 estimate,
                 detections,

@@ -285,3 +285,43 @@ def test_speech_returns_wav_or_clear_503(client: TestClient) -> None:
     else:
         assert r.status_code == 503 and "espeak-ng" in r.json()["message"]
     assert client.post("/speech", json={"text": ""}).status_code == 422
+
+
+def test_a_start_the_camera_contradicts_is_given_up_and_the_client_told(
+    client: TestClient,
+) -> None:
+    """A session given a start 2 m from where the person stands (5 cm, 1 deg): on the
+    frame the filter gives it up, ``warnings`` says so; nothing is told at the start
+    given (docs/API.md, InitialPose)."""
+    from app.localization.types import Pose
+    from app.maps.check import load_map
+    from app.resources import bundled_maps_dir
+    from tests.helpers import seen_from
+
+    suite = load_map(bundled_maps_dir() / "office_suite.json")
+    rng = np.random.default_rng(0)
+    while True:
+        x, y = (float(v) for v in suite.free_space.sample(1, rng)[0])
+        truth = Pose(x, y, float(rng.uniform(-np.pi, np.pi)))
+        seen = seen_from(suite, truth)
+        away = rng.uniform(-np.pi, np.pi)
+        sx, sy = x + 2.0 * math.cos(away), y + 2.0 * math.sin(away)
+        if len(seen) >= 4 and suite.free_space.is_free(np.array([sx]), np.array([sy]))[0]:
+            break
+    start = {"x": sx, "y": sy, "theta_deg": math.degrees(truth.theta_rad),
+             "std_xy_m": 0.05, "std_theta_deg": 1.0}  # fmt: skip
+    body = {"map": "office_suite", "particles": 4000, "seed": 3, "initial_pose": start}
+    sid = client.post("/sessions", json=body).json()["id"]
+    given_up = []
+    for k in range(30):
+        dets = [
+            {"class": d.cls, "bearing_deg": math.degrees(d.bearing_rad) + rng.normal(0, 2.0)}
+            for d in seen
+        ]
+        frame = {"timestamp": 0.2 * k, "odometry": {"forward_m": 0, "left_m": 0, "turn_deg": 0},
+                 "detections": dets}  # fmt: skip
+        res = client.post(f"/sessions/{sid}/frames", json=frame).json()
+        given_up += [k for w in res["warnings"] if w.startswith("initial_pose: what the camera")]
+        if res["converged"]:
+            assert math.hypot(res["pose"]["x"] - x, res["pose"]["y"] - y) < 1.0, (k, res["pose"])
+    assert len(given_up) == 1 and given_up[0] < 10, given_up
