@@ -24,7 +24,10 @@ scenario (``app.experiments.phone.run_scenario``'s ``alter``):
   length learnt while walking slowly, then walking briskly);
 * ``no-timestamps``: the app sends its detections' age but no timestamps (the field is
   optional);
-* ``timestamps-in-ms``: the app's clock counts milliseconds (JavaScript's Date.now()).
+* ``timestamps-in-ms``: the app's clock counts milliseconds (JavaScript's Date.now());
+* ``bearings-clockwise`` / ``turns-clockwise``: the app sends its bearings, or its
+  odometry's turns and sideways steps, clockwise positive (an image's x axis, a
+  compass's sense); the contract has both counter-clockwise.
 
 Prints per scenario and effect: frames, confidently wrong (converged and more than 1 m
 off), beyond protection (converged and farther off than ``protection_m``), and
@@ -162,6 +165,24 @@ def _milliseconds(frames: Frames, _rng: np.random.Generator) -> Frames:
     return [replace(f, t=f.t * 1000.0) for f in frames]
 
 
+def _mirrored(frames: Frames, _rng: np.random.Generator) -> Frames:
+    return [
+        replace(f, detections=[Detection(d.cls, -d.bearing_rad, d.score) for d in f.detections])
+        for f in frames
+    ]
+
+
+def _turns_mirrored(frames: Frames, _rng: np.random.Generator) -> Frames:
+    return [
+        f
+        if f.odometry is None
+        else replace(
+            f, odometry=Odometry(f.odometry.forward_m, -f.odometry.left_m, -f.odometry.turn_rad)
+        )
+        for f in frames
+    ]
+
+
 EFFECTS: dict[str, Effect] = {
     "none": _nothing,
     "tracking-jump-0.8m": _forward_jump(0.8),
@@ -175,6 +196,8 @@ EFFECTS: dict[str, Effect] = {
     "pace-change": _pace,
     "no-timestamps": _nothing,
     "timestamps-in-ms": _milliseconds,
+    "bearings-clockwise": _mirrored,
+    "turns-clockwise": _turns_mirrored,
 }
 #: The effects whose frames go without timestamps.
 UNTIMED = frozenset({"no-timestamps"})

@@ -32,6 +32,7 @@ from app.localization.filter import ParticleFilter
 from app.localization.motion import MAX_SPEED_M_S
 from app.localization.types import Detection, Estimate, Odometry, Pose
 from app.maps.model import SemanticMap
+from app.service.conventions import TurnSignCheck
 from app.service.errors import session_tag
 from app.service.queueing import FrameQueue, merged_warning
 from app.service.types import FrameInput, FrameOutcome, LevelRef, SessionSpec
@@ -137,6 +138,8 @@ class Session:
     last_timestamp: float | None = None
     #: Frames in a row that came more than SLOW_FRAME_S after the previous one.
     slow_frames: int = 0
+    #: Whether the client's bearings and turns share a sign (app.service.conventions).
+    turn_signs: TurnSignCheck = field(default_factory=TurnSignCheck)
     state_lock: threading.Lock = field(default_factory=threading.Lock)
     camera: Camera | None = None
     #: The destination's plan (None: no destination) and what was said about the way.
@@ -223,6 +226,9 @@ class Session:
             )
             if frame.detections_age_s > 0.0 and frame.timestamp is None:
                 warnings.append(AGE_WITHOUT_TIMESTAMPS)
+            mirrored = self.turn_signs.update(frame.odometry, detections)
+            if mirrored is not None:
+                warnings.append(mirrored)
             if frame_s is not None:
                 self.slow_frames = self.slow_frames + 1 if frame_s > SLOW_FRAME_S else 0
                 if self.slow_frames:
@@ -330,6 +336,7 @@ class Session:
             "destination": None if plan is None else plan.target,
             "last_timestamp": self.last_timestamp,
             "slow_frames": self.slow_frames,
+            "turn_signs": self.turn_signs.checkpoint(),
             "last_outcome": self.last_outcome,
             "last_detections": [[d.cls, d.bearing_rad, d.score] for d in self.last_detections],
             "truth": self.truth,
@@ -351,6 +358,7 @@ class Session:
             self.destination = Plan(self.map, from_plain(Target, state["destination"]))
         self.last_timestamp = state["last_timestamp"]
         self.slow_frames = int(state.get("slow_frames", 0))  # (none before it was kept)
+        self.turn_signs.restore(state.get("turn_signs"))
         self.last_outcome = from_plain(FrameOutcome | None, state["last_outcome"])
         self.last_detections = [  # rows since format 4, records before
             Detection(*d) if isinstance(d, list) else from_plain(Detection, d)
