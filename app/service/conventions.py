@@ -24,7 +24,6 @@ from collections.abc import Mapping, Sequence
 from typing import Any
 
 from app.localization.types import Detection, Odometry
-from app.maps.geometry import wrap_scalar
 
 #: Frames a vote spans, and the least turn over them that votes (rad).
 WINDOW = 5
@@ -104,7 +103,10 @@ class TurnSignCheck:
 def _matches(seen: list[tuple[str, float]], before: list[tuple[str, float]], shift: float) -> int:
     """How many of ``seen`` lie within MATCH_RAD of a detection of their class in
     ``before`` moved by ``shift``."""
+    # (math.remainder wraps to [-pi, pi] in plain Python: a compiled function's call
+    # costs more than the arithmetic here.)
+    tau = 2.0 * math.pi
     return sum(
-        any(c == pc and abs(wrap_scalar(b - (pb + shift))) < MATCH_RAD for pc, pb in before)
+        any(c == pc and abs(math.remainder(b - pb - shift, tau)) < MATCH_RAD for pc, pb in before)
         for c, b in seen
     )
