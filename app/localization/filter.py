@@ -163,9 +163,12 @@ FORGIVE_SLIDE_M = 0.25
 #: 15 and 25 frames caught more of seeds 0-29 (15 frames each) but nothing more of
 #: 30-59, and cost the symmetric paper office up to 0.05 of its availability.
 SETTLED_CANDIDATE_FRAMES = 10
-#: Frames with detections that contradict a start given (an object in clear view never
-#: reported, or a frame bad on its own) before its first fix, after which the start is
-#: taken for wrong and the filter starts again from no knowledge.
+#: Frames with detections that contradict a start given (each failing the fit by
+#: itself) before its first fix, after which the start is taken for wrong and the
+#: filter starts again from no knowledge. (An object in clear view never reported is no
+#: such sign: on a stale map a start given right goes on missing the objects taken
+#: away, and counting it gave up right starts there; measured with
+#: tools/wrong_start.py, the same starts given wrong are caught without it.)
 START_CONTRADICTED_FRAMES = 5
 #: A known start tells a map's twins apart (app.maps.symmetry) when each twin lies more
 #: than this many of the start's stds from it, in position or in heading.
@@ -511,15 +514,15 @@ class ParticleFilter:
         detections, this one included, before a fix was told there. The filter then
         starts again from no knowledge (and this frame's fix, if any, is not told)."""
         obs, q = self.last_observation, self.quality
-        # An object in clear view never reported, a frame that contradicts the place on
-        # its own, or one with at least two detections' worth of score that fails the
-        # gain's fit test by itself (the smoothed fit is no such sign: one false box on
-        # the first frame keeps it past the threshold for a second).
+        # A frame that contradicts the place on its own, or one with at least two
+        # detections' worth of score that fails the gain's fit test by itself (the
+        # smoothed fit is no such sign: one false box on the first frame keeps it past
+        # the threshold for a second).
         if (
             obs is not None
             and not obs.empty
             and q is not None
-            and (q.contradicted or self._bad_run > 0 or self._frame_misfit)
+            and (self._bad_run > 0 or self._frame_misfit)
         ):
             self._start_contradicted += 1
         if self._start_contradicted >= START_CONTRADICTED_FRAMES:
