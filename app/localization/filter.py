@@ -518,12 +518,7 @@ class ParticleFilter:
         # detections' worth of score that fails the gain's fit test by itself (the
         # smoothed fit is no such sign: one false box on the first frame keeps it past
         # the threshold for a second).
-        if (
-            obs is not None
-            and not obs.empty
-            and q is not None
-            and (self._bad_run > 0 or self._frame_misfit)
-        ):
+        if obs is not None and not obs.empty and q is not None and self._frame_misfit:
             self._start_contradicted += 1
         if self._start_contradicted >= START_CONTRADICTED_FRAMES:
             self._restart_global()
@@ -1397,10 +1392,11 @@ class ParticleFilter:
         # turning, a person walking past); a kidnap stays bad.
         self._bad_run = self._bad_run + 1 if bad_now else 0
         bad = self._bad_run >= BAD_FRAMES_IN_A_ROW
-        # This frame alone, with at least two detections' worth of score, failing the
-        # gain's fit test (see _doubt_the_start).
-        self._frame_misfit = total >= 2.0 and (
-            fit > self._gate.gain_fit or unexplained > self._gate.gain_unexplained
+        # This frame alone bad, or with at least two detections' worth of score failing
+        # the gain's fit test (see _doubt_the_start).
+        self._frame_misfit = bad_now or (
+            total >= 2.0
+            and (fit > self._gate.gain_fit or unexplained > self._gate.gain_unexplained)
         )
         a_share = FIT_SMOOTHING * min(1.0, total / FIT_FULL_SCORE)
         if self.unseen is not None:
