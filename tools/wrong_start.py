@@ -23,7 +23,7 @@ import argparse
 import math
 import sys
 from collections import defaultdict
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
 
@@ -38,8 +38,11 @@ KINDS = ("turned", "2m", "5m", "right")
 SPREADS = {"tight": (0.05, 1.0), "default": (0.3, 10.0)}
 
 
-def given_start(kind: str, spread: str, seed: int):  # type: ignore[no-untyped-def]
-    """The session's ``initial_pose`` for a walk whose first true pose is ``truth``."""
+def given_start(
+    kind: str, spread: str, seed: int
+) -> Callable[[SemanticMap, Pose], InitialPose | None]:
+    """The session's ``initial_pose`` of kind ``kind`` for a walk whose first true pose
+    is ``truth`` (``phone.run_scenario``'s ``start``)."""
     std_xy, std_deg = SPREADS[spread]
 
     def start(semantic_map: SemanticMap, truth: Pose) -> InitialPose | None:
