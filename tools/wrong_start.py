@@ -8,8 +8,9 @@ heading of 180 deg (``turned``), or placed ``2m`` or ``5m`` from where the walk 
 (in free space, in a random direction), or ``right``, with the tight spread an app
 that trusts itself gives (5 cm, 1 deg) and with the contract's default (0.3 m,
 10 deg), and counts per row the confidently-wrong frames (converged and more than 1 m
-off), those beyond ``protection_m``, availability (converged among the frames within
-0.5 m) and when the first right fix came.
+off), those beyond ``protection_m`` and availability (converged among the frames within
+0.5 m), pooled over the seeds as the phone suite pools them (``phone.metrics``), and
+when each seed's first right fix came.
 
     python tools/wrong_start.py                                  # every map, 5 seeds
     python tools/wrong_start.py --maps office_suite --conditions vio-360 --seeds 3
@@ -28,7 +29,7 @@ from collections.abc import Callable, Sequence
 import numpy as np
 
 from app.experiments import phone
-from app.experiments.integrity import RIGHT_M, WRONG_M
+from app.experiments.integrity import RIGHT_M
 from app.experiments.runner import map_jobs
 from app.localization.types import InitialPose, Pose
 from app.maps.model import SemanticMap
@@ -65,22 +66,18 @@ def given_start(
     return start
 
 
-def _job(args: tuple[str, str, str, str, int]) -> tuple[tuple[str, ...], dict[str, float]]:
+def _job(args: tuple[str, str, str, str, int]) -> tuple[tuple[str, ...], phone.PhoneRun]:
     map_name, condition, kind, spread, seed = args
     run = phone.run_scenario(
         phone.Scenario(map_name, condition), seed, 10_000, start=given_start(kind, spread, seed)
     )
-    told, err = run.converged, run.err_m
-    near = err <= RIGHT_M
-    beyond = told & (err > np.nan_to_num(run.protection_m, nan=np.inf))
-    right = np.flatnonzero(told & near)
-    return (map_name, condition, kind, spread), {
-        "frames": float(err.size),
-        "wrong": float(np.sum(told & (err > WRONG_M))),
-        "beyond": float(np.sum(beyond)),
-        "available": float(np.sum(told & near) / max(int(np.sum(near)), 1)),
-        "first_right_s": float(run.t[right[0]]) if right.size else math.inf,
-    }
+    return (map_name, condition, kind, spread), run
+
+
+def first_right_s(run: phone.PhoneRun) -> float:
+    """Seconds into the walk of its first converged frame within RIGHT_M (inf: never)."""
+    right = np.flatnonzero(run.converged & (run.err_m <= RIGHT_M))
+    return float(run.t[right[0]]) if right.size else math.inf
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -110,23 +107,22 @@ def main(argv: Sequence[str] | None = None) -> int:
         for s in SPREADS
         for seed in range(args.seeds)
     ]
-    rows: dict[tuple[str, ...], list[dict[str, float]]] = defaultdict(list)
-    for key, out in map_jobs(_job, jobs, args.workers):
-        rows[key].append(out)
+    rows: dict[tuple[str, ...], list[phone.PhoneRun]] = defaultdict(list)
+    for key, run in map_jobs(_job, jobs, args.workers):
+        rows[key].append(run)
     print("| map | condition | start | spread | frames | confidently wrong | beyond protection "
           "| availability | first right fix (s, per seed) |")  # fmt: skip
     print("|---|---|---|---|---|---|---|---|---|")
     totals: dict[str, float] = defaultdict(float)
-    for key, outs in rows.items():
-        frames = sum(o["frames"] for o in outs)
-        wrong = sum(o["wrong"] for o in outs)
-        beyond = sum(o["beyond"] for o in outs)
-        avail = float(np.mean([o["available"] for o in outs]))
+    for key, runs in rows.items():
+        m = phone.metrics(runs)  # the phone suite's own figures, pooled over the seeds
+        frames, wrong = int(m["frames"]), int(m["wrong_frames"])
+        beyond = round(float(m["beyond_protection_share"]) * frames)
         firsts = ", ".join(
-            "never" if math.isinf(o["first_right_s"]) else f"{o['first_right_s']:.1f}" for o in outs
+            "never" if math.isinf(f) else f"{f:.1f}" for f in map(first_right_s, runs)
         )
-        print(f"| {' | '.join(key)} | {frames:.0f} | {wrong:.0f} | {beyond:.0f} | {avail:.2f} "
-              f"| {firsts} |")  # fmt: skip
+        print(f"| {' | '.join(key)} | {frames} | {wrong} | {beyond} | "
+              f"{float(m['availability']):.2f} | {firsts} |")  # fmt: skip
         group = "right" if key[2] == "right" else "wrong"
         totals[f"{group} wrong"] += wrong
         totals[f"{group} beyond"] += beyond

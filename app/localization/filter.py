@@ -429,10 +429,8 @@ class ParticleFilter:
         #: the evidence search asks for it at the base interval (see _weigh_alternatives).
         self._after_ride = False
         self.continuation.reset(known_start=initial_pose is not None)
-        #: Whether the belief still rests on the start given (initial_pose), not yet
-        #: told nor given up (see START_CONTRADICTED_FRAMES), and the frames with
-        #: detections that contradicted it so far.
-        self._given_start = initial_pose is not None
+        #: Frames that contradicted the start given so far (START_CONTRADICTED_FRAMES),
+        #: and whether this frame's fit, taken by itself, did (_update_fit).
         self._start_contradicted = 0
         self._frame_misfit = False
         #: Whether a twin of the person's place (app.maps.symmetry) is as likely as the
@@ -508,25 +506,18 @@ class ParticleFilter:
             # wrong everywhere. Start again from no knowledge rather than keep ghosts.
             self._restart_global()
 
-    def _doubt_the_start(self, est: Estimate) -> bool:
-        """Whether a start given (``initial_pose``) is given up on this frame: what the
-        camera sees has contradicted it on ``START_CONTRADICTED_FRAMES`` frames with
-        detections, this one included, before a fix was told there. The filter then
-        starts again from no knowledge (and this frame's fix, if any, is not told)."""
-        obs, q = self.last_observation, self.quality
-        # A frame that contradicts the place on its own, or one with at least two
-        # detections' worth of score that fails the gain's fit test by itself (the
-        # smoothed fit is no such sign: one false box on the first frame keeps it past
-        # the threshold for a second).
-        if obs is not None and not obs.empty and q is not None and self._frame_misfit:
-            self._start_contradicted += 1
-        if self._start_contradicted >= START_CONTRADICTED_FRAMES:
-            self._restart_global()
-            self.start_given_up = True
-            return True
-        if est.converged:
-            self._given_start = False
-        return False
+    def _give_up_the_start(self) -> bool:
+        """Whether the start given (``initial_pose``, not told yet: the continuation's
+        ``known_start``) is given up on this frame: ``START_CONTRADICTED_FRAMES`` frames
+        have now failed the fit by themselves (``_frame_misfit``: the smoothed fit is no
+        such sign, one false box on the first frame keeps it past the threshold for a
+        second). The filter then starts again from no knowledge."""
+        self._start_contradicted += self._frame_misfit
+        if self._start_contradicted < START_CONTRADICTED_FRAMES:
+            return False
+        self._restart_global()
+        self.start_given_up = True
+        return True
 
     def _anywhere(self, n: int) -> tuple[NDArray[np.float64], ...]:
         """``n`` poses uniform over the free space with uniform headings."""
@@ -559,7 +550,6 @@ class ParticleFilter:
         self.geometry.reset()
         self.odometry_check.reset()
         self.told_heading.reset()
-        self._given_start = False
         self._start_contradicted = 0
         if self.evidence is not None:
             self.evidence.reset()
@@ -1018,6 +1008,8 @@ class ParticleFilter:
         est, protection, withheld = self._protect(
             est, raw, w, share, fix_m, slide_m, gained=gained, streak=streak
         )
+        if self.continuation.known_start and self._give_up_the_start():
+            est = est.with_converged(False).with_protection(None)
         # (A told frame never reads in_stop: the guard only spares the stop lookup.)
         self.continuation.after_frame(
             let_go_for_doubt=was_held and self._gate.let_go_for_doubt,
@@ -1028,8 +1020,6 @@ class ParticleFilter:
             was_told=self.estimate.converged,
             search_wait=self._gate.not_gained_because == ("no search yet",),
         )
-        if self._given_start and self._doubt_the_start(est):
-            est = est.with_converged(False).with_protection(None)
         if est.converged:
             self._after_ride = False
             self._told_since_start = True
@@ -1240,7 +1230,6 @@ class ParticleFilter:
             "narrow_frames": self._narrow_frames,
             "turned_run": self._turned_run,
             "told_since_start": self._told_since_start,
-            "given_start": self._given_start,
             "start_contradicted": self._start_contradicted,
             "settled_frames": self._settled_frames,
             "twins_possible": self._twins_possible,
@@ -1301,8 +1290,6 @@ class ParticleFilter:
         self._turned_run = bool(state.get("turned_run", False))
         # (An older checkpoint: as if told, so no candidate forgives.)
         self._told_since_start = bool(state.get("told_since_start", True))
-        # (a checkpoint from before a given start could be doubted: not doubted)
-        self._given_start = bool(state.get("given_start", False))
         self._start_contradicted = int(state.get("start_contradicted", 0))
         self._frame_misfit = False
         self._settled_frames = int(state.get("settled_frames", 0))
@@ -1393,7 +1380,7 @@ class ParticleFilter:
         self._bad_run = self._bad_run + 1 if bad_now else 0
         bad = self._bad_run >= BAD_FRAMES_IN_A_ROW
         # This frame alone bad, or with at least two detections' worth of score failing
-        # the gain's fit test (see _doubt_the_start).
+        # the gain's fit test (see _give_up_the_start).
         self._frame_misfit = bad_now or (
             total >= 2.0
             and (fit > self._gate.gain_fit or unexplained > self._gate.gain_unexplained)

@@ -215,6 +215,12 @@ def _barometer(
     return out
 
 
+def _doors_shut(config: SimulationConfig) -> SimulationConfig:
+    """``config`` with its blocked view (the frames ``shut`` in a lift car between its
+    door waits) blocking the whole field: only false detections come then."""
+    return replace(config, blocked_sector_deg=360.0)
+
+
 def simulate_venue(
     semantic_map: SemanticMap,
     start_level: str,
@@ -230,7 +236,7 @@ def simulate_venue(
     baro_rng = rng.spawn(1)[0]
     dt = 1.0 / config.rate_hz
     readings = _barometer([row[4] for row in truth], barometer, baro_rng, dt)
-    shut_view = replace(config, blocked_sector_deg=360.0)
+    shut_view = _doors_shut(config)
     frames: list[VenueFrame] = []
     prev: Pose | None = None
     for i, (x, y, th, level, alt, k, riding, shut) in enumerate(truth):
@@ -240,7 +246,6 @@ def simulate_venue(
         plane_pose = Pose(px, y, th)
         odo = None if prev is None else _odometry(prev, file_pose, config, rng)
         prev = file_pose
-        # (A lift car's closed doors block the whole view: only false detections.)
         dets, widths = _detections(
             semantic_map, plane_pose, shut, shut_view if shut else config, camera, rng
         )
@@ -289,7 +294,7 @@ def simulate_venue_phone(
         xyz,
         shut,
         none,
-        replace(config, blocked_sector_deg=360.0),
+        _doors_shut(config),
         effects,
         streams,
         plane_x=layout.offsets(level),
