@@ -20,6 +20,8 @@ scenario (``app.experiments.phone.run_scenario``'s ``alter``):
   sent to the background and back);
 * ``tracking-lost-3s``: frames go on, but for 3 s of every 20 s without odometry (a
   visual-inertial tracker's "limited tracking": a blank wall, a fast turn);
+  ``tracking-lost-4.5s`` the same for 4.5 s (near the longest gap a fix is kept
+  through, ``app.localization.gap.GAP_HOLD_S``);
 * ``pace-change``: the odometry's lengths 12 % longer in the walk's second half (a step
   length learnt while walking slowly, then walking briskly);
 * ``no-timestamps``: the app sends its detections' age but no timestamps (the field is
@@ -136,10 +138,14 @@ def _paused(frames: Frames, _rng: np.random.Generator) -> Frames:
     return out
 
 
-def _tracking_lost(frames: Frames, _rng: np.random.Generator) -> Frames:
-    return [
-        replace(f, odometry=None) if f.t >= PERIOD_S and f.t % PERIOD_S < 3.0 else f for f in frames
-    ]
+def _tracking_lost(seconds: float) -> Effect:
+    def effect(frames: Frames, _rng: np.random.Generator) -> Frames:
+        return [
+            replace(f, odometry=None) if f.t >= PERIOD_S and f.t % PERIOD_S < seconds else f
+            for f in frames
+        ]
+
+    return effect
 
 
 def _pace(frames: Frames, _rng: np.random.Generator) -> Frames:
@@ -192,7 +198,8 @@ EFFECTS: dict[str, Effect] = {
     "camera-yaw-6deg": _yaw,
     "occlusion-bursts": _occlusion,
     "paused-8s": _paused,
-    "tracking-lost-3s": _tracking_lost,
+    "tracking-lost-3s": _tracking_lost(3.0),
+    "tracking-lost-4.5s": _tracking_lost(4.5),
     "pace-change": _pace,
     "no-timestamps": _nothing,
     "timestamps-in-ms": _milliseconds,

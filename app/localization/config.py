@@ -11,6 +11,11 @@ import numpy as np
 #: steady errors shift a fix together, along the line of sight, instead of cancelling
 #: (FilterConfig.likelihood_share, app.localization.dilution's ridge search).
 NARROW_CAMERA_FOV_DEG = 180.0
+#: A camera at least this wide (degrees) sees objects all around: their bearings pin a
+#: place on their own, where a narrower view's leave it loose along the line of sight and
+#: lean on the odometry (the separation's rings, the first fix's narrower radius, a gap
+#: in the odometry walked through: app.localization.filter, app.localization.gap).
+ALL_AROUND_FOV_DEG = 270.0
 
 
 @dataclass(frozen=True)

@@ -22,7 +22,7 @@ from numpy.typing import NDArray
 
 from app.localization import sensor_kernel
 from app.localization.compass import CompassReading, compass_log_likelihood
-from app.localization.config import FilterConfig
+from app.localization.config import ALL_AROUND_FOV_DEG, FilterConfig
 from app.localization.continuation import Continuation, doubt_frames
 from app.localization.convergence import (
     GAIN_PROTECTION_M,
@@ -50,6 +50,7 @@ from app.localization.floors import (
     AltitudeReading,
     FloorTracker,
 )
+from app.localization.gap import OdometryGap
 from app.localization.kld import kld_sample_size
 from app.localization.latency import (
     DEFAULT_FRAME_S,
@@ -230,7 +231,7 @@ def separation_allows_gain(pull_m: float, protection_m: float) -> bool:
 #: 18 -> 3), availability 0.8927 -> 0.8926; tools/unmodelled.py 307 -> 206, but its VIO
 #: 360 deg walks without timestamps 0.750 -> 0.691 available. The rings' places held to
 #: a metre instead of GAIN_SEPARATION_M caught 8 of the 15 (0.75 m: the same as 0.5).
-SEPARATION_RINGS_FOV_DEG = 270.0
+SEPARATION_RINGS_FOV_DEG = ALL_AROUND_FOV_DEG
 #: A camera at least SEPARATION_RINGS_FOV_DEG wide sees objects all around and pins a
 #: right place to well under a metre: its first fix is told only with a radius of at
 #: most this (m), not GAIN_PROTECTION_M. Measured on the phone suite (seeds 0-9, Intel
@@ -311,10 +312,15 @@ class ParticleFilter:
         if self.floors is not None and self.evidence is not None:
             self.evidence.place_allowed = self.floors.place_allowed
         self.last_observation: Observation | None = None
+        #: Frames without odometry: walked through when short (:mod:`~app.localization.gap`).
+        self.gap = OdometryGap(self.config.fov_deg)
         #: Motion between detection captures (:mod:`~app.localization.latency`).
         self.capture = CaptureClock()
         #: The detections' age of an app that does not say it, learnt from turns.
         self.latency = LatencyEstimate()
+        #: The same for an app that sends no timestamps, learnt in frames: each taken to
+        #: last ``DEFAULT_FRAME_S`` (as the capture clock takes an untimed frame).
+        self.latency_untimed = LatencyEstimate()
         #: What systematic bearing errors can do to the fix (:mod:`~app.localization.dilution`).
         self.geometry = BearingGeometry(semantic_map, self.config)
         #: The odometry's scale and heading drift (:mod:`~app.localization.odometry_bias`).
@@ -358,6 +364,7 @@ class ParticleFilter:
         self.log_w = np.zeros(n, dtype=np.float64)
         self.capture.reset()
         self.latency.reset()
+        self.latency_untimed.reset()
         self.geometry.reset()
         self.odometry_check.reset()
         self.told_heading.reset()
@@ -384,7 +391,7 @@ class ParticleFilter:
             self.floors.reset()
         #: How well the estimate explains the detections (smoothed); None before any.
         self.quality: FitQuality | None = None
-        self._had_odometry = False
+        self.gap.reset()
         #: Whether the last frame's odometry was refused as faster than a person on foot
         #: (:func:`~app.localization.motion.implausible`: its translation refused, its
         #: turn kept).
@@ -761,21 +768,27 @@ class ParticleFilter:
         unsaid = detections_age_s == 0.0
         if known_s is None:
             # How long the frame lasted is not known, so neither is how much of its
-            # motion came after its detections were captured: an age a frame or more
-            # long would put every capture at the frame's start and the particles would
-            # stand still while the person walks (measured, a phone at 5 frames/s whose
-            # app sent ages but no timestamps: availability 0.957 -> 0.600). The
-            # detections are taken for the frame's end (latency.CaptureClock).
-            detections_age_s = 0.0
+            # motion came after its detections were captured: a said age a frame or
+            # more long would put every capture at the frame's start and the particles
+            # would stand still while the person walks (measured, a phone at 5 frames/s
+            # whose app sent ages but no timestamps: availability 0.957 -> 0.600). The
+            # age is learnt from turns instead, in frames (each taken to last
+            # DEFAULT_FRAME_S, as the capture clock takes it): a phone sending at a
+            # steady rate lags by about as many frames all along.
+            detections_age_s = self.latency_untimed.age_s or 0.0
         elif unsaid and (learnt := self.latency.age_s) is not None:
             detections_age_s = learnt
         odometry = self.capture.step(odometry, frame_s, detections_age_s)
         self._step(odometry, detections, heading, altitude, known_s, weighed.steps)
         est = self._last_answer()
         assert est is not None
-        if unsaid and raw_odometry is not None and known_s is not None:
+        if raw_odometry is not None and known_s is None:
+            turn_rad_frame = raw_odometry.turn_rad / DEFAULT_FRAME_S
+            self._learn_latency(self.latency_untimed, turn_rad_frame, detections_age_s)
+        elif unsaid and raw_odometry is not None:
             # (An app that says its latency has nothing to learn: no matching per frame.)
-            self._learn_latency(raw_odometry.turn_rad / known_s, detections_age_s)
+            assert known_s is not None
+            self._learn_latency(self.latency, raw_odometry.turn_rad / known_s, detections_age_s)
         if self.odometry_bias is not None:
             rode = self.floors is not None and self.floors.changed
             self.odometry_bias.observe(
@@ -788,13 +801,13 @@ class ParticleFilter:
             )
         return est
 
-    def _learn_latency(self, turn_rad_s: float, applied_s: float) -> None:
+    def _learn_latency(self, learner: LatencyEstimate, turn_rad_s: float, applied_s: float) -> None:
         """A converged frame's bearing residuals at the estimate, against its turn rate,
         weighed with an age of ``applied_s``
         (:class:`~app.localization.latency.LatencyEstimate`)."""
         e = self.estimate
         obs = self.last_observation
-        if not e.converged or obs is None or obs.empty or not self.latency.turning(turn_rad_s):
+        if not e.converged or obs is None or obs.empty or not learner.turning(turn_rad_s):
             return
         _, index = match_detections(
             np.array([e.x]), np.array([e.y]), np.array([e.theta_rad]), obs, self.map, self.config
@@ -806,7 +819,7 @@ class ParticleFilter:
             ox, oy = self.map.object_xy[o]
             seen = obs.det_bearing[k] - (math.atan2(oy - e.y, ox - e.x) - e.theta_rad)
             residuals.append(float(wrap_angle(seen)))
-        self.latency.update(residuals, turn_rad_s, applied_s)
+        learner.update(residuals, turn_rad_s, applied_s)
 
     def _last_answer(self) -> Estimate | None:
         """What the last step answered (None before the first): :attr:`estimate`, at the
@@ -847,7 +860,9 @@ class ParticleFilter:
         """:meth:`step` in capture time: ``odometry`` is the motion between captures,
         ``frame_s`` the time since the previous frame (None: not known), adding up
         ``steps`` frames (:mod:`~app.localization.pacing`)."""
-        self.predict(odometry, steps)
+        # A frame without odometry inside a short gap moves by a guess (gap.py).
+        moving, lost = self.gap.frame(odometry, frame_s)
+        self.predict(moving, steps)
         if odometry is None:
             self._last_fix = None
         elif self._last_fix is not None:
@@ -936,9 +951,9 @@ class ParticleFilter:
             # filter's cloud walked away from the tracker's anchor and take the fix's
             # own place for an alternative (measured: a fix held through a stop without
             # a barometer, swapped out on the frame it stepped out).
-            self._weigh_alternatives(odometry, raw, w, ess, heading, carry_only=True, steps=steps)
+            self._weigh_alternatives(moving, raw, w, ess, heading, carry_only=True, steps=steps)
         elif self.evidence is not None:
-            raw, w, ess = self._weigh_alternatives(odometry, raw, w, ess, heading, steps=steps)
+            raw, w, ess = self._weigh_alternatives(moving, raw, w, ess, heading, steps=steps)
             share, searched_ago = self.evidence.alternative_share, self.evidence.searched_ago
             confirmed, gain_share = self.evidence.confirmed_share, self.evidence.gain_share
             if self.evidence.prior_confines:
@@ -954,9 +969,11 @@ class ParticleFilter:
             twins = len(self._twins) / (len(self._twins) + 1.0)
             share, confirmed, gain_share = (max(v, twins) for v in (share, confirmed, gain_share))
         self._update_fit(raw)
+        if self._bad_run and self.gap.guessed:
+            # Most detections contradict a fix walked on a guess: the gap may have
+            # carried the person after all (gap.py).
+            lost = self.gap.break_off()
         turned = np.pi if odometry is None else odometry.turn_rad
-        lost = odometry is None and self._had_odometry
-        self._had_odometry = odometry is not None
         slide_m = self.odometry_check.slide_m(raw.x, raw.y)
         was_held = self._gate.held
         clustered = raw
@@ -1219,7 +1236,8 @@ class ParticleFilter:
             "gate": self._gate.checkpoint(),
             "seed_from_observation": self._seed_from_observation,
             "quality": self.quality,
-            "had_odometry": self._had_odometry,
+            "had_odometry": self.gap.had_odometry,
+            "gap": self.gap.checkpoint(),
             "bad_run": self._bad_run,
             "sees_nothing": self._sees_nothing,
             "blind_hold": self._blind_hold,
@@ -1240,6 +1258,7 @@ class ParticleFilter:
             "estimate": self.estimate,
             "capture": self.capture.checkpoint(),
             "latency": self.latency.checkpoint(),
+            "latency_untimed": self.latency_untimed.checkpoint(),
             "geometry": self.geometry.checkpoint(),
             "odometry_check": self.odometry_check.checkpoint(),
             "told_heading": self.told_heading.checkpoint(),
@@ -1269,7 +1288,7 @@ class ParticleFilter:
         self._seed_from_observation = bool(state["seed_from_observation"])
         self._wide_first = bool(state.get("wide_first", False))
         self.quality = from_plain(FitQuality | None, state["quality"])
-        self._had_odometry = bool(state["had_odometry"])
+        self.gap.restore(state.get("gap"), bool(state["had_odometry"]))
         self._bad_run = int(state.get("bad_run", 0))
         # (checkpoints from before these were kept hold neither)
         self._sees_nothing = bool(state.get("sees_nothing", False))
@@ -1304,6 +1323,7 @@ class ParticleFilter:
         self.continuation.restore(state)
         self.capture.restore(state.get("capture"))
         self.latency.restore(state.get("latency"))
+        self.latency_untimed.restore(state.get("latency_untimed"))
         self.geometry.restore(state.get("geometry"))
         self.odometry_check.restore(state.get("odometry_check"))
         self.told_heading.restore(state.get("told_heading"))

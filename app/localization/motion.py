@@ -12,6 +12,7 @@ compiled.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 from numba import njit
@@ -26,6 +27,19 @@ from app.maps.model import WALL_CLEARANCE_M, SemanticMap
 #: When a frame carries no odometry the person may still have moved: diffuse this much.
 NO_ODOMETRY_STD_M = 0.15
 NO_ODOMETRY_STD_RAD = np.radians(10.0)
+#: A guessed motion's translation noise grows by this share of its length, beyond the
+#: unknown motion's own (:class:`GuessedMotion`).
+GUESS_NOISE_FRAC = 0.5
+
+
+@dataclass(frozen=True, slots=True)
+class GuessedMotion(Odometry):
+    """The motion of a frame without odometry, guessed (from the walk just before: a
+    person walking on keeps walking): moved by as a mean, with the noise of unknown
+    motion and more (:data:`GUESS_NOISE_FRAC`), since the person may as well have
+    stopped or turned (:mod:`~app.localization.gap`)."""
+
+
 #: Twice the free space's clearance from walls (see :meth:`SemanticMap.free_space`).
 LONG_MOVE_M = 2 * WALL_CLEARANCE_M
 #: The fastest a person on foot is taken to move (m/s): a brisk walk is under 2 m/s, a
@@ -70,7 +84,8 @@ def sample_motion(
 
     Args:
         x, y, theta: particle poses, shape (N,), metres and radians.
-        odometry: motion in the previous body frame, or None (unknown motion).
+        odometry: motion in the previous body frame, or None (unknown motion), or a
+            :class:`GuessedMotion` (unknown motion about a mean).
         out: optional array of shape (3, N), each row C-contiguous and none an input, to
             write the new poses into (its rows are returned): saves stacking them.
         steps: frames the odometry adds up (a filter weighing every other frame): the
@@ -82,6 +97,10 @@ def sample_motion(
     if odometry is None:
         fwd = left = turn = 0.0
         std_t, std_r = NO_ODOMETRY_STD_M, float(NO_ODOMETRY_STD_RAD)
+    elif isinstance(odometry, GuessedMotion):
+        fwd, left, turn = odometry.forward_m, odometry.left_m, odometry.turn_rad
+        std_t = NO_ODOMETRY_STD_M + GUESS_NOISE_FRAC * hypot(fwd, left)
+        std_r = float(NO_ODOMETRY_STD_RAD)
     else:
         dist = hypot(odometry.forward_m, odometry.left_m)
         floors = 1.0 if steps == 1 else math.sqrt(steps)

@@ -72,7 +72,8 @@ def slow_frames_warning(frame_s: float, count: int) -> str:
 #: that say how long the frame lasted (docs/API.md, detections_age_s).
 AGE_WITHOUT_TIMESTAMPS = (
     "detections_age_s needs timestamp on this frame and the previous one (how long the "
-    "frame lasted): without, the detections are taken for the frame's end"
+    "frame lasted): without, it is not used, and the lag is learnt from turns in frames "
+    "instead"
 )
 
 

@@ -167,3 +167,32 @@ def test_the_filter_learns_a_phones_unsaid_latency_on_a_walk() -> None:
         last = f.t
     learnt = pf.latency.age_s
     assert learnt is not None and 0.08 < learnt <= 0.2
+
+
+def test_the_filter_learns_an_untimed_phones_latency_in_frames() -> None:
+    """The same walk sent without timestamps (and so without frame durations): the lag is
+    learnt in frames, each taken for latency.DEFAULT_FRAME_S. The walk's 5 frames/s put
+    0.2 s one frame back: most of a frame is learnt (0.69-0.84 of it on seeds 1-3), never
+    more, and the timed learner learns nothing."""
+    from app.experiments import phone
+    from app.localization.latency import DEFAULT_FRAME_S
+    from app.simulation.phone import PhoneEffects, simulate_phone
+
+    scenario = phone.Scenario("office_suite", "ideal-360")
+    sm, _ = phone.suite_map(scenario.map_name)
+    walk = phone.walk_of(scenario)
+    effects = PhoneEffects(latency_s=(0.2, 0.2), latency_known=False, sway_deg=8.0)
+    frames = simulate_phone(sm, walk, effects, np.random.default_rng(1))
+    assert frames[1].t - frames[0].t == pytest.approx(0.2)
+    start = frames[0].truth
+    pf = ParticleFilter(
+        sm,
+        FilterConfig(particles=3000),
+        rng=np.random.default_rng(2),
+        initial_pose=InitialPose(start.x, start.y, start.theta_rad, 0.05, math.radians(1.0)),
+    )
+    for f in frames:
+        pf.step(f.odometry, f.detections)
+    learnt = pf.latency_untimed.age_s
+    assert learnt is not None and 0.4 * DEFAULT_FRAME_S < learnt <= DEFAULT_FRAME_S
+    assert pf.latency.age_s is None

@@ -1,0 +1,154 @@
+"""Frames without odometry: a short timed gap is walked through, a long or untimed one
+lets the fix go (app.localization.gap)."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from app.localization.config import FilterConfig
+from app.localization.filter import ParticleFilter
+from app.localization.gap import GAP_HOLD_S, OdometryGap
+from app.localization.motion import NO_ODOMETRY_STD_M, GuessedMotion, sample_motion
+from app.localization.types import Odometry
+from app.maps.model import SemanticMap
+from app.simulation.scenarios import paper_config
+from app.simulation.simulator import simulate
+
+
+def test_a_short_gap_is_walked_at_the_recent_velocity() -> None:
+    gap = OdometryGap(360.0)
+    for _ in range(30):
+        motion, broke = gap.frame(Odometry(0.1, 0.02, 0.05), 0.2)
+        assert not broke
+    assert gap.velocity == pytest.approx((0.5, 0.1), rel=1e-3)
+    motion, broke = gap.frame(None, 0.4)
+    assert isinstance(motion, GuessedMotion) and not broke
+    moved = (motion.forward_m, motion.left_m, motion.turn_rad)
+    assert moved == pytest.approx((0.2, 0.04, 0.0), rel=1e-3)
+
+
+def test_a_gap_longer_than_the_hold_breaks_off_once() -> None:
+    gap = OdometryGap(360.0)
+    gap.frame(Odometry(0.1, 0.0, 0.0), 0.2)
+    # (Frames of 0.25 s: sums of them are exact in binary floating point.)
+    frames = int(GAP_HOLD_S / 0.25) + 5
+    out = [gap.frame(None, 0.25) for _ in range(frames)]
+    broke = [k for k, (_, b) in enumerate(out) if b]
+    assert len(broke) == 1
+    assert GAP_HOLD_S < 0.25 * (broke[0] + 1) <= GAP_HOLD_S + 0.25
+    assert all(m is None for m, _ in out[broke[0] :])
+    assert all(isinstance(m, GuessedMotion) for m, _ in out[: broke[0]])
+
+
+def test_a_frame_of_unknown_duration_breaks_off_at_once_and_moves_by_nothing() -> None:
+    gap = OdometryGap(360.0)
+    gap.frame(Odometry(0.1, 0.0, 0.0), 0.2)
+    assert gap.frame(None, None) == (None, True)
+    # ... and the gap stays unbounded until odometry comes back.
+    assert gap.frame(None, 0.2) == (None, False)
+    gap.frame(Odometry(0.1, 0.0, 0.0), 0.2)
+    motion, broke = gap.frame(None, 0.2)
+    assert isinstance(motion, GuessedMotion) and not broke
+
+
+def test_a_camera_that_does_not_see_all_around_walks_no_gap_through() -> None:
+    gap = OdometryGap(180.0)
+    gap.frame(Odometry(0.1, 0.0, 0.0), 0.2)
+    assert gap.frame(None, 0.2) == (None, True)
+    assert gap.frame(None, 0.2) == (None, False)
+
+
+def test_the_gap_survives_a_checkpoint() -> None:
+    gap = OdometryGap(360.0)
+    gap.frame(Odometry(0.1, 0.0, 0.0), 0.2)
+    gap.frame(None, 0.2)
+    again = OdometryGap(360.0)
+    again.restore(gap.checkpoint(), had_odometry=False)
+    assert again.checkpoint() == gap.checkpoint()
+    older = OdometryGap(360.0)
+    older.restore(None, had_odometry=True)
+    assert older.frame(None, None) == (None, True)
+
+
+def test_a_guessed_motion_moves_the_cloud_by_its_mean_with_more_than_unknown_noise() -> None:
+    n = 20_000
+    cfg = FilterConfig()
+    zeros = np.zeros(n)
+    x, y, _ = sample_motion(
+        zeros, zeros, zeros, GuessedMotion(0.4, 0.0, 0.0), cfg, np.random.default_rng(0)
+    )
+    # The mean within four standard errors of the guess; the spread beyond the unknown
+    # motion's own (float64 sums of 20,000 draws: far below these margins).
+    se = float(np.std(x)) / np.sqrt(n)
+    assert abs(float(np.mean(x)) - 0.4) < 4 * se
+    assert abs(float(np.mean(y))) < 4 * se
+    assert float(np.std(x)) > NO_ODOMETRY_STD_M * 1.05
+
+
+def _walk_with_a_gap(
+    m: SemanticMap, gap_s: float, timed: bool
+) -> list[tuple[float, bool, float, str]]:
+    """The paper office's nominal walk at 360 deg whose odometry stops for ``gap_s``
+    seconds from t = 8 s (a tracker's "limited tracking"): per frame the time,
+    converged, the error and why the fix was last let go."""
+    sim = replace(paper_config("nominal", 360), duration_s=8.0 + gap_s + 4.0)
+    frames = simulate(m, sim, np.random.default_rng(4))
+    pf = ParticleFilter(m, FilterConfig(particles=4000), rng=np.random.default_rng(104))
+    out = []
+    last_t: float | None = None
+    for f in frames:
+        odo = None if 8.0 <= f.t < 8.0 + gap_s else f.odometry
+        frame_s: float | None = None if last_t is None or not timed else f.t - last_t
+        e = pf.step(odo, f.detections, frame_s=frame_s)
+        err = float(np.hypot(e.x - f.truth.x, e.y - f.truth.y))
+        out.append((f.t, e.converged, err, ",".join(pf._gate.lost_because)))
+        last_t = f.t
+    return out
+
+
+def test_a_fix_is_kept_through_a_short_gap_in_the_odometry(paper_office: SemanticMap) -> None:
+    """Three seconds without odometry, timed: the fix is held and right all along (before,
+    the first frame of the gap let it go: "odometry lost")."""
+    out = _walk_with_a_gap(paper_office, 3.0, timed=True)
+    assert all(conv for t, conv, _, _ in out if 7.0 <= t <= 15.0)
+    assert max(err for t, _, err, _ in out if 7.0 <= t <= 15.0) < 0.5
+
+
+def test_an_untimed_or_long_gap_lets_the_fix_go(paper_office: SemanticMap) -> None:
+    """Without the frames' durations nothing bounds how far the person went: the gap's
+    first frame lets the fix go; timed, a gap longer than GAP_HOLD_S lets it go once the
+    hold is over."""
+    untimed = _walk_with_a_gap(paper_office, 3.0, timed=False)
+    first = next(k for k, (t, *_) in enumerate(untimed) if t >= 8.0)
+    assert untimed[first - 1][1] and not untimed[first][1]
+    assert "odometry lost" in untimed[first][3]
+    long = _walk_with_a_gap(paper_office, GAP_HOLD_S + 1.0, timed=True)
+    released = [
+        (t, why)
+        for (t, conv, _, why), (_, before, _, _) in zip(long[1:], long[:-1], strict=True)
+        if before and not conv
+    ]
+    # (At the frame whose gap, its frames' durations summed, first passes the hold: the
+    # walk's frames are 0.2 s apart, the sum's last bit decides between two of them.)
+    hold_ends = 8.0 + GAP_HOLD_S
+    assert [why for t, why in released if hold_ends - 0.25 < t <= hold_ends + 0.25] == [
+        "odometry lost"
+    ], released
+    assert all(conv for t, conv, _, _ in long if 7.0 <= t < hold_ends - 0.25)
+
+
+def test_a_gap_broken_off_guesses_no_more_until_odometry_comes_back() -> None:
+    gap = OdometryGap(360.0)
+    gap.frame(Odometry(0.1, 0.0, 0.0), 0.2)
+    gap.frame(None, 0.2)
+    assert gap.guessed
+    assert gap.break_off()
+    assert not gap.guessed
+    assert gap.frame(None, 0.2) == (None, False)
+    motion, _ = gap.frame(Odometry(0.1, 0.0, 0.0), 0.2)
+    assert not gap.guessed and motion == Odometry(0.1, 0.0, 0.0)
+    motion, broke = gap.frame(None, 0.2)
+    assert gap.guessed and isinstance(motion, GuessedMotion) and not broke
