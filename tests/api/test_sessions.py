@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -87,6 +88,38 @@ def test_a_walk_converges_and_says_where(client: TestClient) -> None:
         f"/sessions/{sid}/frames", json={**frames[-1].to_contract(), "describe": True}
     )
     assert "You are in Office" in described.json()["feedback"]["text"]
+
+
+@pytest.mark.parametrize("timed", [True, False])
+def test_a_short_gap_in_the_odometry_keeps_the_fix_when_timed(
+    client: TestClient, timed: bool
+) -> None:
+    """Frames without odometry for 3 s (a tracker's "limited tracking"): with timestamps
+    the session walks the gap through and stays located (app/localization/gap.py);
+    without, nothing bounds how far the person went, and the gap's first frame lets the
+    fix go."""
+    sid = client.post(
+        "/sessions", json={"map": "paper_office", "particles": 3000, "seed": 4}
+    ).json()["id"]
+    sim = replace(paper_config("nominal", 360), duration_s=14.0)
+    frames = simulate(paper_office(), sim, np.random.default_rng(4))
+    told = []
+    for f in frames:
+        body = f.to_contract()
+        if 8.0 <= f.t < 11.0:
+            body["odometry"] = None
+        if not timed:
+            body.pop("timestamp", None)
+        res = client.post(f"/sessions/{sid}/frames", json=body).json()
+        err = math.hypot(res["pose"]["x"] - f.truth.x, res["pose"]["y"] - f.truth.y)
+        told.append((f.t, res["converged"], err))
+    gap = [(conv, err) for t, conv, err in told if 7.0 <= t <= 13.0]
+    assert all(err < 0.5 for _, err in gap)
+    if timed:
+        assert all(conv for conv, _ in gap)
+    else:
+        first = next(k for k, (t, _, _) in enumerate(told) if t >= 8.0)
+        assert told[first - 1][1] and not told[first][1]
 
 
 def test_unknown_class_is_ignored_and_warned(client: TestClient, session_id: str) -> None:
