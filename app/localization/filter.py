@@ -860,8 +860,12 @@ class ParticleFilter:
         """:meth:`step` in capture time: ``odometry`` is the motion between captures,
         ``frame_s`` the time since the previous frame (None: not known), adding up
         ``steps`` frames (:mod:`~app.localization.pacing`)."""
-        # A frame without odometry inside a short gap moves by a guess (gap.py).
-        moving, lost = self.gap.frame(odometry, frame_s)
+        # A frame without odometry inside a short gap moves by a guess (gap.py), but not
+        # near a ride: stairs, an escalator or a lift car move a person otherwise than
+        # the walk before them (and without a barometer, nothing says a ride began).
+        floors = self.floors
+        rides = floors is not None and (floors.blind or self._near_a_ride(self.estimate))
+        moving, lost = self.gap.frame(odometry, frame_s, may_guess=not rides)
         self.predict(moving, steps)
         if odometry is None:
             self._last_fix = None
