@@ -277,12 +277,20 @@ def run_condition(
     seed: int,
     particles: int,
     on_step: Callable[[ParticleFilter, VenueFrame, Estimate], None] | None = None,
+    alter: Callable[[list[VenueFrame]], list[VenueFrame]] | None = None,
 ) -> VenueRun:
     """One walk of ``condition`` through the venue's filter (and, leg by leg, through
     each level's own map); ``on_step(filter, frame, estimate)`` after each of the
-    venue filter's frames (a tool's look at its state, e.g. ``tools/odometry_scale.py``)."""
+    venue filter's frames (a tool's look at its state, e.g. ``tools/odometry_scale.py``);
+    ``alter`` changes the simulated frames first, one for one (effects the simulator
+    was not built with, ``tools/venue_gaps.py``)."""
     cond = CONDITIONS[condition]
     m, frames, legs = _walk(seed, cond)
+    if alter is not None:
+        walked = len(frames)
+        frames = alter(frames)
+        if len(frames) != walked:
+            raise ValueError(f"alter must keep the walk's {walked} frames, one for one")
     barometer = cond.barometer
     config = filter_config(cond, particles)
     pf = ParticleFilter(m, config, rng=np.random.default_rng(seed + 1))
