@@ -139,43 +139,11 @@ def test_a_learnt_latency_stays_in_its_bounds() -> None:
     assert est.age_s is not None and est.age_s <= LAG_MAX_S
 
 
-def test_the_filter_learns_a_phones_unsaid_latency_on_a_walk() -> None:
+def _late_phone_walk(timed: bool) -> ParticleFilter:
     """The office suite's walk through a phone in the hand (its sway turns it all the
-    time) whose detections are 0.2 s old and that does not say so: by the walk's end the
-    filter weighs them back by most of it, never more (0.14-0.16 s on seeds 1-3; the
-    filter's own heading follows late bearings part of the way, and a walk turning only
-    at its corners learns far less)."""
+    time) whose detections are 0.2 s old and that does not say so, at 5 frames/s, fed
+    from a known start with or without the frames' durations: the filter after it."""
     from app.experiments import phone
-    from app.simulation.phone import PhoneEffects, simulate_phone
-
-    scenario = phone.Scenario("office_suite", "ideal-360")
-    sm, _ = phone.suite_map(scenario.map_name)
-    walk = phone.walk_of(scenario)
-    effects = PhoneEffects(latency_s=(0.2, 0.2), latency_known=False, sway_deg=8.0)
-    frames = simulate_phone(sm, walk, effects, np.random.default_rng(1))
-    start = frames[0].truth
-    pf = ParticleFilter(
-        sm,
-        FilterConfig(particles=3000),
-        rng=np.random.default_rng(2),
-        initial_pose=InitialPose(start.x, start.y, start.theta_rad, 0.05, math.radians(1.0)),
-    )
-    last = None
-    for f in frames:
-        assert f.detections_age_s is None  # the app does not say it
-        pf.step(f.odometry, f.detections, frame_s=None if last is None else f.t - last)
-        last = f.t
-    learnt = pf.latency.age_s
-    assert learnt is not None and 0.08 < learnt <= 0.2
-
-
-def test_the_filter_learns_an_untimed_phones_latency_in_frames() -> None:
-    """The same walk sent without timestamps (and so without frame durations): the lag is
-    learnt in frames, each taken for latency.DEFAULT_FRAME_S. The walk's 5 frames/s put
-    0.2 s one frame back: most of a frame is learnt (0.69-0.84 of it on seeds 1-3), never
-    more, and the timed learner learns nothing."""
-    from app.experiments import phone
-    from app.localization.latency import DEFAULT_FRAME_S
     from app.simulation.phone import PhoneEffects, simulate_phone
 
     scenario = phone.Scenario("office_suite", "ideal-360")
@@ -191,8 +159,31 @@ def test_the_filter_learns_an_untimed_phones_latency_in_frames() -> None:
         rng=np.random.default_rng(2),
         initial_pose=InitialPose(start.x, start.y, start.theta_rad, 0.05, math.radians(1.0)),
     )
+    last = None
     for f in frames:
-        pf.step(f.odometry, f.detections)
+        assert f.detections_age_s is None  # the app does not say it
+        frame_s = None if last is None or not timed else f.t - last
+        pf.step(f.odometry, f.detections, frame_s=frame_s)
+        last = f.t
+    return pf
+
+
+def test_the_filter_learns_a_phones_unsaid_latency_on_a_walk() -> None:
+    """By the walk's end the filter weighs the detections back by most of their age,
+    never more (0.14-0.16 s on seeds 1-3; the filter's own heading follows late bearings
+    part of the way, and a walk turning only at its corners learns far less)."""
+    learnt = _late_phone_walk(timed=True).latency.age_s
+    assert learnt is not None and 0.08 < learnt <= 0.2
+
+
+def test_the_filter_learns_an_untimed_phones_latency_in_frames() -> None:
+    """The same walk sent without timestamps (and so without frame durations): the lag is
+    learnt in frames, each taken for latency.DEFAULT_FRAME_S. The walk's 5 frames/s put
+    0.2 s one frame back: most of a frame is learnt (0.69-0.84 of it on seeds 1-3), never
+    more, and the timed learner learns nothing."""
+    from app.localization.latency import DEFAULT_FRAME_S
+
+    pf = _late_phone_walk(timed=False)
     learnt = pf.latency_untimed.age_s
     assert learnt is not None and 0.4 * DEFAULT_FRAME_S < learnt <= DEFAULT_FRAME_S
     assert pf.latency.age_s is None
