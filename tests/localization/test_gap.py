@@ -190,3 +190,31 @@ def test_a_venue_walks_a_gap_through_only_with_a_barometer_and_away_from_its_con
     pf.estimate = replace(pf.estimate, x=float(here[0]), y=float(here[1]))
     pf.step(None, [], altitude=altitude, frame_s=0.2)
     assert pf.gap.guessed == barometer
+
+
+def test_a_filter_restored_mid_gap_goes_on_as_the_one_that_was_not(
+    paper_office: SemanticMap,
+) -> None:
+    """A session handed to another worker in the middle of a gap (its checkpoint through
+    the store) walks the rest of it through as it would have: same guesses, same
+    answers (the gap's run and the walk's velocity are in the checkpoint)."""
+    sim = replace(paper_config("nominal", 360), duration_s=12.0)
+    frames = simulate(paper_office, sim, np.random.default_rng(4))
+    cfg = FilterConfig(particles=2000)
+    pf = ParticleFilter(paper_office, cfg, rng=np.random.default_rng(104))
+    twin: ParticleFilter | None = None
+    last_t: float | None = None
+    for f in frames:
+        odo = None if 8.0 <= f.t < 10.0 else f.odometry
+        frame_s = None if last_t is None else f.t - last_t
+        if twin is None and f.t >= 9.0:
+            assert pf.gap.guessed and pf.estimate.converged
+            state = pf.checkpoint()
+            twin = ParticleFilter(paper_office, cfg, rng=np.random.default_rng(7), state=state)
+        a = pf.step(odo, f.detections, frame_s=frame_s)
+        if twin is not None:
+            b = twin.step(odo, f.detections, frame_s=frame_s)
+            assert (b.x, b.y, b.theta_rad, b.converged) == (a.x, a.y, a.theta_rad, a.converged)
+            assert twin.gap.checkpoint() == pf.gap.checkpoint()
+        last_t = f.t
+    assert twin is not None
