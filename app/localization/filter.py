@@ -864,7 +864,11 @@ class ParticleFilter:
         # near a ride: stairs, an escalator or a lift car move a person otherwise than
         # the walk before them (and without a barometer, nothing says a ride began).
         floors = self.floors
-        rides = floors is not None and (floors.blind or self._near_a_ride(self.estimate))
+        rides = (
+            odometry is None
+            and floors is not None
+            and (floors.blind or self._near_a_ride(self.estimate))
+        )
         moving, lost = self.gap.frame(odometry, frame_s, may_guess=not rides)
         self.predict(moving, steps)
         if odometry is None:
@@ -887,7 +891,6 @@ class ParticleFilter:
         # During a blind hold (decided below) the detections weigh nothing; between
         # floors a blank view is no dead reckoning, so a fix held into a ride is not let
         # go for the car's walls.
-        floors = self.floors
         riding = floors is not None and not floors.blind and floors.in_transit
         mean_ll, w = self._correct(detections, weigh=not self._blind_hold, riding=riding)
         if heading is not None:
@@ -1240,6 +1243,7 @@ class ParticleFilter:
             "gate": self._gate.checkpoint(),
             "seed_from_observation": self._seed_from_observation,
             "quality": self.quality,
+            # (also on its own, as a worker of the version before reads it)
             "had_odometry": self.gap.had_odometry,
             "gap": self.gap.checkpoint(),
             "bad_run": self._bad_run,
