@@ -388,3 +388,67 @@ def test_a_venue_session_rides_the_lift_through_an_outage_and_is_resumed_on_its_
 
     with redis_process(tmp_path) as r:
         asyncio.run(main(r))
+
+
+def test_redis_killed_in_a_gap_of_the_odometry_the_fix_is_held_and_resumed_mid_gap(
+    tmp_path: Path,
+) -> None:
+    """A phone's tracker loses track (frames go on without odometry, timed) just as Redis
+    dies: the fix is held through the gap from memory; Redis comes back empty in the
+    middle of the gap and the session is stored again with the gap's run and the walk's
+    velocity; the worker then dies, and another walks the rest of the gap through as the
+    dead one would have, the fix held and right (docs/API.md, ``Frame.odometry`` and
+    "When the store fails")."""
+    gap = range(40, 55)  # 3 s of frames 0.2 s apart without odometry
+    outage_frames = 6
+
+    def gap_frame(i: int) -> FrameInput:
+        f = frame(i)
+        return dataclasses.replace(f, odometry=None) if i in gap else f
+
+    def error_m(out: FrameOutcome, i: int) -> float:
+        truth = frame(i).truth
+        assert truth is not None
+        return float(np.hypot(out.estimate.x - truth.x, out.estimate.y - truth.y))
+
+    async def main(r: RedisProcess) -> None:
+        a = manager(RedisStore(r.url))
+        assert a.sharing is not None
+        keeper = asyncio.create_task(a.sharing.run_keeper())
+        sid = (await a.create(SPEC)).id
+        for i in range(gap.start):
+            out = await a.process(sid, gap_frame(i))
+            await asyncio.sleep(0.005)
+        assert out.estimate.converged and not_persisted([out]) == 0
+        r.kill()
+        during = []
+        for i in range(gap.start, gap.start + outage_frames):
+            during.append(await a.process(sid, gap_frame(i)))
+        assert not_persisted(during) == len(during)
+        for k, o in enumerate(during, gap.start):
+            assert o.estimate.converged and error_m(o, k) < 0.5
+        assert a.get(sid).filter.gap.guessed
+        r.start()  # empty, in the middle of the gap: no frame is sent until it is stored
+        held = a.get(sid).frames
+        loop = asyncio.get_running_loop()
+        deadline = loop.time() + CAUGHT_UP_BOUND_S
+        while stored_frames(r.url, sid) < held:
+            assert loop.time() < deadline, f"not stored again within {CAUGHT_UP_BOUND_S} s"
+            await asyncio.sleep(0.05)
+        keeper.cancel()  # the worker dies mid-gap; its copy stays to compare with
+        b = manager(RedisStore(r.url))
+        old = a.get(sid)
+        for k in range(i + 1, gap.stop + 10):
+            out = await b.process(sid, gap_frame(k))
+            was = old.process_sync(gap_frame(k))
+            assert out.seq == was.seq
+            assert out.estimate.converged and was.estimate.converged
+            assert error_m(out, k) < 0.5
+            resumed, kept = b.get(sid).filter.gap, old.filter.gap
+            assert resumed.guessed == kept.guessed == (k in gap)
+            assert resumed.checkpoint() == kept.checkpoint()
+        for m in (a, b):
+            m.close()
+
+    with redis_process(tmp_path) as r:
+        asyncio.run(main(r))
