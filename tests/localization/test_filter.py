@@ -666,3 +666,42 @@ def test_a_start_half_contradicted_when_the_session_moves_is_given_up_all_the_sa
     for pf, errors, told, given_up in _standing_at_a_given_start(suite, 2.0, 4, handed_over_at=2):
         assert pf.restarts == 1 and given_up is not None and given_up < 5, given_up
         assert not any(t and e > 1.0 for e, t in zip(errors, told, strict=True)), errors
+
+
+def test_a_held_fix_gets_no_injected_particles_until_it_is_let_go(
+    paper_office: SemanticMap,
+) -> None:
+    """While a fix is held, the recovery injects nothing however much it asks for (its
+    averages still follow the frames); on the frame the fix is let go it injects, as
+    before. Held, injected particles would enter with the survivors' weight and carry
+    none of the history behind the fix."""
+    sim = replace(paper_config("nominal", 360), duration_s=12.0)
+    pf, out = run(paper_office, sim, FilterConfig(particles=3000))
+    frame, est, _ = out[-1]
+    assert est.converged
+    asked = []
+    update = pf._recovery.update
+
+    def always_asks(mean_log_likelihood_per_class: float) -> float:
+        update(mean_log_likelihood_per_class)
+        asked.append(mean_log_likelihood_per_class)
+        return 0.3
+
+    pf._recovery.update = always_asks  # type: ignore[method-assign]
+
+    def far_share() -> float:
+        e = pf.estimate
+        return float(np.mean(np.hypot(pf.x - e.x, pf.y - e.y) > 3.0))
+
+    for _ in range(10):  # standing where the walk ended, seeing the same: the fix holds
+        e = pf.step(Odometry(0.0, 0.0, 0.0), frame.detections)
+        assert e.converged and far_share() == 0.0
+    assert len(asked) == 10
+    # The same boxes turned by 90 degrees: a kidnap's frames, and the fix is let go.
+    turned = [replace(d, bearing_rad=d.bearing_rad + np.pi / 2) for d in frame.detections]
+    for _ in range(5):
+        e = pf.step(Odometry(0.0, 0.0, 0.0), turned)
+        if not e.converged:
+            break
+    assert not e.converged
+    assert far_share() > 0.1  # injected on the frame it was let go
