@@ -243,6 +243,9 @@ WIDE_VIEW_GAIN_PROTECTION_M = 1.0
 #: told (PDR-grade step lengths are off by up to 10 %; dropped frames are carried by the
 #: next frame's odometry).
 WALK_BOUND_SCALE = 1.25
+#: A fix held this long (s) gets no injected particles (see ``_step``); a younger one
+#: does, as a lost belief does.
+SETTLED_FIX_S = 10.0
 
 
 class ParticleFilter:
@@ -435,6 +438,8 @@ class ParticleFilter:
         #: the floor in a connector's stop) and until the next fix: a gain waiting for
         #: the evidence search asks for it at the base interval (see _weigh_alternatives).
         self._after_ride = False
+        #: Seconds the current fix has been held (0: none held).
+        self._held_s = 0.0
         self.continuation.reset(known_start=initial_pose is not None)
         #: Frames that contradicted the start given so far (START_CONTRADICTED_FRAMES),
         #: and whether this frame's fit, taken by itself, did (_update_fit).
@@ -1069,21 +1074,27 @@ class ParticleFilter:
         inject = 0.0
         if mean_ll is not None and not transit and not (self._sees_nothing and self._gate.held):
             inject = self._recover(mean_ll)
-            if est.converged:
-                # A held fix has passed every test of the gate, which lets it go on the
-                # signs of a kidnap (a bad frame, a slide, an alternative the evidence
-                # search found); the recovery injects again from that frame on. Until
-                # then particles drawn from one frame's boxes carry none of the history
-                # behind the fix, yet would enter with the survivors' weight, a fifth
-                # of the belief and more. A stale map's moved object lowers the fit at
-                # the true place for as long as it is in view (which is what the
-                # recovery's averages read as a kidnap) and fits a look-alike place
-                # better: measured on the phone suite's stale office at 360 deg (seed
-                # 2), injected particles 6 m along the corridor took the belief off a
-                # fix 0.1 m from the truth within three frames. The cost: a fix gained
-                # wrong is left to the gate alone (a look-alike wing of the two-wing
-                # floor at 180 deg, seed 38: let go after 40 frames instead of 29).
+            if est.converged and self._held_s >= SETTLED_FIX_S:
+                # A fix held for SETTLED_FIX_S has passed every test of the gate all
+                # that while, and the gate lets it go on the signs of a kidnap (a bad
+                # frame, a slide, an alternative the evidence search found); the
+                # recovery injects again from that frame on. Until then particles drawn
+                # from one frame's boxes carry none of the history behind the fix, yet
+                # would enter with the survivors' weight, a fifth of the belief and
+                # more. A stale map's moved object lowers the fit at the true place for
+                # as long as it is in view (which is what the recovery's averages read
+                # as a kidnap) and fits a look-alike place better: measured on the
+                # phone suite's stale office at 360 deg (seed 2), injected particles
+                # 6 m along the corridor took the belief off a fix 0.1 m from the truth,
+                # held for 18 s, within three frames. A younger fix has little history
+                # behind it and may have been gained wrong; injected particles are
+                # what lets it go soonest (a look-alike wing of the two-wing floor at
+                # 180 deg, seed 38, held wrong from its gain: let go after 29 frames
+                # with them, 40 without; the stale office after an 8 s pause, seed 1:
+                # 32 and 38).
                 inject = 0.0
+        frame_held_s = DEFAULT_FRAME_S * steps if frame_s is None else frame_s
+        self._held_s = self._held_s + frame_held_s if est.converged else 0.0
         obs = self.last_observation
         if obs is not None and not obs.empty:
             self._blind_hold = (
@@ -1273,6 +1284,7 @@ class ParticleFilter:
             "told_since_start": self._told_since_start,
             "start_contradicted": self._start_contradicted,
             "settled_frames": self._settled_frames,
+            "held_s": self._held_s,
             "twins_possible": self._twins_possible,
             "last_fix": None if self._last_fix is None else list(self._last_fix),
             **self.continuation.checkpoint(levels=self.floors is not None),
@@ -1335,6 +1347,8 @@ class ParticleFilter:
         self._start_contradicted = int(state.get("start_contradicted", 0))
         self._frame_misfit = False
         self._settled_frames = int(state.get("settled_frames", 0))
+        # (An older checkpoint: a fix as young as can be; it injects as before.)
+        self._held_s = float(state.get("held_s", 0.0))
         # (An older checkpoint: as before twins were known.)
         self._twins_possible = bool(state.get("twins_possible", False))
         last = state.get("last_fix")

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from app.localization.config import FilterConfig
-from app.localization.filter import ParticleFilter
+from app.localization.filter import SETTLED_FIX_S, ParticleFilter
 from app.localization.types import Detection, InitialPose, Odometry
 from app.maps.model import SemanticMap
 from app.simulation.scenarios import paper_config
@@ -668,40 +668,48 @@ def test_a_start_half_contradicted_when_the_session_moves_is_given_up_all_the_sa
         assert not any(t and e > 1.0 for e, t in zip(errors, told, strict=True)), errors
 
 
-def test_a_held_fix_gets_no_injected_particles_until_it_is_let_go(
+def test_a_settled_fix_gets_no_injected_particles_until_it_is_let_go(
     paper_office: SemanticMap,
 ) -> None:
-    """While a fix is held, the recovery injects nothing however much it asks for (its
-    averages still follow the frames); on the frame the fix is let go it injects, as
-    before. Held, injected particles would enter with the survivors' weight and carry
-    none of the history behind the fix."""
-    sim = replace(paper_config("nominal", 360), duration_s=12.0)
+    """A fix held for SETTLED_FIX_S gets no injected particles however much the recovery
+    asks for them (its averages still follow the frames); a younger fix does, and so
+    does a settled one on the frame it is let go. Injected particles would enter with
+    the survivors' weight and carry none of the history behind the fix."""
+    sim = replace(paper_config("nominal", 360), duration_s=6.0)
     pf, out = run(paper_office, sim, FilterConfig(particles=3000))
     frame, est, _ = out[-1]
-    assert est.converged
-    asked = []
-    update = pf._recovery.update
+    assert est.converged and pf._held_s < SETTLED_FIX_S
+    update, sample = pf._recovery.update, pf.sensor.sample_poses
+    injected: list[int] = []
 
     def always_asks(mean_log_likelihood_per_class: float) -> float:
         update(mean_log_likelihood_per_class)
-        asked.append(mean_log_likelihood_per_class)
         return 0.3
 
+    def counted(n: int, *args: object, **kwargs: object):  # type: ignore[no-untyped-def]
+        injected.append(n)
+        return sample(n, *args, **kwargs)
+
     pf._recovery.update = always_asks  # type: ignore[method-assign]
+    pf.sensor.sample_poses = counted  # type: ignore[method-assign]
 
-    def far_share() -> float:
-        e = pf.estimate
-        return float(np.mean(np.hypot(pf.x - e.x, pf.y - e.y) > 3.0))
+    def stand(detections: list[Detection]) -> tuple[bool, int]:
+        """One frame standing still; whether converged, and the particles injected."""
+        injected.clear()
+        e = pf.step(Odometry(0.0, 0.0, 0.0), detections, frame_s=0.2)
+        return e.converged, sum(injected)
 
-    for _ in range(10):  # standing where the walk ended, seeing the same: the fix holds
-        e = pf.step(Odometry(0.0, 0.0, 0.0), frame.detections)
-        assert e.converged and far_share() == 0.0
-    assert len(asked) == 10
+    converged, n = stand(frame.detections)
+    assert converged and n == round(0.3 * pf.n)  # young: 30 % injected
+    while pf._held_s < SETTLED_FIX_S:
+        assert stand(frame.detections)[0]
+    for _ in range(10):  # settled: the fix holds and nothing is injected
+        assert stand(frame.detections) == (True, 0)
     # The same boxes turned by 90 degrees: a kidnap's frames, and the fix is let go.
     turned = [replace(d, bearing_rad=d.bearing_rad + np.pi / 2) for d in frame.detections]
     for _ in range(5):
-        e = pf.step(Odometry(0.0, 0.0, 0.0), turned)
-        if not e.converged:
+        converged, n = stand(turned)
+        if not converged:
             break
-    assert not e.converged
-    assert far_share() > 0.1  # injected on the frame it was let go
+    assert not converged
+    assert n > 0  # injected on the frame it was let go
