@@ -882,7 +882,9 @@ class ParticleFilter:
             lx, ly, lr = self._last_fix
             walked = WALK_BOUND_SCALE * hypot(odometry.forward_m, odometry.left_m)
             self._last_fix = (lx, ly, lr + walked)
-        self.told_heading.moved(odometry, DEFAULT_FRAME_S * steps if frame_s is None else frame_s)
+        # (An untimed frame is taken to last DEFAULT_FRAME_S, as the capture clock takes it.)
+        elapsed_s = DEFAULT_FRAME_S * steps if frame_s is None else frame_s
+        self.told_heading.moved(odometry, elapsed_s)
         if odometry is not None:
             self.geometry.moved(odometry)
             self.odometry_check.moved(odometry)
@@ -1093,8 +1095,7 @@ class ParticleFilter:
                 # with them, 40 without; the stale office after an 8 s pause, seed 1:
                 # 32 and 38).
                 inject = 0.0
-        frame_held_s = DEFAULT_FRAME_S * steps if frame_s is None else frame_s
-        self._held_s = self._held_s + frame_held_s if est.converged else 0.0
+        self._held_s = self._held_s + elapsed_s if est.converged else 0.0
         obs = self.last_observation
         if obs is not None and not obs.empty:
             self._blind_hold = (

@@ -705,6 +705,11 @@ def test_a_settled_fix_gets_no_injected_particles_until_it_is_let_go(
         assert stand(frame.detections)[0]
     for _ in range(10):  # settled: the fix holds and nothing is injected
         assert stand(frame.detections) == (True, 0)
+    # A session handed to another worker now resumes as settled (held_s is checkpointed).
+    twin = ParticleFilter(
+        paper_office, pf.config, rng=np.random.default_rng(7), state=pf.checkpoint()
+    )
+    assert twin._held_s == pf._held_s >= SETTLED_FIX_S
     # The same boxes turned by 90 degrees: a kidnap's frames, and the fix is let go.
     turned = [replace(d, bearing_rad=d.bearing_rad + np.pi / 2) for d in frame.detections]
     for _ in range(5):
