@@ -65,6 +65,9 @@ class FitQuality:
     #: ... and one such object was never reported at this place (not a far object the
     #: detector sees now and then, missed by chance for a few frames).
     never_reported: bool = False
+    #: A contradiction that lapsed has its objects reported where the estimate now puts
+    #: them (:attr:`~app.localization.unseen.UnseenObjects.resolved`).
+    resolved: bool = False
 
 
 class ConvergenceGate:
@@ -398,8 +401,10 @@ class ConvergenceGate:
 
         A contradiction counts whether or not ``converged`` was held when it came: one
         that kept a fix from being gained and lapsed only because its object left the
-        view is as unresolved as one that took a fix away. Once the estimate jumps
-        farther than ``unseen_place_m`` it was about another place, and is forgotten.
+        view is as unresolved as one that took a fix away; one whose objects the
+        detector now reports where the estimate puts them (``FitQuality.resolved``) is
+        resolved. Once the estimate jumps farther than ``unseen_place_m`` it was about
+        another place, and is forgotten.
         """
         if evidence_frame:
             contradicted = quality is not None and quality.contradicted
@@ -407,6 +412,9 @@ class ConvergenceGate:
         if quality is not None and quality.contradicted:
             self._since_unseen = 0
         elif self._since_unseen is None:
+            return
+        elif quality is not None and quality.resolved:
+            self._since_unseen = None
             return
         elif step > self.unseen_place_m:
             self._since_unseen = None

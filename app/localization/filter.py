@@ -1459,7 +1459,8 @@ class ParticleFilter:
             unexplained = q.unexplained + a_share * (unexplained - q.unexplained)
         contradicted = self.unseen is not None and self.unseen.contradicted
         never = contradicted and self.unseen is not None and self.unseen.never_reported
-        self.quality = FitQuality(fit, unexplained, bad, contradicted, never)
+        resolved = self.unseen is not None and self.unseen.resolved
+        self.quality = FitQuality(fit, unexplained, bad, contradicted, never, resolved)
 
     def _exclude_from_models(self, objects: list[int]) -> None:
         """Take ``objects`` out of the filter's sensor model and the evidence tracker's."""

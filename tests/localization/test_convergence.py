@@ -128,6 +128,25 @@ def test_an_unseen_object_before_the_first_fix_delays_it_at_that_place() -> None
     assert _feed(gate, GOOD)
 
 
+def test_a_contradiction_whose_objects_are_reported_again_is_resolved() -> None:
+    """A lapsed contradiction whose objects the detector reports again where the
+    estimate puts them (FitQuality.resolved) waits no longer: the place that missed them
+    was a first fix still converging, 0.9 m off (phone suite, stale office, seed 2)."""
+    resolved = FitQuality(fit=0.5, unexplained=0.05, resolved=True)
+    gate = ConvergenceGate()
+    assert not _feed(gate, UNSEEN, 3)
+    assert not _feed(gate, GOOD, 2)
+    assert gate.not_gained_because == ("unseen object lately",)
+    assert not _feed(gate, resolved)  # (the streak since the lapse is 3 frames)
+    assert gate.not_gained_because == ("not steady yet",)
+    assert _feed(gate, GOOD, gate.frames - 3)
+    # Resolved before the contradiction has lapsed, nothing changes: it still flags.
+    gate = ConvergenceGate()
+    both = FitQuality(fit=0.5, unexplained=0.05, contradicted=True, resolved=True)
+    assert not _feed(gate, both, 3)
+    assert not _feed(gate, GOOD, gate.regain_after_unseen_frames - 1)
+
+
 def test_an_unseen_object_at_another_place_does_not_delay_the_first_fix() -> None:
     """A global start contradicts itself at wrong places: once the estimate has jumped
     away (the unseen check's counts start again) that contradiction is forgotten."""

@@ -236,6 +236,54 @@ def test_an_object_taken_away_or_moved_is_forgiven_and_a_moved_one_is_told_apart
     assert moved.moved.sum() == 1
 
 
+def test_a_lapsed_contradiction_is_resolved_only_by_reports_of_its_objects() -> None:
+    """An object flagged, then reported again in most frames (the estimate that missed
+    it has come to where it is seen), resolves the contradiction, once; one reported now
+    and then (a far object, or one moved near its drawn place) does not, nor one flagged
+    on a single frame, nor one forgiven (the gate's wait is then a stale map's margin)."""
+    sm = generated_map(40, seed=2)
+    cfg = FilterConfig()
+    obj, _ = _loneliest_in_view(sm, cfg)
+
+    def lapse(hit_prob: float, seed: int) -> tuple[UnseenObjects, list[bool], list[bool]]:
+        unseen = UnseenObjects(sm, cfg)
+        assert _walk_past(unseen, sm, 1.0, obj, 20, seed=1)[-1]
+        assert unseen.lately[obj] and unseen.lately.sum() == 1
+        rng = np.random.default_rng(seed)
+        flags, resolved = [], []
+        for _ in range(30):
+            gone = -1 if rng.random() < hit_prob else obj
+            flags += _walk_past(unseen, sm, 1.0, gone, 1, seed=int(rng.integers(1 << 30)))
+            resolved.append(unseen.resolved)
+        return unseen, flags, resolved
+
+    back, flags, resolved = lapse(1.0, seed=3)
+    first = flags.index(False)
+    assert sum(resolved) == 1 and resolved.index(True) >= first
+    assert not back.lately.any() and not any(flags[first:])
+    # Reported in about a third of the frames: the flag lapses, the contradiction stays.
+    now_and_then, flags, resolved = lapse(0.3, seed=4)
+    assert not all(flags) and not any(resolved) and now_and_then.lately[obj]
+    # Flagged on one frame only, then reported: not resolved (a drag's sweep).
+    once = UnseenObjects(sm, cfg)
+    flags = _walk_past(once, sm, 1.0, obj, 20, seed=1)
+    start = flags.index(True)
+    once = UnseenObjects(sm, cfg)
+    assert _walk_past(once, sm, 1.0, obj, start + 1, seed=1)[-1] and once.flag_frames == 1
+    _walk_past(once, sm, 1.0, -1, 30, seed=6)
+    assert not once.resolved and once.lately[obj]
+    # Forgiven: no report resolves it.
+    forgiven = UnseenObjects(sm, cfg)
+    assert _walk_past(forgiven, sm, 1.0, obj, 20, seed=1)[-1] and forgiven.forgive() == 1
+    _walk_past(forgiven, sm, 1.0, -1, 30, seed=5)
+    assert not forgiven.resolved and forgiven.lately[obj]
+    # The objects flagged survive a checkpoint.
+    copy = UnseenObjects(sm, cfg)
+    copy.restore(now_and_then.checkpoint())
+    assert np.array_equal(copy.lately, now_and_then.lately)
+    assert copy.flag_frames == now_and_then.flag_frames > 1
+
+
 def _reported_off(sm, cfg, obj: int, off_rad: float) -> UnseenObjects:
     """The counts of 20 frames at POSE reporting every object but ``obj`` (98 % each),
     and ``obj``'s class ``off_rad`` off its drawn bearing."""
