@@ -118,11 +118,13 @@ class ConvergenceGate:
     releases at once (on a stale map it is what catches a fix pulled a metre off), but
     once it has, or once one has kept a fix from being gained at this place,
     ``converged`` is gained only after ``regain_after_unseen_frames`` frames with
-    detections free of it: a far object the detector reports now and then would
-    otherwise flag, clear and flag again, and an object that left the view unresolved
-    would come back into it, each time taking back a fix just given. The frames
-    towards a gain are also held to the odometry (:mod:`~app.localization.slide`): a
-    cloud dragged off while nothing was converged is not gained mid-drag.
+    detections free of it, or once the detector reports its objects again where the
+    estimate puts them (``FitQuality.resolved``): a far object the detector reports
+    now and then would otherwise flag, clear and flag again, and an object that left
+    the view unresolved would come back into it, each time taking back a fix just
+    given. The frames towards a gain are also held to the odometry
+    (:mod:`~app.localization.slide`): a cloud dragged off while nothing was converged
+    is not gained mid-drag.
     """
 
     gain_fit: float = 2.0
@@ -181,7 +183,8 @@ class ConvergenceGate:
     #: ``hold_unexplained`` before ``converged`` is given up (1 s at 5 frames/s).
     hold_misfit_frames: int = 5
     #: Frames with detections free of an unseen-object contradiction that gaining
-    #: ``converged`` again takes once one has taken it away (5 s at 5 frames/s).
+    #: ``converged`` again takes once one has taken it away (5 s at 5 frames/s), unless
+    #: it is resolved first (``FitQuality.resolved``).
     regain_after_unseen_frames: int = 25
     #: Frames with detections in a row an unseen-object contradiction must last to let
     #: a held fix go, unless one of its objects was never reported at this place

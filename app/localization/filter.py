@@ -1460,7 +1460,10 @@ class ParticleFilter:
         contradicted = self.unseen is not None and self.unseen.contradicted
         never = contradicted and self.unseen is not None and self.unseen.never_reported
         resolved = self.unseen is not None and self.unseen.resolved
-        self.quality = FitQuality(fit, unexplained, bad, contradicted, never, resolved)
+        self.quality = FitQuality(
+            fit, unexplained, bad, contradicted=contradicted, never_reported=never,
+            resolved=resolved,
+        )  # fmt: skip
 
     def _exclude_from_models(self, objects: list[int]) -> None:
         """Take ``objects`` out of the filter's sensor model and the evidence tracker's."""

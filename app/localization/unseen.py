@@ -179,7 +179,9 @@ class UnseenObjects:
         self.frame_expected = 0
         self.frame_missed = 0
         #: The objects flagged since the last resolution (:attr:`resolved`), and on how
-        #: many frames with detections.
+        #: many frames with detections. Cleared only by a resolution or a jump (this
+        #: reset): an object of a contradiction that lapsed unresolved stays, so a later
+        #: one is resolved only once that object is reported too.
         self.lately = np.zeros(n, dtype=bool)
         self.flag_frames = 0
         #: Whether the last :meth:`update` resolved a lapsed contradiction.
