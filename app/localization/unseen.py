@@ -181,7 +181,10 @@ class UnseenObjects:
         #: The objects flagged since the last resolution (:attr:`resolved`), and on how
         #: many frames with detections. Cleared only by a resolution or a jump (this
         #: reset): an object of a contradiction that lapsed unresolved stays, so a later
-        #: one is resolved only once that object is reported too.
+        #: one is resolved only once that object is reported too. A brake kept on
+        #: purpose: letting such objects go once the gate's wait is over let a moved
+        #: plant, reported near its drawn place, resolve its own contradiction and a
+        #: fix gained after it drift 1.05 m off (CHANGELOG, tried and not kept).
         self.lately = np.zeros(n, dtype=bool)
         self.flag_frames = 0
         #: Whether the last :meth:`update` resolved a lapsed contradiction.
