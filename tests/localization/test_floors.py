@@ -894,6 +894,34 @@ def test_a_ride_begun_located_asks_for_the_search_a_gain_waits_for_until_the_nex
     assert any(after[:gained]) and not any(after[gained:])
 
 
+def test_a_ride_begun_not_located_asks_for_the_search_a_gain_waits_for_too() -> None:
+    # Started at the stairs' foot and up them by the barometer before the first fix (the
+    # gate held nothing as the level changed): until the fix on the First Floor, the
+    # gain's search comes at the base interval all the same. Before, only a ride begun
+    # located or one the view made asked for it (venue suite, 66-degree camera, PDR,
+    # seed 7: 4.4 s of "not sure" after the lift waiting on the search alone).
+    ground, first = Pose(22.0, 2.0, 0.0), Pose(22.0 + PITCH, 2.0, 0.0)
+    start = InitialPose(ground.x, ground.y, ground.theta_rad, 0.3, 0.1)
+    pf = ParticleFilter(
+        VENUE, FilterConfig(particles=2000), rng=np.random.default_rng(0), initial_pose=start
+    )
+    assert pf.floors is not None
+    after: list[bool] = []
+    held_at_change = None
+    gained = None
+    for k, r in enumerate(list(np.linspace(100.0, 104.5, 20)) + [104.5] * 40):
+        changes = pf.floors.changes
+        seen = seen_from(VENUE, ground if changes == 0 else first)
+        est = pf.step(Odometry(), seen, altitude=AltitudeReading(float(r), 0.3))
+        if pf.floors.changes and not changes:
+            held_at_change = est.converged
+        after.append(bool(pf.checkpoint()["after_ride"]))
+        if pf.floors.changes and est.converged and gained is None:
+            gained = k
+    assert pf.floors.changes == 1 and held_at_change is False and gained is not None
+    assert any(after[:gained]) and not any(after[gained:])
+
+
 def test_a_rise_at_a_lifts_rate_makes_the_stairs_less_likely_than_the_lift() -> None:
     # A cloud not yet located, half in the lift car and half at the stairs' foot on the
     # Ground Floor: the barometer rises a storey at a lift's 1 m/s, or a climber's 0.3 m/s.
