@@ -852,6 +852,18 @@ def test_without_a_barometer_a_known_start_rides_the_lift_and_its_geometry_follo
     assert len(told) >= 10 and max(told) < 0.3, told
 
 
+def _at_the_stairs_foot() -> tuple[Pose, Pose, ParticleFilter]:
+    """The stairs' foot on the Ground Floor and their head on the First, and a filter
+    started at the foot (0.3 m, 0.1 rad)."""
+    ground, first = Pose(22.0, 2.0, 0.0), Pose(22.0 + PITCH, 2.0, 0.0)
+    start = InitialPose(ground.x, ground.y, ground.theta_rad, 0.3, 0.1)
+    pf = ParticleFilter(
+        VENUE, FilterConfig(particles=2000), rng=np.random.default_rng(0), initial_pose=start
+    )
+    assert pf.floors is not None
+    return ground, first, pf
+
+
 def test_a_ride_begun_located_asks_for_the_search_a_gain_waits_for_until_the_next_fix() -> None:
     # Located at the stairs' foot on the Ground Floor, up the stairs by the barometer, then
     # the First Floor's view from the stairs' head: until the fix there, the filter asks
@@ -859,12 +871,7 @@ def test_a_ride_begun_located_asks_for_the_search_a_gain_waits_for_until_the_nex
     # from the store's bytes into a new filter as it is set, the new filter takes the very
     # steps the first one takes from the same bytes (whatever a checkpoint left out, the
     # first would still have and the new one not).
-    ground, first = Pose(22.0, 2.0, 0.0), Pose(22.0 + PITCH, 2.0, 0.0)
-    start = InitialPose(ground.x, ground.y, ground.theta_rad, 0.3, 0.1)
-    pf = ParticleFilter(
-        VENUE, FilterConfig(particles=2000), rng=np.random.default_rng(0), initial_pose=start
-    )
-    assert pf.floors is not None
+    ground, first, pf = _at_the_stairs_foot()
     for _ in range(30):
         assert not pf.checkpoint()["after_ride"]
         est = pf.step(Odometry(), seen_from(VENUE, ground), altitude=AltitudeReading(100.0, 0.3))
@@ -900,12 +907,7 @@ def test_a_ride_begun_not_located_asks_for_the_search_a_gain_waits_for_too() -> 
     # gain's search comes at the base interval all the same. Before, only a ride begun
     # located or one the view made asked for it (venue suite, 66-degree camera, PDR,
     # seed 7: 4.4 s of "not sure" after the lift waiting on the search alone).
-    ground, first = Pose(22.0, 2.0, 0.0), Pose(22.0 + PITCH, 2.0, 0.0)
-    start = InitialPose(ground.x, ground.y, ground.theta_rad, 0.3, 0.1)
-    pf = ParticleFilter(
-        VENUE, FilterConfig(particles=2000), rng=np.random.default_rng(0), initial_pose=start
-    )
-    assert pf.floors is not None
+    ground, first, pf = _at_the_stairs_foot()
     after: list[bool] = []
     held_at_change = None
     gained = None
