@@ -1591,13 +1591,6 @@ class ParticleFilter:
                 # Not located, but placed in one connector by a belief that rode it:
                 # its whole stop (not the cloud's point in it) is where they are.
                 pinned = self.floors.pinned_stop(self.x, self.y, self.weights)
-                # Until the next fix a gain's search comes at the base interval, as
-                # after a ride begun located (_start_at_ride_exit) or one the view made
-                # (_follow_blind_level). Before, a ride the barometer counted for a
-                # belief not located left the quiet searches' interval: traced on the
-                # venue suite (66-degree camera, PDR, seed 7), 4.4 s of "not sure"
-                # after the lift with every test of the gain passed but the search.
-                self._after_ride = True
         return rode, pinned
 
     def _leave_connector(
@@ -1667,13 +1660,19 @@ class ParticleFilter:
         self._last_fix = None  # on the level left
         if last.converged:
             self._start_at_ride_exit(raw)
-        else:
-            self._after_ride = True
 
     def _rode(self, dx_m: float) -> None:
         """The person rode to another level, ``dx_m`` across the filter's plane (counted
         by the barometer, or without one seen): what the walk built follows or starts
-        again."""
+        again.
+
+        Until the next fix a gain's search comes at the base interval
+        (``_after_ride``), whether the belief was located as the ride began or not.
+        Before, only a located ride and one the view made asked for it, and a ride the
+        barometer counted for a belief not located kept the quiet searches' lengthened
+        interval: traced on the venue suite (66-degree camera, PDR, seed 7), 4.4 s of
+        "not sure" after the lift with every test of the gain passed but the search."""
+        self._after_ride = True
         # The fix the bearings' geometry gave rides along with the person.
         self.geometry.shift_x(dx_m)
         self.odometry_check.reset()  # the ride is no walk the odometry saw
@@ -1690,13 +1689,12 @@ class ParticleFilter:
         elsewhere on the new level (the top of the other escalator) is no alternative
         for someone who just rode this connector, so the exit is a known start, as loose
         as a stop is wide (its prior odds exclude places far from it, as a known
-        start's do); and until the next fix a gain's search comes at the base interval
-        (``_after_ride``)."""
+        start's do). (Called after :meth:`_rode`, which asks for the gain's search at
+        the base interval until the next fix.)"""
         if self.evidence is not None:
             self.evidence.set_prior(
                 InitialPose(raw.x, raw.y, raw.theta_rad, RIDE_START_STD_M, RIDE_START_STD_RAD)
             )
-        self._after_ride = True
 
     def _exclude_moved(self) -> None:
         """Take the objects the unseen-object check forgave as moved out of the sensor
