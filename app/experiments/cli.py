@@ -52,7 +52,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--rate-hz",
         type=float,
         default=None,
-        help="phone: frames a second the phone sends (default 5; a phone app often sends 10)",
+        help="phone and venue: frames a second the phone sends (default 5; a phone app "
+        "often sends 10)",
     )
     parser.add_argument(
         "--scenarios",
@@ -70,9 +71,9 @@ def run(args: argparse.Namespace) -> int:
             "bearings experiments: --first-seed is for the phone and venue suites, "
             f"not {args.suite}"
         )
-    if args.rate_hz is not None and args.suite != "phone":
+    if args.rate_hz is not None and args.suite not in ("phone", "venue"):
         raise SystemExit(
-            f"bearings experiments: --rate-hz is for the phone suite, not {args.suite}"
+            f"bearings experiments: --rate-hz is for the phone and venue suites, not {args.suite}"
         )
     if args.rate_hz is not None and not 0.5 <= args.rate_hz <= 60.0:
         raise SystemExit(f"bearings experiments: need 0.5 <= --rate-hz <= 60, got {args.rate_hz}")
@@ -181,7 +182,7 @@ def _run_venue(args: argparse.Namespace) -> int:
         raise SystemExit("bearings experiments: need --seeds >= 1 and --particles >= 100")
     rows = venue.run(
         args.out, seeds=seeds, particles=args.particles, workers=max(1, args.workers),
-        first_seed=args.first_seed,
+        first_seed=args.first_seed, rate_hz=args.rate_hz,
     )  # fmt: skip
     print(venue.markdown_table(rows))
     print(f"wrote {args.out / 'venue.md'} and venue.json")

@@ -83,6 +83,8 @@ from app.simulation.venue_walk import (
 WRONG_M = 1.0
 #: A level change is to be confirmed within this long after leaving a connector (s).
 CONFIRM_S = 5.0
+#: Frames a second the walks are sent at unless told (``--rate-hz``).
+RATE_HZ = 5.0
 
 
 @dataclass(frozen=True)
@@ -217,7 +219,9 @@ def single_level_map(level_id: str) -> SemanticMap:
     return parse_map({"name": f"venue-{level_id}", **keep})
 
 
-def _walk(seed: int, cond: Condition) -> tuple[SemanticMap, list[VenueFrame], list[Leg]]:
+def _walk(
+    seed: int, cond: Condition, rate_hz: float | None = None
+) -> tuple[SemanticMap, list[VenueFrame], list[Leg]]:
     m = venue_map()
     start, legs = venue_legs()
     cfg = SimulationConfig(
@@ -225,6 +229,7 @@ def _walk(seed: int, cond: Condition) -> tuple[SemanticMap, list[VenueFrame], li
         miss_prob=cond.miss_prob,
         false_rate=cond.false_rate,
         fov_deg=cond.fov_deg,
+        rate_hz=RATE_HZ if rate_hz is None else rate_hz,
     )
     baro = Barometer(noise_m=cond.barometer_noise_m)
     rng = np.random.default_rng(seed)
@@ -278,14 +283,16 @@ def run_condition(
     particles: int,
     on_step: Callable[[ParticleFilter, VenueFrame, Estimate], None] | None = None,
     alter: Callable[[list[VenueFrame]], list[VenueFrame]] | None = None,
+    rate_hz: float | None = None,
 ) -> VenueRun:
     """One walk of ``condition`` through the venue's filter (and, leg by leg, through
     each level's own map); ``on_step(filter, frame, estimate)`` after each of the
     venue filter's frames (a tool's look at its state, e.g. ``tools/odometry_scale.py``);
     ``alter`` changes the simulated frames first, one for one (effects the simulator
-    was not built with, ``tools/venue_gaps.py``)."""
+    was not built with, ``tools/venue_gaps.py``); ``rate_hz`` the frames a second the
+    phone sends (default :data:`RATE_HZ`)."""
     cond = CONDITIONS[condition]
-    m, frames, legs = _walk(seed, cond)
+    m, frames, legs = _walk(seed, cond, rate_hz)
     if alter is not None:
         walked = len(frames)
         frames = alter(frames)
@@ -376,8 +383,9 @@ def run_condition(
     )
 
 
-def _job(args: tuple[str, int, int]) -> VenueRun:
-    return run_condition(*args)
+def _job(args: tuple[str, int, int, float | None]) -> VenueRun:
+    condition, seed, particles, rate_hz = args
+    return run_condition(condition, seed, particles, rate_hz=rate_hz)
 
 
 def summarize(runs: list[VenueRun]) -> list[dict[str, object]]:
@@ -520,12 +528,16 @@ def markdown(
     particles: int,
     seeds: int,
     first_seed: int = 0,
+    rate_hz: float = RATE_HZ,
 ) -> str:
     command = "bearings experiments --suite venue"
     counted = f"{seeds} seeds per condition"
     if first_seed:
         command += f" --first-seed {first_seed} --seeds {seeds}"
         counted += f", {first_seed} to {first_seed + seeds - 1}"
+    if rate_hz != RATE_HZ:
+        command += f" --rate-hz {rate_hz:g}"
+    counted += f", {rate_hz:g} frames/s"
     out = [
         "# Venue suite: three floors, lift, stairs and escalators",
         "",
@@ -597,14 +609,21 @@ def markdown(
 
 
 def run(
-    out: Path, *, seeds: int, particles: int, workers: int, first_seed: int = 0
+    out: Path,
+    *,
+    seeds: int,
+    particles: int,
+    workers: int,
+    first_seed: int = 0,
+    rate_hz: float | None = None,
 ) -> list[dict[str, object]]:
-    """Run every condition for ``seeds`` seeds from ``first_seed`` on; write venue.md and
-    venue.json to ``out``."""
+    """Run every condition for ``seeds`` seeds from ``first_seed`` on, the phone sending
+    ``rate_hz`` frames a second (default :data:`RATE_HZ`); write venue.md and venue.json
+    to ``out``."""
     from app.experiments.runner import map_jobs
 
     seed_range = range(first_seed, first_seed + seeds)
-    jobs = [(c, s, particles) for c in CONDITIONS for s in seed_range]
+    jobs = [(c, s, particles, rate_hz) for c in CONDITIONS for s in seed_range]
     started = time.perf_counter()
     runs = map_jobs(_job, jobs, workers)
     seconds = time.perf_counter() - started
@@ -612,7 +631,14 @@ def run(
     out.mkdir(parents=True, exist_ok=True)
     (out / "venue.json").write_text(json.dumps(rows, indent=1), encoding="utf-8")
     (out / "venue.md").write_text(
-        markdown(rows, seconds=seconds, particles=particles, seeds=seeds, first_seed=first_seed),
+        markdown(
+            rows,
+            seconds=seconds,
+            particles=particles,
+            seeds=seeds,
+            first_seed=first_seed,
+            rate_hz=RATE_HZ if rate_hz is None else rate_hz,
+        ),
         encoding="utf-8",
     )
     return rows

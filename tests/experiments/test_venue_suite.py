@@ -3,10 +3,12 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from app.experiments.venue import (
     CONDITIONS,
     _availability,
+    _walk,
     filter_config,
     leg_availability,
     markdown,
@@ -78,3 +80,21 @@ def test_a_report_of_fresh_seeds_names_them() -> None:
     assert "`bearings experiments --suite venue --first-seed 10 --seeds 2`" in text
     assert "2 seeds per condition, 10 to 11" in text
     assert "--first-seed" not in markdown([], seconds=1.0, particles=1000, seeds=10)
+
+
+def test_the_walks_go_at_the_rate_asked_and_the_report_says_so() -> None:
+    # `--rate-hz 10` for the venue suite: the same walk sent 10 frames a second, twice
+    # the frames over the same time, the barometer's readings with them.
+    cond = CONDITIONS["phone-vio-66"]
+    _, five, _ = _walk(0, cond)
+    _, ten, _ = _walk(0, cond, rate_hz=10.0)
+    t5 = np.array([vf.frame.t for vf in five])
+    t10 = np.array([vf.frame.t for vf in ten])
+    assert np.median(np.diff(t5)) == pytest.approx(0.2)
+    assert np.median(np.diff(t10)) == pytest.approx(0.1)
+    assert t10[-1] == pytest.approx(t5[-1], abs=1.0)
+    assert all(vf.altitude is not None for vf in ten)
+    rows: list[dict[str, object]] = []
+    text = markdown(rows, seconds=1.0, particles=100, seeds=1, rate_hz=10.0)
+    assert "--rate-hz 10" in text and "10 frames/s" in text
+    assert "--rate-hz" not in markdown(rows, seconds=1.0, particles=100, seeds=1)
