@@ -439,8 +439,7 @@ class EvidenceTracker:
         (:func:`~app.localization.search.explaining`) is left out; ``rings``: seek
         its places from around the pose too (``Separation.far_m``)."""
         window = self.window()
-        seen = explaining((x, y, theta), window, self.map.object_xy.reshape(-1, 2))
-        movable = seen[~self.map.fixed[seen]]
+        movable = self._movable_explaining((x, y, theta), window)
         left_out: list[int | tuple[int, ...]] = [int(k) for k in movable]
         # Furniture is rearranged a class at a time as often as a piece at a time (the
         # plants carried to the other wall): every movable object of one class together.
@@ -450,6 +449,26 @@ class EvidenceTracker:
             if group.size > 1:
                 left_out.append(tuple(int(k) for k in group))
         return self.finder.separation((x, y, theta), window, left_out, rings)
+
+    def places_without(
+        self, x: float, y: float, theta: float
+    ) -> tuple[tuple[float, float, float], list[tuple[int, tuple[float, float, float]]]]:
+        """The place that best explains the history window, searched from the pose (x,
+        y, theta), and for each movable object that explains a detection there (as in
+        :meth:`separation_m`) the place it slides to without that object
+        (:meth:`~app.localization.search.PlaceSearch.places_without`)."""
+        window = self.window()
+        movable = [int(k) for k in self._movable_explaining((x, y, theta), window)]
+        full, slid = self.finder.places_without((x, y, theta), window, movable)
+        return full, list(zip(movable, slid, strict=True))
+
+    def _movable_explaining(
+        self, pose: tuple[float, float, float], window: sensor_kernel.ObservationWindow
+    ) -> NDArray[np.int64]:
+        """The movable objects (not fixtures) that explain a detection of ``window``
+        seen from ``pose`` (:func:`~app.localization.search.explaining`)."""
+        seen = explaining(pose, window, self.map.object_xy.reshape(-1, 2))
+        return seen[~self.map.fixed[seen]]
 
     # ------------------------------------------------------------ one frame
     def update(

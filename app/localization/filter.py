@@ -207,6 +207,14 @@ GAIN_SEPARATION_M = 0.5
 #: 0.8543 -> 0.8534; the stale-map rows on seeds 30-59 47 -> 47 (0.7030 -> 0.6997);
 #: integrity suite 3 -> 3; venue suite unchanged.
 GAIN_SEPARATION_MAX_M = 1.0
+#: A held fix let go for sliding off the odometry blames a movable object whose absence
+#: moves the place the tracker's window fits best this far (m) back towards where the
+#: odometry carried the fix: see ``_blame_the_slide``.
+SLIDE_BLAME_M = 0.45
+#: ... when the place let go lies at most this far (m) from where the odometry carried
+#: the fix: a moved object drags a fix by about its move (1-1.5 m on the phone suite's
+#: stale maps), a jump takes it anywhere.
+SLIDE_BLAME_SPAN_M = 2.0
 
 
 def separation_allows_gain(pull_m: float, protection_m: float) -> bool:
@@ -385,6 +393,7 @@ class ParticleFilter:
         self._recovery.reset()
         self._gate.reset()
         self._after_ride = False
+        self._after_blame = False
         if self.evidence is not None:
             self.evidence.reset()
             self.evidence.set_prior(initial_pose)
@@ -438,6 +447,9 @@ class ParticleFilter:
         #: the floor in a connector's stop) and until the next fix: a gain waiting for
         #: the evidence search asks for it at the base interval (see _weigh_alternatives).
         self._after_ride = False
+        #: ... and so does one since a moved object was blamed for a slide
+        #: (_blame_the_slide), until the next fix.
+        self._after_blame = False
         #: Seconds the current fix has been held (0: none held).
         self._held_s = 0.0
         self.continuation.reset(known_start=initial_pose is not None)
@@ -553,6 +565,7 @@ class ParticleFilter:
         self._gate.reset()
         self._blind_hold = False
         self._after_ride = False
+        self._after_blame = False
         self._told_since_start = False
         self._settled_frames = 0
         self._twins_possible = bool(self._twins)
@@ -1052,7 +1065,7 @@ class ParticleFilter:
             search_wait=self._gate.not_gained_because == ("no search yet",),
         )
         if est.converged:
-            self._after_ride = False
+            self._after_ride = self._after_blame = False
             self._told_since_start = True
             assert protection is not None
             self._last_fix = (est.x, est.y, protection)
@@ -1104,6 +1117,8 @@ class ParticleFilter:
                 and self.floors is not None
                 and self.floors.in_stop(raw.x, raw.y)
             )
+        if was_held and not est.converged and "slide" in self._gate.lost_because:
+            self._blame_the_slide(raw)
         # A run of frames on the way to a gain is held to the odometry as a fix is: its
         # estimates are anchors while it lasts (a new run starts without the last's).
         if not est.converged and streak <= 1:
@@ -1184,7 +1199,7 @@ class ParticleFilter:
         # fits: phone suite 87 -> 105 confidently-wrong frames).
         gate, ago = self._gate, self.evidence.searched_ago
         gain_waits = (
-            self._after_ride
+            (self._after_ride or self._after_blame)
             and not gate.held
             and gate.streak >= gate.frames - 1
             and (ago is None or ago >= gate.streak)
@@ -1286,6 +1301,7 @@ class ParticleFilter:
             "start_contradicted": self._start_contradicted,
             "settled_frames": self._settled_frames,
             "held_s": self._held_s,
+            "after_blame": self._after_blame,
             "twins_possible": self._twins_possible,
             "last_fix": None if self._last_fix is None else list(self._last_fix),
             **self.continuation.checkpoint(levels=self.floors is not None),
@@ -1350,6 +1366,7 @@ class ParticleFilter:
         self._settled_frames = int(state.get("settled_frames", 0))
         # (An older checkpoint: a fix as young as can be; it injects as before.)
         self._held_s = float(state.get("held_s", 0.0))
+        self._after_blame = bool(state.get("after_blame", False))
         # (An older checkpoint: as before twins were known.)
         self._twins_possible = bool(state.get("twins_possible", False))
         last = state.get("last_fix")
@@ -1707,6 +1724,55 @@ class ParticleFilter:
         if self.last_observation is not None:
             columns = observation_columns([self.last_observation])
             self.last_observation = self.sensor.observations_from_columns(columns)[0]
+
+    def _blame_the_slide(self, raw: Estimate) -> None:
+        """A held fix was let go for sliding off the odometry: if, without one movable
+        object, the place that best explains the evidence tracker's window goes back
+        to where the odometry carried the fix, take that object for moved since the map
+        was drawn, weigh on without it, and move half the cloud by the rigid motion
+        from the full place to the one without it (the frames after choose).
+
+        Blamed: of the objects whose absence moves the place at least
+        ``SLIDE_BLAME_M`` and at least half that way towards the carried fix, the one
+        that leaves it nearest the carried fix; nothing when the place let go lies more
+        than ``SLIDE_BLAME_SPAN_M`` from it (a jump, not a drag)."""
+        if self.unseen is None or self.evidence is None:
+            return
+        carried = self.odometry_check.carried_xy()
+        if carried is None:
+            return
+        cx, cy = carried
+        full, slides = self.evidence.places_without(raw.x, raw.y, raw.theta_rad)
+        fx, fy, ft = full
+        off_m = hypot(fx - cx, fy - cy)
+        if off_m > SLIDE_BLAME_SPAN_M:
+            return
+        best: tuple[float, int, tuple[float, float, float]] | None = None
+        for obj, (sx, sy, st) in slides:
+            moved_m = hypot(sx - fx, sy - fy)
+            left_m = hypot(sx - cx, sy - cy)
+            toward = moved_m >= SLIDE_BLAME_M and off_m - left_m >= 0.5 * moved_m
+            if toward and (best is None or left_m < best[0]):
+                best = (left_m, obj, (sx, sy, st))
+        if best is None:
+            return
+        _, culprit, (sx, sy, st) = best
+        self.unseen.take_moved(culprit)
+        self._exclude_moved()
+        # Its detections are clutter from now on, everywhere: the fit drops, which is
+        # no kidnap (augmented MCL would inject where the boxes point). The estimates
+        # it dragged are no anchors for the slide test any more, and the gain's search
+        # comes at the base interval until the next fix (_weigh_alternatives).
+        self._recovery.reset()
+        self.odometry_check.reset()
+        self._after_blame = True
+        turn = st - ft
+        c, s = math.cos(turn), math.sin(turn)
+        half = slice(0, None, 2)
+        dx, dy = self.x[half] - fx, self.y[half] - fy
+        self.x[half] = sx + c * dx - s * dy
+        self.y[half] = sy + s * dx + c * dy
+        self.theta[half] = wrap_angle(self.theta[half] + turn)
 
     def _place_is_unique(self, raw: Estimate) -> bool:
         """Whether the place is the only one that explains what was seen (a global

@@ -190,6 +190,26 @@ class PlaceSearch:
             far_m = max(far_m, float(moved[best]))
         return Separation(near_m, far_m, which)
 
+    def places_without(
+        self,
+        pose: tuple[float, float, float],
+        window: ObservationWindow,
+        objects: Sequence[int],
+    ) -> tuple[tuple[float, float, float], list[tuple[float, float, float]]]:
+        """The place that best explains ``window`` (a pattern search from ``pose``), and
+        for each of ``objects`` the place it slides to when that object explains nothing
+        (a search from the full place, as :meth:`separation`'s ``near_m``)."""
+        x, y, t = (np.array([v]) for v in pose)
+        steps = (SEPARATION_STEP_M, SEPARATION_STEP_RAD, SEPARATION_ROUNDS)
+        bx, by, bt, _ = self.sensor.pattern_search(x, y, t, PATTERN, *steps, window)
+        slid = []
+        for obj in objects:
+            qx, qy, qt, _ = self.sensor.pattern_search(
+                bx, by, bt, PATTERN, *steps, window.without(obj)
+            )
+            slid.append((float(qx[0]), float(qy[0]), float(qt[0])))
+        return (float(bx[0]), float(by[0]), float(bt[0])), slid
+
 
 class Separation(NamedTuple):
     """:meth:`PlaceSearch.separation`'s answer (metres; ``obj`` -1 when none)."""

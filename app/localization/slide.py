@@ -34,6 +34,11 @@ fix sideways by 1-3 cm a frame, which the slide let through: with the slip, 33 f
 more than 1 m off while converged instead of 46, every scenario without a stale map
 unchanged (docs/results/phone.md). What is left forms a metre off before any fix does,
 or is gained again mid-drag by a run too short for the slip to see.
+
+A fix let go for a slide is where the drag shows: the filter then asks which movable
+object, left out, takes the place the recent frames fit best back to where the odometry
+carried the fix (:meth:`OdometryCheck.carried_xy`), and takes that one for moved
+(:meth:`~app.localization.filter.ParticleFilter._blame_the_slide`).
 """
 
 from __future__ import annotations
@@ -148,6 +153,23 @@ class OdometryCheck:
             self.heading_tolerance_rad,
         )
         return max(slide, slip)
+
+    def carried_xy(self) -> tuple[float, float] | None:
+        """Where the odometry carries the estimate :meth:`slide_m` compares with (the
+        middle of its band: the odometry's own scale, the estimate's own heading then);
+        None without one."""
+        old_enough = len(self._past) - MIN_FRAMES + 1
+        first = next((i for i in range(old_enough) if self._past[i][1] is not None), None)
+        if first is None:
+            return None
+        (rx, ry, rt), estimate_then, *_ = self._past[first]
+        assert estimate_then is not None
+        dx, dy = self._reckoned[0] - rx, self._reckoned[1] - ry
+        c, s = math.cos(rt), math.sin(rt)
+        forward, left = c * dx + s * dy, -s * dx + c * dy
+        ex, ey, et = estimate_then
+        c, s = math.cos(et), math.sin(et)
+        return (ex + c * forward - s * left, ey + s * forward + c * left)
 
     def _slip_m(self, x: float, y: float) -> float:
         """How far the estimate moved, over the run of anchored frames that ends with

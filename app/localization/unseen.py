@@ -40,6 +40,12 @@ weighed against its drawn place, would drag the estimate to where that place exp
 them. One with no detection of its class near it stays in the sensor model: it may be
 there after all, missed by the detector, and still tells look-alike places apart.
 
+An object is also taken for moved when it dragged a held fix off the odometry
+(:meth:`UnseenObjects.take_moved`, from
+:meth:`~app.localization.filter.ParticleFilter._blame_the_slide`): the fix was let go
+for the slide, and without that object the place the recent frames fit best goes back
+to where the odometry carried the fix.
+
 A contradiction that lapses because the detector now reports its objects where the
 estimate puts them is resolved (:attr:`UnseenObjects.resolved`): the estimate that
 missed them was off, and has moved.
@@ -238,6 +244,16 @@ class UnseenObjects:
         self.moved |= flagged & near & ~fixed
         self._contradicted = None
         return int(flagged.sum())
+
+    def take_moved(self, obj: int) -> None:
+        """Take the movable object ``obj`` for moved since the map was drawn (it dragged
+        a fix off the odometry, :mod:`~app.localization.drag`): it flags nothing any
+        more, and the filter takes it out of its sensor model."""
+        if self.map.fixed[obj]:
+            raise ValueError(f"object {obj} is a fixture: fixtures are never taken for moved")
+        self.absent[obj] = True
+        self.moved[obj] = True
+        self._contradicted = None
 
     def miss_rates(self) -> NDArray[np.float64]:
         """Per band of distance, the learnt chance that an object in clear view goes
