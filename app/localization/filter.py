@@ -1766,6 +1766,9 @@ class ParticleFilter:
         self._recovery.reset()
         self.odometry_check.reset()
         self._after_blame = True
+        # (The rigid motion written out, not alternatives.carry: the same motion, but
+        # carry's arithmetic rounds otherwise, and the results quoted in the CHANGELOG
+        # were measured with this.)
         turn = st - ft
         c, s = math.cos(turn), math.sin(turn)
         half = slice(0, None, 2)

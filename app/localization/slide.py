@@ -130,20 +130,11 @@ class OdometryCheck:
         The slide is the distance from (x, y) to that band.
         """
         slip = self._slip_m(x, y)
-        old_enough = len(self._past) - MIN_FRAMES + 1
-        anchors = (i for i in range(old_enough) if self._past[i][1] is not None)
-        first = next(anchors, None)
-        if first is None:
+        compared = self._compared()
+        if compared is None:
             return slip
-        reckoned_then, estimate_then, *_ = self._past[first]
-        assert estimate_then is not None
-        # The dead reckoning's motion since then, in its own pose then ...
-        rx, ry, rt = reckoned_then
-        dx, dy = self._reckoned[0] - rx, self._reckoned[1] - ry
-        c, s = math.cos(rt), math.sin(rt)
-        forward, left = c * dx + s * dy, -s * dx + c * dy
-        # ... and where the estimate lies relative to the estimate then, in its heading.
-        ex, ey, et = estimate_then
+        # Where the estimate lies relative to the estimate then, in its heading.
+        (ex, ey, et), (forward, left) = compared
         c, s = math.cos(et), math.sin(et)
         px, py = x - ex, y - ey
         slide = _distance_to_band(
@@ -158,6 +149,17 @@ class OdometryCheck:
         """Where the odometry carries the estimate :meth:`slide_m` compares with (the
         middle of its band: the odometry's own scale, the estimate's own heading then);
         None without one."""
+        compared = self._compared()
+        if compared is None:
+            return None
+        (ex, ey, et), (forward, left) = compared
+        c, s = math.cos(et), math.sin(et)
+        return (ex + c * forward - s * left, ey + s * forward + c * left)
+
+    def _compared(self) -> tuple[Pose, Move] | None:
+        """The estimate :meth:`slide_m` compares with (the oldest kept of the last
+        ``SLIDE_FRAMES`` frames, at least ``MIN_FRAMES`` old), and the dead reckoning's
+        motion since then in its own pose then (forward, left); None without one."""
         old_enough = len(self._past) - MIN_FRAMES + 1
         first = next((i for i in range(old_enough) if self._past[i][1] is not None), None)
         if first is None:
@@ -166,10 +168,7 @@ class OdometryCheck:
         assert estimate_then is not None
         dx, dy = self._reckoned[0] - rx, self._reckoned[1] - ry
         c, s = math.cos(rt), math.sin(rt)
-        forward, left = c * dx + s * dy, -s * dx + c * dy
-        ex, ey, et = estimate_then
-        c, s = math.cos(et), math.sin(et)
-        return (ex + c * forward - s * left, ey + s * forward + c * left)
+        return estimate_then, (c * dx + s * dy, -s * dx + c * dy)
 
     def _slip_m(self, x: float, y: float) -> float:
         """How far the estimate moved, over the run of anchored frames that ends with
