@@ -392,8 +392,7 @@ class ParticleFilter:
         self._wide_first = initial_pose is None and self.floors is not None
         self._recovery.reset()
         self._gate.reset()
-        self._after_ride = False
-        self._after_blame = False
+        self._search_at_base = False
         if self.evidence is not None:
             self.evidence.reset()
             self.evidence.set_prior(initial_pose)
@@ -443,13 +442,11 @@ class ParticleFilter:
         self._pacing = Pacing()
         #: Whether the convergence gate held a fix when the last ride between levels began.
         self._located_at_ride = False
-        #: Since a ride that began located (without a barometer: since the view settled
-        #: the floor in a connector's stop) and until the next fix: a gain waiting for
-        #: the evidence search asks for it at the base interval (see _weigh_alternatives).
-        self._after_ride = False
-        #: ... and so does one since a moved object was blamed for a slide
-        #: (_blame_the_slide), until the next fix.
-        self._after_blame = False
+        #: Until the next fix, a gain waiting for the evidence search asks for it at the
+        #: base interval (see _weigh_alternatives): since a ride (_rode; without a
+        #: barometer, since the view settled the floor in a connector's stop), or since
+        #: a moved object was blamed for a slide (_blame_the_slide).
+        self._search_at_base = False
         #: Seconds the current fix has been held (0: none held).
         self._held_s = 0.0
         self.continuation.reset(known_start=initial_pose is not None)
@@ -564,8 +561,7 @@ class ParticleFilter:
         self._recovery.reset()
         self._gate.reset()
         self._blind_hold = False
-        self._after_ride = False
-        self._after_blame = False
+        self._search_at_base = False
         self._told_since_start = False
         self._settled_frames = 0
         self._twins_possible = bool(self._twins)
@@ -966,7 +962,7 @@ class ParticleFilter:
                 # the test starts afresh, below.
                 kept = self._gate.held and self.estimate.converged
                 if not kept:
-                    self._after_ride = True
+                    self._search_at_base = True
             elif not (self._gate.held and (rode or not floors.changed) and not floors.blind):
                 # A level change resets the test, except for a ride the belief was
                 # located for (rode): its fix rides along with the barometer's count,
@@ -1065,7 +1061,7 @@ class ParticleFilter:
             search_wait=self._gate.not_gained_because == ("no search yet",),
         )
         if est.converged:
-            self._after_ride = self._after_blame = False
+            self._search_at_base = False
             self._told_since_start = True
             assert protection is not None
             self._last_fix = (est.x, est.y, protection)
@@ -1190,16 +1186,17 @@ class ParticleFilter:
         )
         particles = (self.x, self.y, self.theta, w)
         obs = self.last_observation
-        # After a ride, a run of steady frames long enough to gain with no search since
-        # it began asks for the search it waits for (ConvergenceGate.confirm) at the base
-        # interval, not the lengthened one of searches that found nothing: that was up to
-        # 4 s more of "not sure" at a fix the ride's known start had already placed
+        # After a ride (or a slide's blame), a run of steady frames long enough to gain
+        # with no search since it began asks for the search it waits for
+        # (ConvergenceGate.confirm) at the base interval, not the lengthened one of
+        # searches that found nothing: that was up to 4 s more of "not sure" at a fix
+        # the ride's known start had already placed
         # (venue suite, 66 deg cameras). Only then: elsewhere the wait is a stale map's
         # margin (the same rule everywhere gained fixes a metre off where a moved object
         # fits: phone suite 87 -> 105 confidently-wrong frames).
         gate, ago = self._gate, self.evidence.searched_ago
         gain_waits = (
-            (self._after_ride or self._after_blame)
+            self._search_at_base
             and not gate.held
             and gate.streak >= gate.frames - 1
             and (ago is None or ago >= gate.streak)
@@ -1301,7 +1298,7 @@ class ParticleFilter:
             "start_contradicted": self._start_contradicted,
             "settled_frames": self._settled_frames,
             "held_s": self._held_s,
-            "after_blame": self._after_blame,
+            "search_at_base": self._search_at_base,
             "twins_possible": self._twins_possible,
             "last_fix": None if self._last_fix is None else list(self._last_fix),
             **self.continuation.checkpoint(levels=self.floors is not None),
@@ -1321,7 +1318,6 @@ class ParticleFilter:
         if self.floors is not None:  # maps with several levels only
             state["floors"] = self.floors.checkpoint()
             state["located_at_ride"] = self._located_at_ride
-            state["after_ride"] = self._after_ride
             state["wide_first"] = self._wide_first
         return state
 
@@ -1354,7 +1350,6 @@ class ParticleFilter:
         if self.floors is not None and state.get("floors") is not None:
             self.floors.restore(state["floors"])
         self._located_at_ride = bool(state.get("located_at_ride", False))
-        self._after_ride = bool(state.get("after_ride", False))
         self.frames_without_evidence = int(state["frames_without_evidence"])
         self.restarts = int(state["restarts"])
         self._narrow_frames = int(state.get("narrow_frames", 0))
@@ -1366,7 +1361,10 @@ class ParticleFilter:
         self._settled_frames = int(state.get("settled_frames", 0))
         # (An older checkpoint: a fix as young as can be; it injects as before.)
         self._held_s = float(state.get("held_s", 0.0))
-        self._after_blame = bool(state.get("after_blame", False))
+        # (Checkpoints of the last releases kept it as after_ride, or after_blame.)
+        self._search_at_base = bool(
+            state.get("search_at_base", state.get("after_ride") or state.get("after_blame"))
+        )
         # (An older checkpoint: as before twins were known.)
         self._twins_possible = bool(state.get("twins_possible", False))
         last = state.get("last_fix")
@@ -1684,12 +1682,12 @@ class ParticleFilter:
         again.
 
         Until the next fix a gain's search comes at the base interval
-        (``_after_ride``), whether the belief was located as the ride began or not.
+        (``_search_at_base``), whether the belief was located as the ride began or not.
         Before, only a located ride and one the view made asked for it, and a ride the
         barometer counted for a belief not located kept the quiet searches' lengthened
         interval: traced on the venue suite (66-degree camera, PDR, seed 7), 4.4 s of
         "not sure" after the lift with every test of the gain passed but the search."""
-        self._after_ride = True
+        self._search_at_base = True
         # The fix the bearings' geometry gave rides along with the person.
         self.geometry.shift_x(dx_m)
         self.odometry_check.reset()  # the ride is no walk the odometry saw
@@ -1765,7 +1763,7 @@ class ParticleFilter:
         # comes at the base interval until the next fix (_weigh_alternatives).
         self._recovery.reset()
         self.odometry_check.reset()
-        self._after_blame = True
+        self._search_at_base = True
         # (The rigid motion written out, not alternatives.carry: the same motion, but
         # carry's arithmetic rounds otherwise, and the results quoted in the CHANGELOG
         # were measured with this.)

@@ -168,10 +168,9 @@ class PlaceSearch:
         ``rings``, ``far_m`` is ``near_m``."""
         if not objects:
             return Separation(0.0, 0.0, -1)
-        x, y, t = (np.array([v]) for v in pose)
         pattern_search = self.sensor.pattern_search
-        steps = (SEPARATION_STEP_M, SEPARATION_STEP_RAD, SEPARATION_ROUNDS)
-        bx, by, bt, _ = pattern_search(x, y, t, PATTERN, *steps, window)
+        steps = _SEPARATION_STEPS
+        bx, by, bt = self._full_place(pose, window)
         sx, sy = bx, by
         if rings:
             sx = np.concatenate([bx, bx[0] + _RING_DX])
@@ -199,16 +198,23 @@ class PlaceSearch:
         """The place that best explains ``window`` (a pattern search from ``pose``), and
         for each of ``objects`` the place it slides to when that object explains nothing
         (a search from the full place, as :meth:`separation`'s ``near_m``)."""
-        x, y, t = (np.array([v]) for v in pose)
-        steps = (SEPARATION_STEP_M, SEPARATION_STEP_RAD, SEPARATION_ROUNDS)
-        bx, by, bt, _ = self.sensor.pattern_search(x, y, t, PATTERN, *steps, window)
+        bx, by, bt = self._full_place(pose, window)
         slid = []
         for obj in objects:
             qx, qy, qt, _ = self.sensor.pattern_search(
-                bx, by, bt, PATTERN, *steps, window.without(obj)
+                bx, by, bt, PATTERN, *_SEPARATION_STEPS, window.without(obj)
             )
             slid.append((float(qx[0]), float(qy[0]), float(qt[0])))
         return (float(bx[0]), float(by[0]), float(bt[0])), slid
+
+    def _full_place(
+        self, pose: tuple[float, float, float], window: ObservationWindow
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+        """The place that best explains ``window``, a pattern search from ``pose`` (the
+        separation's steps), as one-element arrays."""
+        x, y, t = (np.array([v]) for v in pose)
+        bx, by, bt, _ = self.sensor.pattern_search(x, y, t, PATTERN, *_SEPARATION_STEPS, window)
+        return bx, by, bt
 
 
 class Separation(NamedTuple):
@@ -268,6 +274,8 @@ SEPARATION_RINGS_M = (0.75, 1.5)
 _RING_ANGLES = np.arange(8) * (np.pi / 4.0)
 _RING_DX = np.concatenate([r * np.cos(_RING_ANGLES) for r in SEPARATION_RINGS_M])
 _RING_DY = np.concatenate([r * np.sin(_RING_ANGLES) for r in SEPARATION_RINGS_M])
+#: The separation's steps, as the pattern search takes them.
+_SEPARATION_STEPS = (SEPARATION_STEP_M, SEPARATION_STEP_RAD, SEPARATION_ROUNDS)
 
 
 #: The pattern search's 27 steps (x, y, heading; each -1, 0 or +1), shape (3, 27), in

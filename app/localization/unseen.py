@@ -247,7 +247,8 @@ class UnseenObjects:
 
     def take_moved(self, obj: int) -> None:
         """Take the movable object ``obj`` for moved since the map was drawn (it dragged
-        a fix off the odometry, :mod:`~app.localization.drag`): it flags nothing any
+        a fix off the odometry: :meth:`~app.localization.filter.ParticleFilter.
+        _blame_the_slide`): it flags nothing any
         more, and the filter takes it out of its sensor model."""
         if self.map.fixed[obj]:
             raise ValueError(f"object {obj} is a fixture: fixtures are never taken for moved")

@@ -869,7 +869,7 @@ def _up_the_stairs(
 ) -> tuple[list[bool], int | None, bool | None]:
     """Up the stairs by the barometer (standing at the foot, then the First Floor's view
     from the head), 60 frames. On the first frame that asks for the gain's search at the
-    base interval (``after_ride``), the filter is restored from the store's bytes into a
+    base interval (``search_at_base``), the filter is restored from the store's bytes into a
     new filter, and both take every step after it from the same bytes: they must take the
     very same steps (whatever a checkpoint left out, the first would still have and the
     new one not). Per frame whether the search was asked for, the frame of the first fix
@@ -889,13 +889,13 @@ def _up_the_stairs(
         if pf.floors.changes and not changes:
             held_at_change = est.converged
         state = pf.checkpoint()
-        after.append(bool(state["after_ride"]))
+        after.append(bool(state["search_at_base"]))
         if after[-1] and restored is None:
             data = checkpoint.pack({"format": checkpoint.FORMAT_VERSION, "filter": state})
             restored = ParticleFilter(VENUE, pf.config, rng=np.random.default_rng(99))
             restored.restore(checkpoint.unpack(data)["filter"])
             pf.restore(checkpoint.unpack(data)["filter"])  # the same rounding for both
-            assert restored.checkpoint()["after_ride"]
+            assert restored.checkpoint()["search_at_base"]
         if pf.floors.changes and est.converged and gained is None:
             gained = k
     assert pf.floors.changes == 1 and restored is not None
@@ -910,7 +910,7 @@ def test_a_ride_begun_located_asks_for_the_search_a_gain_waits_for_until_the_nex
     # the first would (_up_the_stairs).
     ground, first, pf = _at_the_stairs_foot()
     for _ in range(30):
-        assert not pf.checkpoint()["after_ride"]
+        assert not pf.checkpoint()["search_at_base"]
         est = pf.step(Odometry(), seen_from(VENUE, ground), altitude=AltitudeReading(100.0, 0.3))
     assert est.converged
     after, gained, _ = _up_the_stairs(ground, first, pf)
