@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import argparse
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -98,3 +101,37 @@ def test_the_walks_go_at_the_rate_asked_and_the_report_says_so() -> None:
     text = markdown(rows, seconds=1.0, particles=100, seeds=1, rate_hz=10.0)
     assert "--rate-hz 10" in text and "10 frames/s" in text
     assert "--rate-hz" not in markdown(rows, seconds=1.0, particles=100, seeds=1)
+
+
+def test_the_command_line_passes_the_rate_and_seeds_to_the_venue_suite(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """`bearings experiments --suite venue --rate-hz 10 --first-seed 3`: the walks the
+    suite runs are asked for at that rate and from that seed (the whole suite's run is
+    the committed docs/results/venue-10hz; here only what the command line hands it)."""
+    from app.experiments import cli, venue
+
+    asked: dict[str, object] = {}
+
+    def record(out: Path, **kwargs: object) -> list[dict[str, object]]:
+        asked.update(kwargs, out=out)
+        return []
+
+    monkeypatch.setattr(venue, "run", record)
+    monkeypatch.setattr(venue, "markdown_table", lambda rows: "")
+    parser = argparse.ArgumentParser()
+    cli.add_arguments(parser)
+    args = parser.parse_args(
+        ["--suite", "venue", "--rate-hz", "10", "--first-seed", "3", "--seeds", "2",
+         "--particles", "500", "--workers", "1", "--out", str(tmp_path)]
+    )  # fmt: skip
+    assert cli.run(args) == 0
+    assert asked == {
+        "out": tmp_path, "seeds": 2, "particles": 500, "workers": 1, "first_seed": 3,
+        "rate_hz": 10.0,
+    }  # fmt: skip
+    for bad in ("0", "-5", "nan"):
+        with pytest.raises(SystemExit, match="--rate-hz"):
+            cli.run(
+                parser.parse_args(["--suite", "venue", "--rate-hz", bad, "--out", str(tmp_path)])
+            )
