@@ -236,12 +236,21 @@ def suite_map(name: str) -> tuple[SemanticMap, tuple[tuple[float, float], ...]]:
 
 
 def walk_of(
-    scenario: Scenario, max_s: float | None = None, rate_hz: float | None = None
+    scenario: Scenario,
+    max_s: float | None = None,
+    rate_hz: float | None = None,
+    passes: int = 1,
 ) -> SimulationConfig:
     """The walk of one scenario (cut to ``max_s`` seconds when given), at ``rate_hz``
-    frames a second (:data:`RATE_HZ` when None)."""
+    frames a second (:data:`RATE_HZ` when None); ``passes``: walked there and back that
+    many times in all, one session (a long session, ``tools/long_session.py``)."""
+    if passes < 1:
+        raise ValueError(f"passes must be at least 1, got {passes}")
     cond = CONDITIONS[scenario.condition]
-    _, path = suite_map(scenario.map_name)
+    _, there = suite_map(scenario.map_name)
+    path = tuple(there)
+    for k in range(1, passes):
+        path += tuple(there[::-1] if k % 2 else there)[1:]
     duration: float | None = None
     if cond.known_start is not None:
         ks = cond.known_start
@@ -353,6 +362,7 @@ def run_scenario(
     alter: Callable[[list[PhoneFrame]], list[PhoneFrame]] | None = None,
     timestamps: bool = True,
     start: Callable[[SemanticMap, Pose], InitialPose | None] | None = None,
+    passes: int = 1,
 ) -> PhoneRun:
     """Simulate one walk and feed it, frame by frame, to a fresh session;
     ``on_frame(session, frame, outcome)`` after each frame (a tool's look at the
@@ -360,7 +370,8 @@ def run_scenario(
     frames before they are sent (an effect the simulator does not model,
     ``tools/unmodelled.py``); ``timestamps`` False sends the frames without them;
     ``start(map, first true pose)`` gives the session's ``initial_pose`` instead of the
-    condition's (a start given wrong, ``tools/wrong_start.py``)."""
+    condition's (a start given wrong, ``tools/wrong_start.py``); ``passes``: the walk
+    there and back that many times in all (:func:`walk_of`)."""
     from app.service.sessions import SessionManager
     from app.service.types import SensorSpec, SessionSpec
 
@@ -369,7 +380,7 @@ def run_scenario(
     world_seed, filter_seed = np.random.SeedSequence([seed, 27]).generate_state(2)
     frames = simulate_phone(
         semantic_map,
-        walk_of(scenario, max_s, rate_hz),
+        walk_of(scenario, max_s, rate_hz, passes),
         cond.effects,
         np.random.default_rng(world_seed),
         facing_deg=cond.known_start.theta_deg if cond.known_start else 0.0,
