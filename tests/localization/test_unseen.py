@@ -42,9 +42,11 @@ def _numpy_counts(
     within = st.cutoff_sigmas / np.sqrt(obs.group_kappa[obs.det_group])
     seen = np.zeros(sm.object_count, dtype=bool)
     seen[in_view] = (same & (err <= within[None, :])).any(axis=1)
-    # A near miss: a detection of its class within near_miss_rad, none seeing it.
+    # A near miss: a detection of its class within near_miss_rad but outside the angle
+    # the object's extent subtends, none seeing it.
+    extent = np.arctan2(st.extent_m, dist[in_view])[:, None]
     close = np.zeros(sm.object_count, dtype=bool)
-    close[in_view] = (same & (err <= st.near_miss_rad)).any(axis=1)
+    close[in_view] = (same & (err <= st.near_miss_rad) & (err > extent)).any(axis=1)
     np.maximum.at(reach_m, cls[seen], dist[seen])
     reach = np.where(reach_m > 0.0, reach_m, reach_m.max())
     clear = view & (dist <= reach[cls])
@@ -424,3 +426,44 @@ def test_a_checkpoint_from_before_the_bands_restores_its_counts_and_flags() -> N
         & (restored.expected - restored.seen >= needed - 1e-9)
     )
     assert want.any() and np.array_equal(restored._flagged(), want)
+
+
+def test_a_box_off_a_wide_object_s_centre_up_close_is_no_near_miss() -> None:
+    """Up close a box's centre is not the object's reference point: a table 1 m away
+    reported 15 deg off its centre is neither seen nor a near miss (within the angle
+    ``extent_m`` subtends: no sign it was moved), one 6 m away reported 15 deg off is a
+    near miss; without the extent both were near misses."""
+    from app.maps.model import parse_map
+
+    far = (6.0 * math.cos(math.radians(-60.0)), 6.0 * math.sin(math.radians(-60.0)))
+    sm = parse_map(
+        {
+            "name": "tables",
+            "objects": [
+                {"class": "table", "x": 1.0, "y": 0.0},
+                {"class": "table", "x": far[0], "y": far[1]},
+                {"class": "door", "x": 0.0, "y": 7.0},
+                # Reported where it stands: tables are reported this far away.
+                {"class": "table", "x": -6.5, "y": 0.0},
+            ],
+        }
+    )
+    cfg = FilterConfig()
+    dets = [
+        Detection("table", math.radians(15.0), 0.9),
+        Detection("table", math.radians(-45.0), 0.9),
+        Detection("door", math.radians(90.0), 0.9),
+        Detection("table", math.radians(180.0), 0.9),
+    ]
+    obs = prepare_observation(dets, sm, cfg)
+    for settings, near_miss in (
+        (DEFAULT_UNSEEN, False),
+        (replace(DEFAULT_UNSEEN, extent_m=0.0), True),
+    ):
+        unseen = UnseenObjects(sm, cfg, settings)
+        for _ in range(5):
+            unseen.update(0.0, 0.0, 0.0, obs, None)
+        assert unseen.seen[0] == 0.0 and unseen.expected[0] > 0.0
+        assert bool(unseen.near[0] > 0.0) == near_miss
+        assert unseen.seen[1] == 0.0 and unseen.near[1] > 0.0
+        assert unseen.seen[2] > 0.0 and unseen.seen[3] > 0.0
