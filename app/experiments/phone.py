@@ -31,6 +31,7 @@ Metrics per scenario (the integrity suite's definitions, :mod:`app.experiments.i
 
 from __future__ import annotations
 
+import argparse
 import dataclasses
 import itertools
 import json
@@ -38,7 +39,7 @@ import math
 import resource
 import time
 from collections import defaultdict
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -291,6 +292,31 @@ def scenarios(quick: bool = False, select: str | None = None) -> list[Scenario]:
         for s in out
         if any(w[0] in ("*", s.map_name) and (len(w) == 1 or w[1] == s.condition) for w in wanted)
     ]
+
+
+def add_tool_arguments(parser: argparse.ArgumentParser, rows: Sequence[str]) -> None:
+    """The arguments every tool walking the suite's scenarios takes (``tools/*.py``):
+    ``--rows`` (default ``rows``; :func:`parse_rows`), ``--seeds``, ``--first-seed``,
+    ``--workers`` and ``--out``."""
+    parser.add_argument("--rows", default=",".join(rows), help="map/condition, comma-separated")
+    parser.add_argument("--seeds", type=int, default=10)
+    parser.add_argument("--first-seed", type=int, default=0)
+    parser.add_argument("--workers", type=int, default=2)
+    parser.add_argument("--out", help="also write the table to this markdown file")
+
+
+def parse_rows(text: str) -> list[Scenario]:
+    """Comma-separated ``MAP/CONDITION`` scenarios of the suite (the tools' ``--rows``);
+    ValueError naming the first that is none."""
+    rows = []
+    for row in (r.strip() for r in text.split(",")):
+        if not row:
+            continue
+        parts = row.split("/")
+        if len(parts) != 2 or parts[0] not in MAPS or parts[1] not in CONDITIONS:
+            raise ValueError(f"{row!r} is no MAP/CONDITION of the phone suite")
+        rows.append(Scenario(parts[0], parts[1]))
+    return rows
 
 
 @dataclass(frozen=True)
