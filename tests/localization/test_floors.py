@@ -16,6 +16,7 @@ from app.localization.floors import (
     BLIND_RATE,
     LEVEL_SURE_S,
     STAY_LIKELIHOOD,
+    STILL_S,
     AltitudeReading,
     FloorTracker,
 )
@@ -61,6 +62,46 @@ def test_a_lift_ride_of_two_floors_moves_the_particles_in_the_car_two_levels() -
     assert VENUE.layout.level_of_plane_x(x).tolist() == [2] * x.size
     np.testing.assert_allclose(x, 1.5 + 2 * PITCH)
     assert tracker.changes == 2 and not tracker.in_transit
+
+
+def test_a_lift_ride_that_ends_short_of_its_storeys_ends_once_the_barometer_stands_still() -> None:
+    """The barometer drifted before the ride (the anchor lags it), so two storeys up the
+    altitude settles 1.3 m short of the anchor's two storeys: more than the quarter
+    storey a walking person stays within. The person is between floors while the lift
+    moves, and no longer once the readings have stood still for STILL_S (before, until
+    the noise brought them within the band: never, for these)."""
+    tracker = FloorTracker(VENUE)
+    x, y = particles(1.5, 1.5, 0)
+    rise = list(np.linspace(100.0, 107.7, 39))  # 7.7 m at 1 m/s, 5 frames/s
+    x, _, _ = feed(tracker, x, y, [100.0] * 5 + rise)
+    assert tracker.changes == 2 and tracker.in_transit
+    flags = []
+    for _ in range(50):
+        x, _, _ = feed(tracker, x, y, [107.7])
+        flags.append(tracker.in_transit)
+    ended = flags.index(False)
+    # STILL_S at least, and a few seconds at most for these readings' measured noise.
+    assert round(STILL_S * 5) - 4 <= ended <= 35 and not any(flags[ended:])
+    assert tracker.anchor_m == pytest.approx(107.7)
+    # A person climbing stairs (0.3 m/s) after the change is not standing still.
+    stairs = FloorTracker(VENUE)
+    sx, sy = particles(22.0, 2.0, 0)
+    climb = list(np.linspace(100.0, 103.2, 54))  # 3.2 of 4.5 m at 0.3 m/s
+    sx, _, _ = feed(stairs, sx, sy, [100.0] * 5 + climb)
+    assert stairs.changes == 1 and stairs.in_transit
+    # ... nor through a poor barometer's 0.4 m of noise, whose slope over 3 s is noisier
+    # than a climb: the anchor is not taken where the climb stands midway.
+    noisy = FloorTracker(VENUE)
+    nx, ny = particles(22.0, 2.0, 0)
+    rng = np.random.default_rng(5)
+    anchors = []
+    for r in [100.0] * 25 + list(np.linspace(100.0, 104.5, 76)):
+        reading = AltitudeReading(float(r + rng.normal(0.0, 0.4)), 0.4)
+        nx, _, _ = noisy.apply(nx, ny, np.zeros(nx.shape), reading, rng, seconds=0.2)
+        if noisy.changes:
+            anchors.append(noisy.anchor_m)
+    assert noisy.changes == 1 and anchors
+    assert max(abs(a - anchors[0]) for a in anchors) < 0.3
 
 
 def test_particles_outside_every_connector_lose_their_weight_when_the_floor_changes() -> None:
