@@ -60,14 +60,16 @@ class LongRun:
 def _job(args: tuple[str, int, int]) -> LongRun:
     row, seed, passes = args
     scenario = phone.Scenario(*row.split("/"))
-    taken = {"gone": 0, "moved": 0}
+    sessions: list[object] = []
 
-    def look(session: object, frame: object, outcome: object) -> None:
-        unseen = session.filter.unseen  # type: ignore[attr-defined]
-        if unseen is not None:
-            taken.update(gone=int(unseen.absent.sum()), moved=int(unseen.moved.sum()))
+    def keep(session: object, frame: object, outcome: object) -> None:
+        if not sessions:
+            sessions.append(session)
 
-    run = phone.run_scenario(scenario, seed, 10_000, on_frame=look, passes=passes)
+    run = phone.run_scenario(scenario, seed, 10_000, on_frame=keep, passes=passes)
+    unseen = sessions[0].filter.unseen  # type: ignore[attr-defined]
+    gone = 0 if unseen is None else int(unseen.absent.sum())
+    moved = 0 if unseen is None else int(unseen.moved.sum())
     # The passes are the same route there and back: as many frames each.
     parts = [
         dataclasses.replace(
@@ -81,7 +83,7 @@ def _job(args: tuple[str, int, int]) -> LongRun:
         )
         for idx in np.array_split(np.arange(run.t.size), passes)
     ]
-    return LongRun(row, seed, parts, taken["gone"], taken["moved"])
+    return LongRun(row, seed, parts, gone, moved)
 
 
 def table(runs: list[LongRun], passes: int) -> list[str]:

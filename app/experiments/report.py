@@ -7,6 +7,7 @@ from typing import Any
 
 import numpy as np
 
+from app.bench import machine_line
 from app.experiments.protocol import FIXED, PAPER_RESULTS, Cell
 from app.experiments.runner import Run
 
@@ -172,8 +173,6 @@ def tool_results_head(title: str, command: str, seconds: float, what: str, intro
     """The first lines of a results file a tool writes (``tools/*.py --out``): its title,
     the command and how long it ran on which machine, what it ran, and the tool's own
     account of it."""
-    from app.bench import machine_line
-
     return [
         f"# {title}",
         "",
