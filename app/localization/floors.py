@@ -203,10 +203,10 @@ WALKED_AT_LIFT_RATE = 0.1
 #: readings of 0.25 m at 5 frames/s, 5.6 s of a poor barometer's 0.4 m (over 3 s its
 #: slope's noise, 0.12 m/s, called a climb of the stairs still now and then: measured on
 #: the venue suite's poorer phone, a stairs ride's place found 3.2 s after it instead of
-#: at once); if the altitude then stands
-#: a quarter storey or more from the anchor (``DRIFT_SHARE``), the anchor had lagged the
-#: barometer's drift as the ride began (it follows drift with a time constant of about
-#: 10 s) and is taken where the altitude stands. Before, the person stayed "between
+#: at once); if the altitude then stands a quarter storey or more from the anchor
+#: (``DRIFT_SHARE``), the anchor had lagged the barometer's drift as the ride began (it
+#: follows drift with a time constant of about 10 s) and is taken where the altitude
+#: stands. Before, the person stayed "between
 #: floors" until the readings' noise brought them within the band: traced on the venue
 #: suite (PDR, 66 deg, a belief not located as the lift left; the smoothed altitude 1.2-1.4
 #: m short of the anchor after two storeys), the Second Floor was said 10.2 s after the
@@ -540,13 +540,19 @@ class FloorTracker:
     def _still(self, reported_std_m: float) -> bool:
         """Whether the latest readings lie on a line rising or falling slower than
         ``STILL_MPS``: those of ``STILL_S`` seconds, or more, so that the slope's noise
-        is at most half of ``STILL_MPS`` (False while there are not that many)."""
+        is at most half of ``STILL_MPS`` (False while there are not that many). The
+        noise is counted in updates, not frames: a barometer updating once a second
+        repeats each reading over the frames between, which add no sample (counted in
+        frames, 3 of 40 simulated 0.3 m/s climbs of the stairs through readings of 0.25 or
+        0.4 m updated at 1 Hz were called still midway; none counted in updates)."""
         period = self._period()
+        step = self._update_period()
         # A line's slope through n readings dt apart, each of std s, has std
         # s / sqrt(dt^2 n (n^2 - 1) / 12).
         std = self._reading_std(reported_std_m)
-        enough = float(np.cbrt(12.0 * std**2 / ((STILL_MPS / 2.0) ** 2 * period**2)))
-        n = max(self._frames_in(STILL_S), int(np.ceil(enough)) + 1, 5)
+        enough = float(np.cbrt(12.0 * std**2 / ((STILL_MPS / 2.0) ** 2 * step**2)))
+        updates = int(np.ceil(enough)) + 1
+        n = max(self._frames_in(STILL_S), int(np.ceil(updates * step / period - 1e-9)), 5)
         if n > len(self._readings):
             return False
         r = np.fromiter(itertools.islice(reversed(self._readings), n), dtype=np.float64)
@@ -554,6 +560,16 @@ class FloorTracker:
         tc = t - t.mean()
         slope = float(np.dot(tc, r - r.mean()) / np.dot(tc, tc))
         return abs(slope) < STILL_MPS
+
+    def _update_period(self) -> float:
+        """Seconds between the barometer's updates (readings other than the one before),
+        over the latest ``STEP_UPDATES``; the frame period until two are known, and
+        never less."""
+        period = self._period()
+        if len(self._updates) < 2:
+            return period
+        first, last = self._updates[0], self._updates[-1]
+        return max((last[1] - first[1]) / (len(self._updates) - 1), period)
 
     def _reading_std(self, reported_std_m: float) -> float:
         """The barometer's noise, metres: from the latest differences between its
